@@ -1,0 +1,39 @@
+# Every target installs what it needs into .venv first, so each works on a fresh machine.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+
+.PHONY: demo test test-all lint bench clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+## demo: simulate the paper's car on its bump (configs/gokdag2015/base.yaml), write data and a figure to runs/demo/
+demo: $(STAMP)
+	mkdir -p runs/demo
+	$(BIN)/vehid simulate configs/gokdag2015/base.yaml -o runs/demo/bump.csv --plot runs/demo/bump.png
+	$(BIN)/vehid simulate configs/gokdag2015/base.yaml -o runs/demo/bump.h5
+
+## test: lint and the fast test suite (what CI runs)
+test: $(STAMP)
+	$(BIN)/ruff check vehid_cli tests benchmarks
+	$(BIN)/python -m pytest -q -m "not slow"
+
+## test-all: the whole suite, long checks included
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check vehid_cli tests benchmarks
+	$(BIN)/ruff format --check vehid_cli tests benchmarks
+
+## bench: speed benchmarks (not tests); results are recorded by hand in benchmarks/RESULTS.md
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_simulation.py
+
+clean:
+	rm -rf $(VENV) runs/demo .pytest_cache

@@ -1,0 +1,134 @@
+"""The `vehid` command line: each command parses its options and calls the library, nothing more.
+
+Exit status (SPEC section 3): 0 success; 2 bad input, with one message naming the file, key or
+column; 1 anything else. Set VEHID_DEBUG=1 to see the traceback of an unexpected error.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+
+from . import __version__
+from .config import load_config
+from .data import check_writable, write_measurement_csv
+from .errors import InputError
+from .experiment import build_experiment, run_streams, simulate_measurement
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="vehid: vehicle and suspension parameter identification.",
+)
+out = Console()
+err = Console(stderr=True, highlight=False, soft_wrap=True)
+
+SetOption = Annotated[
+    Optional[list[str]],  # noqa: UP045 - typer needs Optional here
+    typer.Option("--set", help="Override a config value: dotted.key=value (repeatable).", show_default=False),
+]
+
+
+def _guarded(command):
+    """Turn InputError into exit 2 with its message, anything unexpected into exit 1, never a traceback."""
+
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except InputError as exc:
+            err.print(f"error: {exc}", markup=False)
+            raise typer.Exit(2) from None
+        except (typer.Exit, typer.Abort, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # noqa: BLE001 - the last line of defence of the CLI
+            if os.environ.get("VEHID_DEBUG"):
+                raise
+            err.print(
+                f"internal error: {exc.__class__.__name__}: {exc} (set VEHID_DEBUG=1 for the traceback)", markup=False
+            )
+            raise typer.Exit(1) from None
+
+    return wrapper
+
+
+def _version(value: bool) -> None:
+    if value:
+        out.print(f"vehid {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
+    ] = False,
+) -> None:
+    """vehid: vehicle and suspension parameter identification."""
+
+
+@app.command()
+@_guarded
+def simulate(
+    config: Annotated[Path, typer.Argument(help="Experiment config (YAML).", show_default=False)],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Output file: .csv (measurement format) or .h5.", show_default=False)
+    ],
+    road: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--road", help="Take road1..road4 and the time grid from this measurement file."),
+    ] = None,
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="Also draw the responses to this PNG.")] = None,  # noqa: UP045
+    seed: Annotated[Optional[int], typer.Option("--seed", help="Seed of the noise (default identify.seed).")] = None,  # noqa: UP045
+    set_: SetOption = None,
+) -> None:
+    """Simulate the configured car on its road and write a vehicle measurement file.
+
+    CSV holds the noisy responses (Eq. 15; --set noise.level=0 for clean ones); HDF5 holds clean and
+    noisy. The noise is the noise stream of run 0 of the campaign with the same seed.
+    """
+    target = check_writable(output, (".csv", ".h5", ".hdf5"))
+    if plot is not None:
+        check_writable(plot, (".png",))
+    if seed is not None and seed < 0:
+        raise InputError(f"--seed must be a non-negative integer, got {seed}")
+    cfg = load_config(config, set_ or ())
+    seed = cfg.identify.seed if seed is None else seed
+    experiment = build_experiment(cfg, road_file=road)
+    run = simulate_measurement(experiment, run_streams(seed, 0).noise)
+    if target.suffix.lower() == ".csv":
+        comments = [
+            f"vehid {__version__} simulate {config}",
+            f"config sha256 {cfg.digest()}",
+            f"noise level Np = {cfg.noise.level:g} (Eq. 15), seed {seed}, road from {experiment.road_source}",
+        ]
+        write_measurement_csv(target, experiment.t, experiment.road, run.acc, run.disp, comments)
+    else:
+        from .results import write_simulation_h5
+
+        write_simulation_h5(target, run, seed)
+    if plot is not None:
+        from .report.plots import plot_responses
+
+        plot_responses(run, plot)
+    out.print(
+        f"wrote {target}: {experiment.t.size} samples at dt = {experiment.dt * 1e3:g} ms, "
+        f"noise Np = {100 * cfg.noise.level:g} %" + (f"; figure {plot}" if plot else "")
+    )
+
+
+def run() -> None:
+    """Console-script entry point."""
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    run()
+    sys.exit(0)

@@ -1,0 +1,433 @@
+"""Experiment configuration: YAML -> validated, frozen pydantic models, with `--set` overrides.
+
+Every problem a user can make in a config is reported as an :class:`InputError` that names the file
+and the dotted key, with a did-you-mean for unknown keys (exit status 2 on the command line).
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import types
+import typing
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+
+from .errors import InputError
+
+Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+VEHICLE_PARAMETERS = (
+    "m", "mf", "mr", "Ix", "Iy", "a1", "a2", "b1", "b2",
+    "kf", "kr", "ktf", "ktr", "kR", "cf", "cr",
+)  # fmt: skip
+ALGORITHMS = ("ga", "cpso", "abc", "de", "nelder-mead", "lsq", "hybrid")
+OBJECTIVES = ("f1", "f2", "wls")
+
+
+class _Section(BaseModel):
+    """Base of every config section: unknown keys are errors, values are immutable, ints become floats."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=False)
+
+
+class Vehicle(_Section):
+    """The 7-DOF full car (Gökdağ Fig. 1). SI units: kg, kg m², m, N/m, N m/rad (kR), N s/m."""
+
+    m: Pos = Field(description="sprung (body) mass [kg]")
+    mf: Pos = Field(description="front unsprung mass, each [kg]")
+    mr: Pos = Field(description="rear unsprung mass, each [kg]")
+    Ix: Pos = Field(description="roll moment of inertia [kg m²]")
+    Iy: Pos = Field(description="pitch moment of inertia [kg m²]")
+    a1: Pos = Field(description="CG to front axle [m]")
+    a2: Pos | None = Field(None, description="CG to rear axle [m]; or give wheelbase")
+    b1: Pos = Field(description="CG to side-1 wheels (corners 1, 4) [m]")
+    b2: Pos | None = Field(None, description="CG to side-2 wheels (corners 2, 3) [m]; or give track")
+    wheelbase: Pos | None = Field(None, description="a1 + a2 [m], alternative to a2")
+    track: Pos | None = Field(None, description="b1 + b2 [m], alternative to b2")
+    kf: Pos = Field(description="front suspension stiffness [N/m]")
+    kr: Pos = Field(description="rear suspension stiffness [N/m]")
+    ktf: Pos = Field(description="front tyre stiffness [N/m]")
+    ktr: Pos = Field(description="rear tyre stiffness [N/m]")
+    kR: NonNeg = Field(0.0, description="front anti-roll bar stiffness [N m/rad]")
+    cf: NonNeg = Field(description="front suspension damping [N s/m]")
+    cr: NonNeg = Field(description="rear suspension damping [N s/m]")
+
+    @model_validator(mode="after")
+    def _geometry(self) -> Vehicle:
+        for near, far, total, what in (("a1", "a2", "wheelbase", "wheelbase"), ("b1", "b2", "track", "track")):
+            d_near, d_far, d_total = getattr(self, near), getattr(self, far), getattr(self, total)
+            if d_far is None and d_total is None:
+                raise _KeyedError(f"vehicle.{far}", f"give either '{far}' or '{total}'")
+            if d_total is not None:
+                if d_near >= d_total:
+                    raise _KeyedError(
+                        f"vehicle.{near}",
+                        f"{near} = {d_near:g} m puts the centre of gravity outside the {what} "
+                        f"({total} = {d_total:g} m); expected 0 < {near} < {d_total:g}",
+                    )
+                if d_far is not None and abs(d_near + d_far - d_total) > 1e-9 * d_total:
+                    raise _KeyedError(
+                        f"vehicle.{total}",
+                        f"{near} + {far} = {d_near + d_far:g} m disagrees with {total} = {d_total:g} m",
+                    )
+        return self
+
+    @property
+    def L(self) -> float:
+        """Wheelbase a1 + a2 [m], held fixed when the CG moves."""
+        return self.wheelbase if self.wheelbase is not None else self.a1 + self.a2
+
+    @property
+    def w(self) -> float:
+        """Track b1 + b2 [m], held fixed when the CG moves."""
+        return self.track if self.track is not None else self.b1 + self.b2
+
+    def values(self) -> dict[str, float]:
+        """All 16 model parameters, with a2 and b2 resolved from wheelbase and track."""
+        out = {name: getattr(self, name) for name in VEHICLE_PARAMETERS}
+        out["a2"] = self.L - self.a1
+        out["b2"] = self.w - self.b1
+        return out
+
+
+BumpShape = Literal["step", "cosine_step", "half_sine", "trapezoid"]
+
+
+class Bump(_Section):
+    """A discrete obstacle met at constant speed; the rear tyres meet it (a1 + a2)/V after the front."""
+
+    shape: BumpShape = "cosine_step"
+    length: Pos = Field(0.1, description="ramp length (cosine_step, trapezoid) or bump length (half_sine) [m]")
+    plateau: NonNeg = Field(0.0, description="length of the flat top of a trapezoid [m]")
+    heights: tuple[Finite, Finite, Finite, Finite] = Field(description="height under corners 1..4 [m]")
+    start_time: NonNeg = Field(0.1, description="time at which the front tyres meet the bump [s]")
+
+
+IsoClass = Literal["A", "B", "C", "D", "E", "F", "G", "H"]
+
+
+class RandomRoad(_Section):
+    """A random road of an ISO 8608 class; the two wheel tracks are independent, rear follows front."""
+
+    iso_class: IsoClass
+    n_min: Pos = Field(0.01, description="lowest spatial frequency [cycles/m]")
+    n_max: Pos = Field(10.0, description="highest spatial frequency [cycles/m]")
+    fade_in: NonNeg = Field(5.0, description="distance over which the roughness fades in from zero [m]")
+
+    @model_validator(mode="after")
+    def _band(self) -> RandomRoad:
+        if self.n_max <= self.n_min:
+            raise ValueError(f"n_max = {self.n_max:g} must exceed n_min = {self.n_min:g} cycles/m")
+        return self
+
+
+class Road(_Section):
+    """Road input: bumps and/or a random ISO 8608 road, or a road profile from a measurement file."""
+
+    speed_kmh: Pos | None = Field(None, description="forward speed [km/h]")
+    speed: Pos | None = Field(None, description="forward speed [m/s], alternative to speed_kmh")
+    bump: Bump | None = None
+    random: RandomRoad | None = None
+    file: str | None = Field(None, description="measurement file whose road1..road4 columns and time grid are used")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> Road:
+        if self.speed_kmh is not None and self.speed is not None:
+            raise ValueError("give either 'speed_kmh' or 'speed', not both")
+        if self.file is None:
+            if self.bump is None and self.random is None:
+                raise ValueError("give a 'bump', a 'random' road, or a road 'file'")
+            if self.speed_kmh is None and self.speed is None:
+                raise ValueError("give the forward speed as 'speed_kmh' (km/h) or 'speed' (m/s)")
+        return self
+
+    @property
+    def V(self) -> float:
+        """Forward speed [m/s]."""
+        if self.speed is not None:
+            return self.speed
+        if self.speed_kmh is not None:
+            return self.speed_kmh / 3.6
+        raise InputError("no forward speed configured", key="road.speed_kmh")
+
+
+class Simulation(_Section):
+    """Time grid and integrator."""
+
+    duration: Pos = Field(3.0, description="simulated time [s]")
+    dt: Pos = Field(0.001, description="time step [s]")
+    integrator: Literal["exact", "newmark"] = Field(
+        "exact", description="exact: matrix exponential with first-order hold; newmark: average acceleration"
+    )
+
+    @model_validator(mode="after")
+    def _grid(self) -> Simulation:
+        if self.dt * 2 > self.duration:
+            raise ValueError(f"dt = {self.dt:g} s leaves fewer than 3 samples in duration = {self.duration:g} s")
+        if self.duration / self.dt > 10_000_000:
+            raise ValueError(f"duration/dt = {self.duration / self.dt:.3g} samples is more than 10 million")
+        return self
+
+
+class Noise(_Section):
+    """Measurement noise of Gökdağ Eq. 15: sigma_i = level * std(clean channel i)."""
+
+    level: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = Field(0.0, description="Np, 0.1 = 10 %")
+
+
+class Algorithm(_Section):
+    """Identification algorithm and its budget."""
+
+    name: Literal["ga", "cpso", "abc", "de", "nelder-mead", "lsq", "hybrid"] = "abc"
+    population: Annotated[int, Field(ge=2)] = 20
+    iterations: Annotated[int, Field(ge=1)] = 50
+
+
+class Identify(_Section):
+    """What to identify and how. Bounds are relative to the configured (true or nominal) values."""
+
+    unknowns: tuple[str, ...] = ("m", "Ix", "Iy", "a1", "b1")
+    bounds: tuple[Pos, Pos] = Field((0.7, 1.3), description="search range as factors of the configured values")
+    limits: dict[str, tuple[Finite, Finite]] = Field(
+        default_factory=dict, description="absolute search range per unknown, overriding 'bounds'"
+    )
+    objective: Literal["f1", "f2", "wls"] = "f2"
+    algorithm: Algorithm = Algorithm()
+    runs: Annotated[int, Field(ge=1)] = 30
+    seed: Annotated[int, Field(ge=0)] = 2015
+
+
+class Config(_Section):
+    """A whole experiment: the car, the road, the time grid, the sensors, the noise, the identification."""
+
+    system: Literal["vehicle"] = "vehicle"
+    vehicle: Vehicle
+    road: Road
+    simulation: Simulation = Simulation()
+    sensors: Literal["acc", "disp", "both"] = "both"
+    noise: Noise = Noise()
+    identify: Identify = Identify()
+
+    _source: str = PrivateAttr(default="<config>")
+
+    @model_validator(mode="after")
+    def _identify_against_vehicle(self) -> Config:
+        ident, values = self.identify, self.vehicle.values()
+        seen = set()
+        for name in ident.unknowns:
+            if name not in values:
+                hint = _did_you_mean(name, VEHICLE_PARAMETERS)
+                raise _KeyedError("identify.unknowns", f"'{name}' is not a vehicle parameter{hint}")
+            if name in seen:
+                raise _KeyedError("identify.unknowns", f"'{name}' is listed twice")
+            seen.add(name)
+        for name in ident.limits:
+            if name not in ident.unknowns:
+                raise _KeyedError(
+                    f"identify.limits.{name}", f"'{name}' is not one of the unknowns {list(ident.unknowns)}"
+                )
+        lo_f, hi_f = ident.bounds
+        if not lo_f < hi_f:
+            raise _KeyedError("identify.bounds", f"lower factor {lo_f:g} must be below upper factor {hi_f:g}")
+        for name, (lo, hi) in self.search_box().items():
+            if not lo < hi:
+                raise _KeyedError(f"identify.limits.{name}", f"lower limit {lo:g} must be below upper limit {hi:g}")
+            if not lo <= values[name] <= hi:
+                raise _KeyedError(
+                    f"identify.limits.{name}" if name in ident.limits else "identify.bounds",
+                    f"the search range [{lo:g}, {hi:g}] of '{name}' excludes its configured value {values[name]:g}",
+                )
+            span = {"a1": self.vehicle.L, "a2": self.vehicle.L, "b1": self.vehicle.w, "b2": self.vehicle.w}.get(name)
+            if span is not None and (lo <= 0 or hi >= span):
+                raise _KeyedError(
+                    f"identify.limits.{name}" if name in ident.limits else "identify.bounds",
+                    f"the search range [{lo:g}, {hi:g}] m of '{name}' leaves the "
+                    f"{'wheelbase' if name[0] == 'a' else 'track'} ({span:g} m); keep it inside (0, {span:g})",
+                )
+            if lo <= 0 and name not in ("kR", "cf", "cr"):
+                raise _KeyedError(f"identify.limits.{name}", f"'{name}' must stay positive; got lower limit {lo:g}")
+        return self
+
+    def search_box(self) -> dict[str, tuple[float, float]]:
+        """Search range of each unknown [SI units]: 'limits' where given, else 'bounds' x configured value."""
+        values, ident = self.vehicle.values(), self.identify
+        lo_f, hi_f = ident.bounds
+        return {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
+
+    @property
+    def source(self) -> str:
+        """The file the config was read from (for messages and relative paths)."""
+        return self._source
+
+    def to_yaml(self) -> str:
+        """The resolved config as YAML text (defaults filled in, overrides applied)."""
+        return yaml.safe_dump(self.model_dump(mode="json", exclude_none=True), sort_keys=False)
+
+    def digest(self) -> str:
+        """SHA-256 of the resolved config, independent of key order and formatting."""
+        canonical = json.dumps(self.model_dump(mode="json", exclude_none=True), sort_keys=True)
+        return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+class _KeyedError(ValueError):
+    """A validation error attached to a dotted key other than the one pydantic is validating."""
+
+    def __init__(self, key: str, message: str):
+        super().__init__(message)
+        self.key = key
+
+
+# ------------------------------------------------------------------------------------------ loading
+
+
+def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Config:
+    """Read a YAML config, apply `--set dotted.key=value` overrides, validate. Raises InputError."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("config file not found", source=source) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a YAML config file", source=source) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read config file ({exc.__class__.__name__}: {exc})", source=source) from None
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise InputError(f"not valid YAML{where}: {problem}", source=source) from None
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise InputError(f"expected a mapping of sections at the top level, got {type(raw).__name__}", source=source)
+    raw = apply_overrides(raw, overrides, source=source)
+    cfg = config_from_dict(raw, source=source)
+    if cfg.road.file is not None and not Path(cfg.road.file).is_absolute():
+        resolved = (path.parent / cfg.road.file).as_posix()
+        cfg = cfg.model_copy(update={"road": cfg.road.model_copy(update={"file": resolved})})
+        cfg._source = source
+    return cfg
+
+
+def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config:
+    """Validate a plain dict (e.g. parsed YAML) into a Config. Raises InputError naming the key."""
+    try:
+        cfg = Config.model_validate(raw)
+    except ValidationError as exc:
+        raise InputError(_explain(exc), source=source) from None
+    except _KeyedError as exc:  # raised from a validator outside pydantic's wrapping
+        raise InputError(str(exc), source=source, key=exc.key) from None
+    cfg._source = source
+    return cfg
+
+
+def apply_overrides(raw: dict[str, Any], overrides: typing.Sequence[str], source: str = "<config>") -> dict[str, Any]:
+    """Return a copy of `raw` with each `dotted.key=value` applied; values are parsed as YAML scalars/lists."""
+    out = json.loads(json.dumps(raw, default=str))  # deep copy of plain data
+    for item in overrides:
+        if "=" not in item:
+            raise InputError(f"--set expects dotted.key=value, got '{item}'", source=source)
+        key, _, text = item.partition("=")
+        key = key.strip()
+        parts = key.split(".")
+        if not key or any(not p for p in parts):
+            raise InputError(f"--set expects dotted.key=value, got '{item}'", source=source)
+        try:
+            value = yaml.safe_load(text) if text.strip() else None
+        except yaml.YAMLError:
+            raise InputError(f"--set {key}: cannot parse value '{text}'", source=source) from None
+        node = out
+        for depth, part in enumerate(parts[:-1]):
+            child = node.get(part)
+            if child is None:
+                child = node[part] = {}
+            if not isinstance(child, dict):
+                where = ".".join(parts[: depth + 1])
+                raise InputError(f"--set {key}: '{where}' is a value, not a section", source=source)
+            node = child
+        node[parts[-1]] = value
+    return out
+
+
+# ------------------------------------------------------------------------------------------ errors
+
+
+def _did_you_mean(word: str, choices: typing.Iterable[str]) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.5)
+    if not close:
+        lowered = {c.lower(): c for c in choices}
+        if word.lower() in lowered:
+            close = [lowered[word.lower()]]
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+def _described_as(word: str, model: type[BaseModel] | None) -> str:
+    """Suggest the first field whose description mentions `word` (e.g. 'mass' -> 'm')."""
+    if model is None or len(word) < 3:
+        return ""
+    for name, field in model.model_fields.items():
+        text = (field.description or "").lower().replace("(", " ").replace(")", " ")
+        if word.lower().replace("_", " ") in text:
+            return f"; did you mean '{name}' ({field.description})?"
+    return ""
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The pydantic model class that validates the mapping at `loc` inside a Config (None if not a model)."""
+    model: Any = Config
+    for part in loc:
+        if not (isinstance(model, type) and issubclass(model, BaseModel)) or part not in model.model_fields:
+            return None
+        model = _unwrap_model(model.model_fields[part].annotation)
+    return model if isinstance(model, type) and issubclass(model, BaseModel) else None
+
+
+def _unwrap_model(annotation: Any) -> Any:
+    origin = typing.get_origin(annotation)
+    if origin in (Union, types.UnionType):
+        for arg in typing.get_args(annotation):
+            if isinstance(arg, type) and issubclass(arg, BaseModel):
+                return arg
+    return annotation
+
+
+def _explain(exc: ValidationError) -> str:
+    """Turn pydantic's errors into one paragraph: each names its dotted key and what was expected."""
+    lines = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(p for p in err["loc"])
+        key = ".".join(str(p) for p in loc)
+        kind = err["type"]
+        ctx_error = (err.get("ctx") or {}).get("error")
+        if isinstance(ctx_error, _KeyedError):
+            lines.append(f"'{ctx_error.key}': {ctx_error}")
+            continue
+        if kind == "extra_forbidden":
+            parent = _model_at(loc[:-1])
+            known = list(parent.model_fields) if parent else []
+            hint = _did_you_mean(str(loc[-1]), known) or _described_as(str(loc[-1]), parent)
+            listing = f" (known keys: {', '.join(known)})" if known and not hint else ""
+            lines.append(f"'{key}': unknown key{hint}{listing}")
+        elif kind == "missing":
+            lines.append(f"'{key}': required key is missing")
+        elif kind == "literal_error":
+            lines.append(f"'{key}': {err['msg'].replace('Input should be', 'expected')}, got {err['input']!r}")
+        else:
+            msg = err["msg"].removeprefix("Value error, ")
+            msg = msg.replace("Input should be", "expected")
+            shown = "" if kind.startswith("value_error") or kind.startswith("assertion") else f", got {err['input']!r}"
+            if key:
+                lines.append(f"'{key}': {msg}{shown}")
+            else:
+                lines.append(f"{msg}{shown}")
+    return "; ".join(lines)

@@ -1,0 +1,238 @@
+"""Vehicle measurement files (SPEC section 2): read and validate, write atomically.
+
+Format: CSV with a header row, `#` comment lines allowed, uniform time step. Columns `t` [s],
+`road1..road4` [m], and `acc1..acc4` [m/s²] and/or `disp1..disp4` [m]; extra columns are ignored.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import os
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InputError
+
+ROAD_COLUMNS = tuple(f"road{i}" for i in range(1, 5))
+ACC_COLUMNS = tuple(f"acc{i}" for i in range(1, 5))
+DISP_COLUMNS = tuple(f"disp{i}" for i in range(1, 5))
+UNIFORM_TOLERANCE = 1e-3  # time steps may deviate from the median step by this fraction (print round-off)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One vehicle run: time grid, road under each tyre, and the measured body-point responses."""
+
+    t: NDArray  # (n,) [s], uniform
+    road: NDArray  # (n, 4) [m]
+    acc: NDArray | None  # (n, 4) [m/s²]
+    disp: NDArray | None  # (n, 4) [m]
+    source: str
+
+    @property
+    def dt(self) -> float:
+        """Time step [s]."""
+        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+
+
+@dataclass(frozen=True)
+class Table:
+    """A numeric CSV table: column name -> values, with where it came from."""
+
+    columns: dict[str, NDArray]
+    source: str
+
+    def column(self, name: str) -> NDArray:
+        if name not in self.columns:
+            raise InputError(
+                f"column '{name}' is missing (columns present: {', '.join(self.columns)})", source=self.source
+            )
+        return self.columns[name]
+
+
+def read_table(path: str | Path) -> Table:
+    """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column."""
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("file not found", source=source) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a CSV file", source=source) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read file ({exc.__class__.__name__}: {exc})", source=source) from None
+    lines = [
+        (no, line)
+        for no, line in enumerate(text.splitlines(), start=1)
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise InputError("empty file: expected a header row and data rows", source=source)
+    header_no, header = lines[0]
+    names = [h.strip() for h in header.split(",")]
+    if any(not n for n in names):
+        raise InputError(f"header (line {header_no}) has an empty column name", source=source)
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise InputError(f"header (line {header_no}) repeats column(s) {', '.join(dupes)}", source=source)
+    rows = lines[1:]
+    if not rows:
+        raise InputError("no data rows after the header", source=source)
+    values = np.empty((len(rows), len(names)))
+    for r, (no, line) in enumerate(rows):
+        cells = line.split(",")
+        if len(cells) != len(names):
+            raise InputError(f"line {no} has {len(cells)} fields, the header has {len(names)}", source=source)
+        for c, cell in enumerate(cells):
+            try:
+                values[r, c] = float(cell)
+            except ValueError:
+                raise InputError(
+                    f"column '{names[c]}', line {no}: expected a number, got '{cell.strip()}'", source=source
+                ) from None
+    return Table(columns={n: values[:, i] for i, n in enumerate(names)}, source=source)
+
+
+def check_time(t: NDArray, source: str, column: str = "t") -> float:
+    """Check a time column is finite, increasing and uniform; return its step [s]."""
+    if t.size < 3:
+        raise InputError(f"column '{column}' has {t.size} samples; at least 3 are needed", source=source)
+    if not np.all(np.isfinite(t)):
+        bad = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise InputError(f"column '{column}' has a non-finite value at data row {bad + 1}", source=source)
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        bad = int(np.flatnonzero(steps <= 0)[0])
+        raise InputError(
+            f"column '{column}' must increase strictly; data row {bad + 2} has t = {t[bad + 1]:g} after t = {t[bad]:g}",
+            source=source,
+        )
+    dt = float(np.median(steps))
+    worst = int(np.argmax(np.abs(steps - dt)))
+    if abs(steps[worst] - dt) > UNIFORM_TOLERANCE * dt:
+        raise InputError(
+            f"column '{column}' is not uniformly sampled: step {steps[worst]:g} s at data row {worst + 2} "
+            f"against the usual {dt:g} s; resample to a uniform grid",
+            source=source,
+        )
+    return dt
+
+
+def check_finite(values: NDArray, column: str, source: str) -> None:
+    """Reject NaN and infinite values, naming the column and the first bad data row."""
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise InputError(
+            f"column '{column}' has {bad.size} non-finite value(s) (NaN or Inf), first at data row {bad[0] + 1}",
+            source=source,
+        )
+
+
+def read_measurement(path: str | Path, *, need_responses: bool = True) -> Measurement:
+    """Read a vehicle measurement file; road columns always, responses when `need_responses`."""
+    table = read_table(path)
+    source = table.source
+    t = table.column("t")
+    check_time(t, source)
+    present = table.columns
+    missing_road = [c for c in ROAD_COLUMNS if c not in present]
+    if missing_road:
+        raise InputError(
+            f"road column(s) {', '.join(missing_road)} missing; expected t, road1..road4 (columns present: "
+            f"{', '.join(present)})",
+            source=source,
+        )
+    families: dict[str, NDArray | None] = {}
+    for family, cols in (("acc", ACC_COLUMNS), ("disp", DISP_COLUMNS)):
+        have = [c for c in cols if c in present]
+        if have and len(have) < 4:
+            lacking = [c for c in cols if c not in present]
+            raise InputError(
+                f"response column(s) {', '.join(lacking)} missing: {family} needs all four corners", source=source
+            )
+        families[family] = np.column_stack([present[c] for c in cols]) if have else None
+    if need_responses and families["acc"] is None and families["disp"] is None:
+        raise InputError("no response columns: expected acc1..acc4 and/or disp1..disp4", source=source)
+    used = list(ROAD_COLUMNS) + [
+        c for f, cols in (("acc", ACC_COLUMNS), ("disp", DISP_COLUMNS)) if families[f] is not None for c in cols
+    ]
+    for c in used:
+        check_finite(present[c], c, source)
+    road = np.column_stack([present[c] for c in ROAD_COLUMNS])
+    return Measurement(t=t, road=road, acc=families["acc"], disp=families["disp"], source=source)
+
+
+# ------------------------------------------------------------------------------------------ writing
+
+
+def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
+    """Check an output path has a known suffix and a writable directory, before any work is done."""
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise InputError(
+            f"unknown output type '{path.suffix}'; expected one of {', '.join(suffixes)}", source=str(path)
+        )
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"output directory '{parent}' does not exist", source=str(path))
+    if path.is_dir():
+        raise InputError("is a directory, expected a file name", source=str(path))
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"output directory '{parent}' is not writable", source=str(path))
+    return path
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; on success rename it into place, on failure remove it."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise
+
+
+def write_measurement_csv(
+    path: str | Path,
+    t: NDArray,
+    road: NDArray,
+    acc: NDArray | None = None,
+    disp: NDArray | None = None,
+    comments: Sequence[str] = (),
+) -> None:
+    """Write a vehicle measurement CSV atomically (full double precision, `#` comment header)."""
+    names, cols = ["t"], [np.asarray(t)[:, None]]
+    names += list(ROAD_COLUMNS)
+    cols.append(road)
+    for family, data in ((ACC_COLUMNS, acc), (DISP_COLUMNS, disp)):
+        if data is not None:
+            names += list(family)
+            cols.append(data)
+    table = np.hstack(cols)
+    buf = io.StringIO()
+    for line in comments:
+        for part in str(line).splitlines() or [""]:
+            buf.write(f"# {part}\n")
+    buf.write(",".join(names) + "\n")
+    np.savetxt(buf, table, delimiter=",", fmt="%.17g")
+    with atomic_path(path) as tmp:
+        tmp.write_text(buf.getvalue(), encoding="utf-8")
+
+
+def time_grid(duration: float, dt: float) -> NDArray:
+    """Uniform grid of duration/dt samples 0, dt, ... (3 s at 1 ms: 3000 samples, as the paper's runs)."""
+    n = int(math.floor(duration / dt + 1e-9))
+    return np.arange(n) * dt

@@ -1,0 +1,128 @@
+"""An experiment: the configured car on a sampled road, with its sensors, noise and random streams.
+
+This is where a config becomes arrays: the time grid, the road under each tyre (from bumps, a random
+road or a measurement file), the nominal car. Random streams come from the campaign seed through
+``SeedSequence.spawn``: one stream for the experiment itself (a random road), and one per run, which
+splits into a noise stream and an optimizer stream. Run i gets the same streams whatever the number
+of runs or the number of worker processes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .config import Config
+from .data import read_measurement, time_grid
+from .errors import InputError
+from .models.fullcar import FullCarMatrices, assemble, parameter_batch
+from .noise import add_noise
+from .road import road_function
+from .sim.linear import Response, simulate
+
+MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
+
+
+@dataclass(frozen=True)
+class RunStreams:
+    """The random generators of one run of a campaign."""
+
+    noise: np.random.Generator
+    optimizer: np.random.Generator
+
+
+def experiment_rng(seed: int) -> np.random.Generator:
+    """The experiment's own stream (e.g. a random road): the same for every run of the campaign."""
+    experiment_seq, _ = np.random.SeedSequence(seed).spawn(2)
+    return np.random.default_rng(experiment_seq)
+
+
+def run_streams(seed: int, run: int) -> RunStreams:
+    """Streams of run `run` (0-based): child `run` of the runs' SeedSequence, split in noise and optimizer."""
+    _, runs_seq = np.random.SeedSequence(seed).spawn(2)
+    run_seq = runs_seq.spawn(run + 1)[run]
+    noise_seq, opt_seq = run_seq.spawn(2)
+    return RunStreams(noise=np.random.default_rng(noise_seq), optimizer=np.random.default_rng(opt_seq))
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """The configured car on a sampled road. Simulates any batch of parameter sets on that road."""
+
+    config: Config
+    t: NDArray  # (n,) [s]
+    road: NDArray  # (n, 4) [m]
+    road_source: str  # "config" or the measurement file the road came from
+
+    @property
+    def dt(self) -> float:
+        """Time step [s]."""
+        return float(self.t[1] - self.t[0])
+
+    def parameters(self, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:
+        """All 16 parameters for a batch: the configured car with `values` replacing some of them."""
+        return parameter_batch(self.config.vehicle, values)
+
+    def matrices(self, values: Mapping[str, ArrayLike] | None = None) -> FullCarMatrices:
+        """M, C, K, B, G for a batch of cars."""
+        return assemble(self.parameters(values))
+
+    def simulate(self, values: Mapping[str, ArrayLike] | None = None) -> Response:
+        """Clean responses of a batch of cars (the configured car when `values` is None)."""
+        return simulate(self.matrices(values), self.road, self.dt, self.config.simulation.integrator)
+
+
+def build_experiment(config: Config, road_file: str | Path | None = None) -> Experiment:
+    """Sample the configured road (or read it from `road_file` / `road.file`), check the time step."""
+    vehicle = config.vehicle
+    file = road_file if road_file is not None else config.road.file
+    if file is not None:
+        measured = read_measurement(file, need_responses=False)
+        road, source, dt_key = measured.road, str(file), f"{file}: column 't'"
+        t = measured.t[0] + np.arange(measured.t.size) * measured.dt  # the uniform grid the file approximates
+    else:
+        sim = config.simulation
+        t = time_grid(sim.duration, sim.dt)
+        heights = road_function(config.road, vehicle.L, experiment_rng(config.identify.seed))
+        road, source, dt_key = heights(t), "config", "simulation.dt"
+    check_time_step(config, float(t[1] - t[0]), dt_key)
+    return Experiment(config=config, t=t, road=road, road_source=source)
+
+
+def check_time_step(config: Config, dt: float, key: str) -> None:
+    """Refuse a time step too coarse to resolve the fastest mode (the wheel hop) of the configured car."""
+    omega = assemble(config.vehicle.values()).natural_frequencies()
+    f_max = float(omega[-1]) / (2 * math.pi)
+    dt_max = 1.0 / (MIN_SAMPLES_PER_PERIOD * f_max)
+    if dt > dt_max * (1 + 1e-9):
+        raise InputError(
+            f"time step {dt:g} s is too coarse for the wheel-hop mode at {f_max:.2f} Hz: use dt <= {dt_max:.3g} s "
+            f"({MIN_SAMPLES_PER_PERIOD} samples per period of the fastest mode)",
+            source=config.source,
+            key=key,
+        )
+
+
+@dataclass(frozen=True)
+class SimulatedRun:
+    """Clean responses of the configured car and their noisy measurement (Eq. 15)."""
+
+    experiment: Experiment
+    clean: Response
+    acc: NDArray  # (n, 4) noisy [m/s²]
+    disp: NDArray  # (n, 4) noisy [m]
+    noise_level: float
+
+
+def simulate_measurement(experiment: Experiment, rng: np.random.Generator) -> SimulatedRun:
+    """Simulate the configured car and add Eq. 15 noise to each channel (accelerations first, then displacements)."""
+    clean = experiment.simulate()
+    level = experiment.config.noise.level
+    acc = add_noise(clean.acc, level, rng)
+    disp = add_noise(clean.disp, level, rng)
+    return SimulatedRun(experiment=experiment, clean=clean, acc=acc, disp=disp, noise_level=level)
