@@ -1,0 +1,193 @@
+"""The optimizer framework: a fixed outer loop (budget, counting, best-so-far, penalties) around one hook.
+
+An algorithm implements ``_initialize`` (make its first population and evaluate it) and ``_step``
+(advance one iteration); ``minimize`` is the same for all of them. All evaluations go through
+``Run.evaluate``, which takes a whole population at once (shape (P, D)), counts every evaluation,
+replaces non-finite costs by a finite penalty, and records the best-cost history.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+BatchCost = Callable[[NDArray], NDArray]  # (P, D) -> (P,)
+Residuals = Callable[[NDArray], NDArray]  # (D,) -> (R,) with cost = sum(r**2) (least squares)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Minimise cost(x) over the box lower <= x <= upper.
+
+    ``cost`` evaluates a population (P, D) -> (P,). ``residuals`` (optional) gives the residual vector of
+    one point whose sum of squares is proportional to the cost; least-squares methods need it.
+    ``penalty`` is the finite cost given to points whose cost is NaN or infinite (unstable models).
+    """
+
+    lower: NDArray
+    upper: NDArray
+    cost: BatchCost
+    residuals: Residuals | None = None
+    penalty: float = 1e10
+    names: tuple[str, ...] = ()
+
+    @property
+    def dim(self) -> int:
+        return int(np.asarray(self.lower).size)
+
+
+@dataclass(frozen=True)
+class OptimizeResult:
+    """Best point found, its cost, and how the search went (evaluations counted, history of best cost)."""
+
+    x: NDArray
+    cost: float
+    evaluations: int
+    iterations: int
+    penalised: int
+    wall_s: float
+    history_evals: NDArray  # cumulative evaluations after each batch
+    history_cost: NDArray  # best cost after each batch
+    message: str = ""
+
+
+class BudgetExhausted(Exception):
+    """Raised inside an algorithm's step when the evaluation budget is spent; ends the run cleanly."""
+
+
+@dataclass
+class Run:
+    """The state every algorithm shares: problem, random stream, budget, counters, best so far."""
+
+    problem: Problem
+    rng: np.random.Generator
+    budget: int
+    evaluations: int = 0
+    penalised: int = 0
+    best_x: NDArray | None = None
+    best_cost: float = np.inf
+    history_evals: list[int] = field(default_factory=list)
+    history_cost: list[float] = field(default_factory=list)
+
+    @property
+    def remaining(self) -> int:
+        return self.budget - self.evaluations
+
+    def evaluate(self, X: NDArray) -> NDArray:
+        """Costs of a population (P, D), clipped into the box first. Truncated to the remaining budget:
+        points past the budget get +inf and BudgetExhausted is raised after recording the ones that fit."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        lo, hi = self.problem.lower, self.problem.upper
+        X = np.clip(X, lo, hi)
+        take = min(len(X), max(self.remaining, 0))
+        costs = np.full(len(X), np.inf)
+        if take > 0:
+            raw = np.asarray(self.problem.cost(X[:take]), dtype=float).reshape(take)
+            bad = ~np.isfinite(raw)
+            self.penalised += int(bad.sum())
+            raw = np.where(bad, self.problem.penalty, raw)
+            costs[:take] = raw
+            self.evaluations += take
+            i = int(np.argmin(raw))
+            if raw[i] < self.best_cost:
+                self.best_cost, self.best_x = float(raw[i]), X[i].copy()
+            self.history_evals.append(self.evaluations)
+            self.history_cost.append(self.best_cost)
+        if take < len(X):
+            raise BudgetExhausted
+        return costs
+
+    def uniform(self, n: int) -> NDArray:
+        """n points drawn uniformly in the box."""
+        lo, hi = self.problem.lower, self.problem.upper
+        return lo + (hi - lo) * self.rng.random((n, lo.size))
+
+
+class Optimizer(ABC):
+    """Base of all algorithms. Subclasses set ``name`` and implement ``_initialize`` and ``_step``."""
+
+    name: ClassVar[str]
+
+    def __init__(self, population: int = 20, iterations: int = 50, **options: Any):
+        if population < 2:
+            raise ValueError("population must be at least 2")
+        if iterations < 1:
+            raise ValueError("iterations must be at least 1")
+        self.population = int(population)
+        self.iterations = int(iterations)
+        self.options = options
+
+    def default_budget(self) -> int:
+        """Evaluations allowed when none is given: population x iterations (the paper's 20 x 50 = 1000)."""
+        return self.population * self.iterations
+
+    def minimize(
+        self,
+        problem: Problem,
+        rng: np.random.Generator,
+        budget: int | None = None,
+        x0: NDArray | None = None,
+    ) -> OptimizeResult:
+        """Run the algorithm until its iterations are done or the evaluation budget is spent."""
+        lo, hi = np.asarray(problem.lower, dtype=float), np.asarray(problem.upper, dtype=float)
+        if lo.shape != hi.shape or lo.ndim != 1 or np.any(~(lo < hi)):
+            raise ValueError("bounds must be 1-D with lower < upper")
+        problem = Problem(lo, hi, problem.cost, problem.residuals, problem.penalty, problem.names)
+        run = Run(problem=problem, rng=rng, budget=int(budget if budget is not None else self.default_budget()))
+        start = time.perf_counter()
+        iterations, message = 0, "iterations done"
+        try:
+            state = self._initialize(run, None if x0 is None else np.clip(np.asarray(x0, dtype=float), lo, hi))
+            while iterations < self.iterations and run.remaining > 0:
+                iterations += 1
+                if self._step(run, state) is False:
+                    message = "converged"
+                    break
+            if run.remaining <= 0:
+                message = "budget spent"
+        except BudgetExhausted:
+            message = "budget spent"
+        return OptimizeResult(
+            x=run.best_x if run.best_x is not None else (lo + hi) / 2,
+            cost=run.best_cost,
+            evaluations=run.evaluations,
+            iterations=iterations,
+            penalised=run.penalised,
+            wall_s=time.perf_counter() - start,
+            history_evals=np.asarray(run.history_evals, dtype=np.int64),
+            history_cost=np.asarray(run.history_cost, dtype=float),
+            message=message,
+        )
+
+    @abstractmethod
+    def _initialize(self, run: Run, x0: NDArray | None) -> Any:
+        """Create and evaluate the first population (seeded with x0 when given); return the state."""
+
+    @abstractmethod
+    def _step(self, run: Run, state: Any) -> bool | None:
+        """One iteration on the population; return False to stop early (converged)."""
+
+
+REGISTRY: dict[str, type[Optimizer]] = {}
+
+
+def register(cls: type[Optimizer]) -> type[Optimizer]:
+    """Class decorator: make an algorithm available by its ``name`` (SPEC section 3)."""
+    REGISTRY[cls.name] = cls
+    return cls
+
+
+def get_optimizer(name: str, population: int = 20, iterations: int = 50, **options: Any) -> Optimizer:
+    """An optimizer by its SPEC name (`ga`, `cpso`, `abc`, `de`, `nelder-mead`, `lsq`, `hybrid`)."""
+    from . import load_all
+
+    load_all()
+    if name not in REGISTRY:
+        raise KeyError(f"unknown algorithm {name!r}; known: {', '.join(sorted(REGISTRY))}")
+    return REGISTRY[name](population=population, iterations=iterations, **options)
