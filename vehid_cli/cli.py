@@ -124,6 +124,82 @@ def simulate(
     )
 
 
+@app.command()
+@_guarded
+def identify(
+    config: Annotated[Path, typer.Argument(help="Experiment config (YAML).", show_default=False)],
+    data: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--data", help="Identify from this measurement file instead of simulated data."),
+    ] = None,
+    runs: Annotated[Optional[int], typer.Option("--runs", help="Number of runs (identify.runs).")] = None,  # noqa: UP045
+    seed: Annotated[Optional[int], typer.Option("--seed", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
+    jobs: Annotated[Optional[int], typer.Option("--jobs", help="Worker processes (default: all cores).")] = None,  # noqa: UP045
+    output: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("-o", "--output", help="Campaign file (.h5); default runs/<config>-<hash>.h5."),
+    ] = None,
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="Also write the SPEC JSON summary here.")] = None,  # noqa: UP045
+    set_: SetOption = None,
+) -> None:
+    """Run a statistical identification campaign: one HDF5 file, and the RE/NRE summary table.
+
+    Each run identifies from its own noise realisation with its own optimizer stream, so results are
+    identical for any --jobs. Finished runs are kept in <output>.partial/ until the campaign completes:
+    rerun the same command to resume an interrupted campaign.
+    """
+    import json
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from .campaign import run_campaign
+    from .report.tables import summary_table
+    from .results import campaign_json, write_campaign_h5
+
+    overrides = list(set_ or ())
+    if runs is not None:
+        overrides.append(f"identify.runs={runs}")
+    if seed is not None:
+        overrides.append(f"identify.seed={seed}")
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    cfg = load_config(config, overrides)
+    if output is None:
+        Path("runs").mkdir(exist_ok=True)
+        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+    target = check_writable(output, (".h5", ".hdf5"))
+    if json_out is not None:
+        check_writable(json_out, (".json",))
+    partial = target.with_name(target.name + ".partial")
+    with Progress(
+        TextColumn("[bold]identify[/] {task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        console=err, transient=True, disable=not err.is_terminal,
+    ) as progress:  # fmt: skip
+        bar = progress.add_task(f"{cfg.identify.algorithm.name}/{cfg.identify.objective}", total=cfg.identify.runs)
+        campaign = run_campaign(
+            cfg, data, jobs=jobs, checkpoint_dir=partial, on_run=lambda d, n: progress.update(bar, completed=d)
+        )
+    write_campaign_h5(target, campaign)
+    if json_out is not None:
+        from .data import atomic_path
+
+        with atomic_path(json_out) as tmp:
+            tmp.write_text(json.dumps(campaign_json(campaign), indent=2))
+    _remove_checkpoint(partial)
+    out.print(summary_table(campaign))
+    unidentifiable = campaign.bound.unidentifiable()
+    if unidentifiable:
+        out.print(f"[yellow]warning:[/] the sensors cannot identify {', '.join(unidentifiable)} (Fisher information)")
+    out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
+
+
+def _remove_checkpoint(directory: Path) -> None:
+    if directory.is_dir():
+        for path in directory.iterdir():
+            path.unlink()
+        directory.rmdir()
+
+
 def run() -> None:
     """Console-script entry point."""
     app()

@@ -202,6 +202,13 @@ class Identify(_Section):
     algorithm: Algorithm = Algorithm()
     runs: Annotated[int, Field(ge=1)] = 30
     seed: Annotated[int, Field(ge=0)] = 2015
+    budget: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="model evaluations per run; default population x iterations"
+    )
+    truth: Literal["auto", "config", "none"] = Field(
+        "auto",
+        description="are the configured values the truth? auto: yes for simulated data, no with --data",
+    )
 
 
 class Config(_Section):
@@ -233,6 +240,10 @@ class Config(_Section):
                 raise _KeyedError(
                     f"identify.limits.{name}", f"'{name}' is not one of the unknowns {list(ident.unknowns)}"
                 )
+        if ident.objective == "f1" and self.sensors == "acc":
+            raise _KeyedError("identify.objective", "f1 compares displacements; set sensors to 'disp' or 'both'")
+        if ident.objective == "f2" and self.sensors == "disp":
+            raise _KeyedError("identify.objective", "f2 compares accelerations; set sensors to 'acc' or 'both'")
         lo_f, hi_f = ident.bounds
         if not lo_f < hi_f:
             raise _KeyedError("identify.bounds", f"lower factor {lo_f:g} must be below upper factor {hi_f:g}")

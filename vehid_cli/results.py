@@ -38,3 +38,176 @@ def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
         q = clean.create_dataset("q", data=run.clean.q)
         q.attrs["columns"] = np.array(DOF_NAMES, dtype=h5py.string_dtype())
         q.attrs["unit"] = "m (bounce, wheels), rad (roll, pitch)"
+
+
+# ------------------------------------------------------------------------------------------ campaigns
+
+CAMPAIGN_KIND = "vehid.campaign"
+
+
+def _padded(rows: list[np.ndarray], fill: float) -> np.ndarray:
+    width = max((r.size for r in rows), default=0)
+    out = np.full((len(rows), width), fill, dtype=float)
+    for i, r in enumerate(rows):
+        out[i, : r.size] = r
+    return out
+
+
+def write_campaign_h5(path: str | Path, campaign) -> None:
+    """One campaign in one file, written atomically. Layout (README, "Campaign files"):
+
+    attrs: kind, config_yaml, config_sha256, seed, runs, objective, algorithm, data_file, sigma_source, provenance
+    /parameters (D,) names; /truth (D,) (NaN when unknown; attr known); /nominal, /bounds (D, 2)
+    /runs/{estimate (N, D), cost, evaluations, penalised, wall_s (N,), history_evals, history_cost (N, H)}
+    /summary/{mean, sd, re_percent, per_run_nre_percent, ...} with scalar figures as attributes
+    /crlb/{re_sd_percent (D,), fisher (D, D), identifiable (D,)} with nre_rms_percent, condition attributes
+    /noise_sigma/<family> (4,) noise standard deviation per channel used by wls and the bound
+    """
+    cfg, s, b = campaign.config, campaign.summary, campaign.bound
+    D = len(campaign.names)
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
+        h5.attrs["kind"] = CAMPAIGN_KIND
+        h5.attrs["config_yaml"] = cfg.to_yaml()
+        h5.attrs["config_sha256"] = cfg.digest()
+        h5.attrs["seed"] = cfg.identify.seed
+        h5.attrs["runs"] = len(campaign.records)
+        h5.attrs["objective"] = cfg.identify.objective
+        h5.attrs["algorithm"] = cfg.identify.algorithm.name
+        h5.attrs["sensors"] = cfg.sensors
+        h5.attrs["noise_level"] = cfg.noise.level
+        h5.attrs["data_file"] = campaign.data_file or ""
+        h5.attrs["sigma_source"] = campaign.sigma_source
+        for key, value in provenance().items():
+            h5.attrs[key] = value
+        h5.create_dataset("parameters", data=np.array(campaign.names, dtype=h5py.string_dtype()))
+        truth = h5.create_dataset("truth", data=campaign.truth if campaign.truth is not None else np.full(D, np.nan))
+        truth.attrs["known"] = campaign.truth is not None
+        h5.create_dataset("nominal", data=campaign.nominal)
+        h5.create_dataset("bounds", data=np.column_stack([campaign.lower, campaign.upper]))
+        runs = h5.create_group("runs")
+        recs = campaign.records
+        runs.create_dataset("estimate", data=np.array([r.estimate for r in recs]))
+        runs.create_dataset("cost", data=np.array([r.cost for r in recs]))
+        runs.create_dataset("evaluations", data=np.array([r.evaluations for r in recs]))
+        runs.create_dataset("penalised", data=np.array([r.penalised for r in recs]))
+        runs.create_dataset("wall_s", data=np.array([r.wall_s for r in recs]))
+        runs.create_dataset("history_evals", data=_padded([r.history_evals for r in recs], -1).astype(np.int64))
+        runs.create_dataset("history_cost", data=_padded([r.history_cost for r in recs], np.nan))
+        sg = h5.create_group("summary")
+        sg.create_dataset("mean", data=s.mean)
+        sg.create_dataset("sd", data=s.sd)
+        if s.re_percent is not None:
+            sg.create_dataset("re_percent", data=s.re_percent)
+            sg.create_dataset("per_run_nre_percent", data=s.per_run_nre_percent)
+            sg.attrs["nre_percent"] = s.nre_percent
+            sg.attrs["per_run_nre_median"] = s.per_run_nre_median
+            sg.attrs["per_run_nre_rms"] = s.per_run_nre_rms
+        if s.nre_over_crlb is not None:
+            sg.attrs["nre_over_crlb"] = s.nre_over_crlb
+        sg.attrs["wall_s"] = s.wall_s
+        sg.attrs["penalised"] = s.penalised
+        cg = h5.create_group("crlb")
+        cg.create_dataset("re_sd_percent", data=b.re_sd_percent)
+        cg.create_dataset("fisher", data=b.fisher)
+        cg.create_dataset("identifiable", data=b.identifiable)
+        cg.attrs["nre_rms_percent"] = b.nre_rms_percent
+        cg.attrs["condition"] = b.condition
+        ng = h5.create_group("noise_sigma")
+        for family, sigma in campaign.sigma.items():
+            ng.create_dataset(family, data=sigma)
+
+
+def campaign_json(campaign) -> dict:
+    """SPEC section 5 `identify` object (plus a few extra keys)."""
+    s, b, names = campaign.summary, campaign.bound, list(campaign.names)
+
+    def obj(values):
+        return None if values is None else {n: float(v) for n, v in zip(names, values, strict=True)}
+
+    evals = [int(e) for e in s.evaluations]
+    return {
+        "parameters": names,
+        "truth": obj(campaign.truth),
+        "mean": obj(s.mean),
+        "re_percent": obj(s.re_percent),
+        "nre_percent": s.nre_percent,
+        "per_run_nre_percent": None if s.per_run_nre_percent is None else [float(v) for v in s.per_run_nre_percent],
+        "crlb": {
+            "re_sd_percent": obj(b.re_sd_percent),
+            "nre_rms_percent": b.nre_rms_percent,
+            "unidentifiable": b.unidentifiable(),
+        },
+        "evaluations_per_run": float(np.mean(evals)),
+        "runs": len(campaign.records),
+        "wall_s": s.wall_s,
+        "per_run_nre_median": s.per_run_nre_median,
+        "per_run_nre_rms": s.per_run_nre_rms,
+        "nre_over_crlb": s.nre_over_crlb,
+        "evaluations": evals,
+        "penalised_evaluations": s.penalised,
+        "objective": campaign.config.identify.objective,
+        "algorithm": campaign.config.identify.algorithm.name,
+        "noise_level": campaign.config.noise.level,
+    }
+
+
+def read_campaign_h5(path: str | Path):
+    """Read a campaign file back into a `Campaign` (raises InputError for a file that is not one)."""
+    import yaml
+
+    from .campaign import Campaign, RunRecord, summarise
+    from .config import config_from_dict
+    from .crlb import CramerRao
+    from .errors import InputError
+
+    source = str(path)
+    try:
+        h5 = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise InputError("campaign file not found", source=source) from None
+    except OSError as exc:
+        raise InputError(f"not a readable HDF5 file ({exc})", source=source) from None
+    with h5:
+        if h5.attrs.get("kind") != CAMPAIGN_KIND:
+            raise InputError(f"not a vehid campaign file (kind {h5.attrs.get('kind')!r})", source=source)
+        try:
+            config = config_from_dict(yaml.safe_load(h5.attrs["config_yaml"]), source=f"{source}:config_yaml")
+            names = tuple(n.decode() if isinstance(n, bytes) else str(n) for n in h5["parameters"][()])
+            truth = h5["truth"][()] if h5["truth"].attrs["known"] else None
+            runs = h5["runs"]
+            est, cost, evals = runs["estimate"][()], runs["cost"][()], runs["evaluations"][()]
+            pen, wall = runs["penalised"][()], runs["wall_s"][()]
+            hev, hco = runs["history_evals"][()], runs["history_cost"][()]
+            records = tuple(
+                RunRecord(
+                    index=i,
+                    estimate=est[i],
+                    cost=float(cost[i]),
+                    evaluations=int(evals[i]),
+                    penalised=int(pen[i]),
+                    wall_s=float(wall[i]),
+                    history_evals=hev[i][hev[i] >= 0],
+                    history_cost=hco[i][~np.isnan(hco[i])],
+                )  # fmt: skip
+                for i in range(len(est))
+            )
+            cg = h5["crlb"]
+            bound = CramerRao(
+                names=names,
+                values=truth if truth is not None else h5["nominal"][()],
+                fisher=cg["fisher"][()],
+                re_sd_percent=cg["re_sd_percent"][()],
+                nre_rms_percent=float(cg.attrs["nre_rms_percent"]),
+                identifiable=cg["identifiable"][()],
+                condition=float(cg.attrs["condition"]),
+            )
+            summary = summarise(names, truth, list(records), bound, float(h5["summary"].attrs["wall_s"]))
+            bounds = h5["bounds"][()]
+            sigma = {k: h5["noise_sigma"][k][()] for k in h5["noise_sigma"]}
+            return Campaign(
+                config=config, data_file=h5.attrs["data_file"] or None, names=names, truth=truth,
+                nominal=h5["nominal"][()], lower=bounds[:, 0], upper=bounds[:, 1], sigma=sigma,
+                sigma_source=str(h5.attrs["sigma_source"]), records=records, bound=bound, summary=summary,
+            )  # fmt: skip
+        except (KeyError, ValueError, TypeError) as exc:
+            raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None

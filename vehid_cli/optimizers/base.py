@@ -18,22 +18,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 BatchCost = Callable[[NDArray], NDArray]  # (P, D) -> (P,)
-Residuals = Callable[[NDArray], NDArray]  # (D,) -> (R,) with cost = sum(r**2) (least squares)
+CostAndResiduals = Callable[[NDArray], tuple[NDArray, NDArray]]  # (P, D) -> costs (P,), residuals (P, R)
 
 
 @dataclass(frozen=True)
 class Problem:
     """Minimise cost(x) over the box lower <= x <= upper.
 
-    ``cost`` evaluates a population (P, D) -> (P,). ``residuals`` (optional) gives the residual vector of
-    one point whose sum of squares is proportional to the cost; least-squares methods need it.
+    ``cost`` evaluates a population (P, D) -> (P,). ``residuals`` (optional) evaluates a population to
+    (costs (P,), residual vectors (P, R)) from one simulation; least-squares methods minimise the sum of
+    squared residuals (the Gaussian likelihood) and report the cost.
     ``penalty`` is the finite cost given to points whose cost is NaN or infinite (unstable models).
     """
 
     lower: NDArray
     upper: NDArray
     cost: BatchCost
-    residuals: Residuals | None = None
+    residuals: CostAndResiduals | None = None
     penalty: float = 1e10
     names: tuple[str, ...] = ()
 
@@ -102,6 +103,32 @@ class Run:
         if take < len(X):
             raise BudgetExhausted
         return costs
+
+    def evaluate_residuals(self, X: NDArray) -> NDArray:
+        """Residual vectors (P, R) of a population, counted and tracked like ``evaluate``.
+
+        Raises BudgetExhausted (evaluating nothing) when the whole batch does not fit the budget, and
+        ValueError when the problem has no residuals.
+        """
+        if self.problem.residuals is None:
+            raise ValueError("this problem has no residual vector")
+        X = np.clip(np.atleast_2d(np.asarray(X, dtype=float)), self.problem.lower, self.problem.upper)
+        if len(X) > self.remaining:
+            raise BudgetExhausted
+        costs, residuals = self.problem.residuals(X)
+        costs = np.asarray(costs, dtype=float).reshape(len(X))
+        residuals = np.asarray(residuals, dtype=float)
+        bad = ~np.isfinite(costs) | ~np.all(np.isfinite(residuals), axis=1)
+        self.penalised += int(bad.sum())
+        costs = np.where(bad, self.problem.penalty, costs)
+        residuals = np.where(bad[:, None], np.sqrt(self.problem.penalty), residuals)
+        self.evaluations += len(X)
+        i = int(np.argmin(costs))
+        if costs[i] < self.best_cost:
+            self.best_cost, self.best_x = float(costs[i]), X[i].copy()
+        self.history_evals.append(self.evaluations)
+        self.history_cost.append(self.best_cost)
+        return residuals
 
     def uniform(self, n: int) -> NDArray:
         """n points drawn uniformly in the box."""

@@ -1,0 +1,50 @@
+"""The project's best estimator: a global population phase, then a least-squares polish.
+
+The global phase (differential evolution by default) spends a fraction of the budget finding the basin
+of the global minimum; the trust-region polish (`lsq`) then converges to the maximum-likelihood estimate
+in a few dozen evaluations. Both phases share one counted run, so the budget is the whole budget.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .base import REGISTRY, BudgetExhausted, Optimizer, Run, register
+from .lsq import polish
+
+
+@register
+class Hybrid(Optimizer):
+    """Global phase (`global_algorithm`, `global_fraction` of the budget), then the `lsq` polish."""
+
+    name = "hybrid"
+
+    def __init__(self, population: int = 20, iterations: int = 50, **options: Any):
+        super().__init__(population, iterations, **options)
+        self.global_algorithm = str(options.get("global_algorithm", "de"))
+        self.global_fraction = float(options.get("global_fraction", 0.5))
+
+    def _initialize(self, run: Run, x0: NDArray | None) -> Any:
+        from . import load_all
+
+        load_all()
+        inner = REGISTRY[self.global_algorithm](population=self.population, iterations=self.iterations)
+        global_budget = int(self.global_fraction * run.budget)
+        state = inner._initialize(run, x0)
+        try:
+            while run.evaluations + self.population <= global_budget:
+                if inner._step(run, state) is False:
+                    break
+        except BudgetExhausted:
+            pass
+        return {"x": run.best_x}
+
+    def _step(self, run: Run, state: Any) -> bool | None:
+        try:
+            state["x"] = polish(run, np.asarray(state["x"]))
+        except BudgetExhausted:
+            pass
+        return False
