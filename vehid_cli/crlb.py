@@ -80,17 +80,27 @@ def cramer_rao(
         W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
         W = W.reshape(-1, D)
         F += W.T @ W
-    scale = np.sqrt(np.clip(np.diag(F), 1e-300, None))
-    corr = F / scale[:, None] / scale[None, :]
-    eig, vec = np.linalg.eigh(corr)
-    condition = float(eig[-1] / max(eig[0], 1e-300))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cov = np.linalg.pinv(F, rcond=1e-14, hermitian=True)
-        re_sd = 100.0 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    weak = eig / eig[-1] < NEAR_SINGULAR
-    in_null = np.any(np.abs(vec[:, weak]) > 0.3, axis=1) if weak.any() else np.zeros(D, bool)
-    identifiable = ~in_null & (re_sd < UNIDENTIFIABLE_RE_SD) & (np.diag(F) > 0)
-    re_sd = np.where(np.diag(F) > 0, re_sd, np.inf)
+    # A parameter the data carries (next to) no information about has an infinite bound: it is not
+    # dropped from the inverse (a pseudo-inverse would silently report a tiny bound for it).
+    info = np.diag(F)
+    seen = info > NEAR_SINGULAR * max(info.max(), 1e-300)
+    identifiable = seen.copy()
+    re_sd = np.full(D, np.inf)
+    condition = np.inf
+    if seen.any():
+        Fs = F[np.ix_(seen, seen)]
+        scale = np.sqrt(np.diag(Fs))
+        corr = Fs / scale[:, None] / scale[None, :]
+        eig, vec = np.linalg.eigh(corr)
+        condition = float(eig[-1] / max(eig[0], 1e-300)) if seen.all() else np.inf
+        weak = eig / eig[-1] < NEAR_SINGULAR
+        in_null = np.any(np.abs(vec[:, weak]) > 0.3, axis=1) if weak.any() else np.zeros(seen.sum(), bool)
+        cov = np.linalg.pinv(corr, rcond=NEAR_SINGULAR, hermitian=True) / scale[:, None] / scale[None, :]
+        sd = 100.0 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        sd[in_null] = np.inf
+        re_sd[seen] = sd
+        identifiable[seen] = ~in_null
+    identifiable &= re_sd < UNIDENTIFIABLE_RE_SD
     return CramerRao(
         names=tuple(names),
         values=values,

@@ -1,0 +1,160 @@
+"""Campaigns: bit-identical for any --jobs, resumable after a kill, the SPEC JSON, and clear bad-input errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, needs_shared
+from vehid_cli.campaign import run_campaign
+from vehid_cli.config import load_config
+from vehid_cli.results import read_campaign_h5, write_campaign_h5
+
+SMALL = [
+    "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=4",
+    "identify.algorithm.name=de", "identify.algorithm.population=8", "identify.algorithm.iterations=5",
+]  # fmt: skip
+
+
+def small_config(*extra):
+    return load_config(BASE_CONFIG, SMALL + list(extra))
+
+
+def h5_content(path):
+    """Every dataset of a campaign file (provenance attributes such as the creation time excluded)."""
+    out = {}
+    with h5py.File(path) as h5:
+        h5.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+        out["config_yaml"] = h5.attrs["config_yaml"]
+    return out
+
+
+def assert_same_content(a, b):
+    ca, cb = h5_content(a), h5_content(b)
+    assert ca.keys() == cb.keys()
+    for key in ca:
+        if key == "runs/wall_s":
+            continue
+        np.testing.assert_array_equal(ca[key], cb[key], err_msg=key)
+
+
+def test_same_seed_identical_results_for_any_jobs(tmp_path):
+    cfg = small_config()
+    for jobs in (1, 2):
+        write_campaign_h5(tmp_path / f"j{jobs}.h5", run_campaign(cfg, jobs=jobs))
+    assert_same_content(tmp_path / "j1.h5", tmp_path / "j2.h5")
+    other = run_campaign(small_config("identify.seed=1"), jobs=1)
+    assert not np.array_equal(other.summary.mean, read_campaign_h5(tmp_path / "j1.h5").summary.mean)
+
+
+def test_interrupted_campaign_resumes_to_the_same_result(tmp_path):
+    cfg = small_config()
+    write_campaign_h5(tmp_path / "whole.h5", run_campaign(cfg, jobs=1))
+
+    def interrupt_after_two(done, total):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    partial = tmp_path / "part.h5.partial"
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(cfg, jobs=1, checkpoint_dir=partial, on_run=interrupt_after_two)
+    assert len(list(partial.glob("run-*.npz"))) == 2
+    seen = []
+    resumed = run_campaign(cfg, jobs=2, checkpoint_dir=partial, on_run=lambda d, n: seen.append(d))
+    assert seen[0] == 2  # started from the two finished runs
+    write_campaign_h5(tmp_path / "part.h5", resumed)
+    assert_same_content(tmp_path / "whole.h5", tmp_path / "part.h5")
+
+
+def test_checkpoint_of_another_config_is_refused(tmp_path):
+    from vehid_cli.errors import InputError
+
+    partial = tmp_path / "c.partial"
+    run_campaign(small_config("identify.runs=1"), jobs=1, checkpoint_dir=partial)
+    with pytest.raises(InputError, match="different config"):
+        run_campaign(small_config("identify.runs=1", "noise.level=0.2"), jobs=1, checkpoint_dir=partial)
+
+
+def test_file_round_trip_and_summary_statistics(tmp_path):
+    campaign = run_campaign(small_config(), jobs=1)
+    write_campaign_h5(tmp_path / "c.h5", campaign)
+    back = read_campaign_h5(tmp_path / "c.h5")
+    s = back.summary
+    est = np.array([r.estimate for r in back.records])
+    np.testing.assert_allclose(s.mean, est.mean(axis=0))
+    re_mean = 100 * (est.mean(axis=0) - back.truth) / back.truth
+    np.testing.assert_allclose(s.re_percent, re_mean)
+    assert s.nre_percent == pytest.approx(np.linalg.norm(re_mean))
+    per_run = np.linalg.norm(100 * (est - back.truth) / back.truth, axis=1)
+    assert s.per_run_nre_rms == pytest.approx(np.sqrt(np.mean(per_run**2)))
+    assert s.nre_over_crlb == pytest.approx(s.per_run_nre_rms / back.bound.nre_rms_percent)
+    assert all(r.evaluations <= 40 for r in back.records)
+
+
+def vehid(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT
+    )
+
+
+def test_identify_cli_writes_h5_and_spec_json(tmp_path):
+    sets = [x for s in SMALL for x in ("--set", s)]
+    res = vehid(
+        "identify", BASE_CONFIG, *sets, "--runs", 2, "--jobs", 1, "-o", tmp_path / "c.h5", "--json", tmp_path / "c.json"
+    )
+    assert res.returncode == 0, res.stderr
+    doc = json.loads((tmp_path / "c.json").read_text())
+    for key in ("parameters", "truth", "mean", "re_percent", "nre_percent", "per_run_nre_percent", "crlb",
+                "evaluations_per_run", "runs", "wall_s"):  # fmt: skip
+        assert key in doc
+    assert doc["parameters"] == ["m", "Ix", "Iy", "a1", "b1"] and doc["runs"] == 2
+    assert set(doc["crlb"]["re_sd_percent"]) == set(doc["parameters"]) and doc["crlb"]["nre_rms_percent"] > 0
+    assert "NRE of mean" in res.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.h5", "c.json"]  # checkpoint removed
+
+
+def test_identify_from_measured_data_with_known_truth(tmp_path):
+    data = needs_shared(VEHICLE_DATA / "bump_run_linear.csv")
+    cfg = load_config(
+        BASE_CONFIG,
+        [
+            "identify.runs=2",
+            "identify.algorithm.name=lsq",
+            "identify.objective=wls",
+            "sensors=acc",
+            "identify.truth=config",
+            "noise.level=0",
+        ],
+    )
+    campaign = run_campaign(cfg, data, jobs=1)
+    # lsq from the box centre (the truth, for symmetric bounds) on the independent 5 %-noise run
+    assert campaign.sigma_source.startswith("estimated")
+    assert campaign.summary.per_run_nre_rms < 4 * campaign.bound.nre_rms_percent
+    assert np.all(np.array([r.cost for r in campaign.records]) < 1.2)  # chi² per sample near 1
+
+
+@pytest.mark.parametrize(
+    "args, fragment",
+    [
+        (["--set", "identify.bounds=[1.1, 1.3]"], "excludes"),
+        (["--set", "identify.unknowns=[m, mass]"], "'mass' is not a vehicle parameter"),
+        (["--set", "identify.algorithm.population=1"], "identify.algorithm.population"),
+        (["--runs", "0"], "identify.runs"),
+        (["-o", "/nonexistent-dir/c.h5"], "does not exist"),
+        (["--set", "identify.objective=f1", "--set", "sensors=acc"], "f1 compares displacements"),
+        (["--data", "{tmp}/missing.csv"], "file not found"),
+    ],
+)
+def test_identify_bad_input_exits_2(tmp_path, args, fragment):
+    args = [a.format(tmp=tmp_path) for a in args]
+    if "-o" not in args:
+        args += ["-o", str(tmp_path / "c.h5")]
+    res = vehid("identify", BASE_CONFIG, *args)
+    assert res.returncode == 2, res.stderr
+    assert fragment in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "c.h5").exists()
