@@ -193,6 +193,119 @@ def identify(
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
 
 
+@app.command()
+@_guarded
+def sweep(
+    config: Annotated[Path, typer.Argument(help="Base experiment config (YAML).", show_default=False)],
+    vary: Annotated[list[str], typer.Option("--vary", help="dotted.key=v1,v2,... (repeatable): the product is swept.")],
+    output: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("-o", "--output", help="Directory of campaign files (default runs/sweep-<config>)."),
+    ] = None,
+    shard: Annotated[Optional[str], typer.Option("--shard", help="K/N: run only this share, for job arrays.")] = None,  # noqa: UP045
+    runs: Annotated[Optional[int], typer.Option("--runs", help="Runs per campaign (identify.runs).")] = None,  # noqa: UP045
+    seed: Annotated[Optional[int], typer.Option("--seed", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
+    jobs: Annotated[Optional[int], typer.Option("--jobs", help="Worker processes (default: all cores).")] = None,  # noqa: UP045
+    set_: SetOption = None,
+) -> None:
+    """Run the Cartesian product of campaigns, one HDF5 file each, plus index.csv.
+
+    Campaigns whose file already holds the same resolved config are skipped, so a sweep can be rerun
+    to finish what an interrupted one left; --shard K/N splits the work among independent processes.
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from .campaign import run_campaign
+    from .results import write_campaign_h5
+    from .sweep import parse_shard, parse_vary, plan_sweep, run_sweep, write_index
+
+    overrides = list(set_ or ())
+    if runs is not None:
+        overrides.append(f"identify.runs={runs}")
+    if seed is not None:
+        overrides.append(f"identify.seed={seed}")
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    k, n = parse_shard(shard)
+    variations = parse_vary(vary)
+    out_dir = output if output is not None else Path("runs") / f"sweep-{Path(config).stem}"
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("sweep output must be a directory", source=str(out_dir))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    planned = plan_sweep(config, overrides, variations, out_dir)
+    write_index(out_dir, planned)
+    mine = [p for p in planned if p.index % n == k - 1]
+    with Progress(
+        TextColumn("[bold]sweep[/] {task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        console=err, transient=True, disable=not err.is_terminal,
+    ) as progress:  # fmt: skip
+        bar = progress.add_task(f"shard {k}/{n}", total=len(mine))
+
+        def run_one(p) -> None:
+            progress.update(bar, description=p.path.stem)
+            partial = p.path.with_name(p.path.name + ".partial")
+            campaign = run_campaign(p.config, jobs=jobs, checkpoint_dir=partial)
+            write_campaign_h5(p.path, campaign)
+            _remove_checkpoint(partial)
+            s = campaign.summary
+            nre = "–" if s.nre_percent is None else f"{s.nre_percent:.3f} %"
+            out.print(f"{p.path.name}: NRE of mean {nre}, {s.wall_s:.1f} s")
+            progress.advance(bar)
+
+        def skipped(p) -> None:
+            out.print(f"{p.path.name}: up to date, skipped")
+            progress.advance(bar)
+
+        ran = run_sweep(planned, (k, n), run_one, skipped)
+    out.print(f"sweep {out_dir}: {len(ran)} campaign(s) run, {len(mine) - len(ran)} up to date (shard {k}/{n})")
+
+
+@app.command()
+@_guarded
+def report(
+    paths: Annotated[
+        list[Path], typer.Argument(help="Campaign files (.h5) or directories of them.", show_default=False)
+    ],
+    fmt: Annotated[str, typer.Option("--format", help="table, md, csv, latex or json.")] = "table",
+    output: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("-o", "--output", help="Write the report to this file instead of the terminal."),
+    ] = None,
+    plots: Annotated[Optional[Path], typer.Option("--plots", help="Write PNG figures into this directory.")] = None,  # noqa: UP045
+) -> None:
+    """Summary tables (and figures) of campaign files: algorithms side by side, with the Cramér–Rao bound."""
+    from .report import FORMATS, collect, render
+    from .report.tables import summary_table
+
+    if fmt not in FORMATS:
+        raise InputError(f"--format must be one of {', '.join(FORMATS)}, got '{fmt}'")
+    if output is not None:
+        check_writable(output, (".md", ".csv", ".tex", ".json", ".txt"))
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise InputError("--plots must name a directory", source=str(plots))
+    campaigns, files = collect(paths)
+    if fmt == "table":
+        text = None
+        for c in campaigns:
+            out.print(summary_table(c))
+    else:
+        text = render(campaigns, files, fmt)
+    if text is not None:
+        if output is None:
+            out.print(text, markup=False, highlight=False)
+        else:
+            from .data import atomic_path
+
+            with atomic_path(output) as tmp:
+                tmp.write_text(text)
+            out.print(f"wrote {output}")
+    if plots is not None:
+        from .report.plots import write_campaign_plots
+
+        written = write_campaign_plots(campaigns, files, plots)
+        out.print(f"wrote {len(written)} figure(s) to {plots}")
+
+
 def _remove_checkpoint(directory: Path) -> None:
     if directory.is_dir():
         for path in directory.iterdir():

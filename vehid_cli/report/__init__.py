@@ -1,0 +1,50 @@
+"""Reports of campaign files: tables in several formats and figures."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+from ..campaign import Campaign
+from ..errors import InputError
+from ..results import campaign_json, read_campaign_h5
+
+FORMATS = ("table", "md", "csv", "latex", "json")
+
+
+def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
+    """Read campaign files, expanding directories to the *.h5 files in them (sorted)."""
+    files: list[Path] = []
+    for path in paths:
+        if path.is_dir():
+            found = sorted(path.glob("*.h5"))
+            if not found:
+                raise InputError("directory holds no campaign files (*.h5)", source=str(path))
+            files.extend(found)
+        else:
+            files.append(path)
+    if not files:
+        raise InputError("no campaign files given")
+    return [read_campaign_h5(f) for f in files], [str(f) for f in files]
+
+
+def render(campaigns: list[Campaign], files: list[str], fmt: str) -> str:
+    """The report as text in format `fmt` (all but 'table', which is printed with rich)."""
+    from . import tables
+
+    if fmt == "md":
+        return tables.markdown(campaigns)
+    if fmt == "latex":
+        return tables.latex(campaigns)
+    if fmt == "json":
+        docs = [dict(campaign_json(c), file=f) for c, f in zip(campaigns, files, strict=True)]
+        return json.dumps(docs, indent=2)
+    if fmt == "csv":
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow(tables.CSV_COLUMNS)
+        writer.writerows(tables.csv_rows(campaigns, files))
+        return buf.getvalue()
+    raise InputError(f"unknown format '{fmt}'; expected one of {', '.join(FORMATS)}")

@@ -46,3 +46,132 @@ def plot_responses(run: SimulatedRun, path: str | Path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------------ campaign figures
+
+
+def _save(fig, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def _best_cost_on_grid(record, grid):
+    """Best cost so far at each evaluation count of `grid` (a step function of the run's history)."""
+    import numpy as np
+
+    idx = np.searchsorted(record.history_evals, grid, side="right") - 1
+    out = np.where(idx >= 0, record.history_cost[np.clip(idx, 0, None)], np.nan)
+    return out
+
+
+def plot_convergence(group, path: str | Path) -> None:
+    """Best cost against evaluations: median over runs and the 10-90 % band, one curve per algorithm."""
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
+    for i, c in enumerate(group):
+        recorded = [r for r in c.records if r.history_evals.size]
+        first = max(int(r.history_evals[0]) for r in recorded)  # every run has a best cost from here on
+        top = max(int(r.history_evals[-1]) for r in recorded)
+        grid = np.unique(np.linspace(first, max(top, first), 200).astype(int))
+        curves = np.array([_best_cost_on_grid(r, grid) for r in c.records])
+        med = np.nanmedian(curves, axis=0)
+        lo, hi = np.nanpercentile(curves, [10, 90], axis=0)
+        color = f"C{i}"
+        ax.plot(grid, med, color=color, label=c.config.identify.algorithm.name)
+        ax.fill_between(grid, lo, hi, color=color, alpha=0.2, lw=0)
+    ax.set_yscale("log")
+    ax.set_xlabel("model evaluations")
+    ax.set_ylabel(f"best {group[0].config.identify.objective}")
+    ax.set_title("Convergence: median over runs, 10–90 % band")
+    ax.legend()
+    _save(fig, Path(path))
+
+
+def plot_re_boxes(group, path: str | Path) -> None:
+    """Per-run RE of each parameter, a box per algorithm, with the Cramér–Rao ±1 sd band shaded."""
+    names = group[0].names
+    fig, axes = plt.subplots(1, len(names), figsize=(3 * len(names), 4), constrained_layout=True, squeeze=False)
+    for j, name in enumerate(names):
+        ax = axes[0, j]
+        data = [c.summary.per_run_re_percent[:, j] for c in group]
+        ax.boxplot(data, tick_labels=[c.config.identify.algorithm.name for c in group])
+        bound = group[0].bound.re_sd_percent[j]
+        if bound < 1e3:
+            ax.axhspan(-bound, bound, color="C2", alpha=0.2, lw=0, label="CRLB ±1 sd")
+        ax.axhline(0, color="0.3", lw=0.8)
+        ax.set_title(name)
+        ax.set_ylabel("RE per run [%]")
+        ax.tick_params(axis="x", rotation=45)
+    axes[0, 0].legend(fontsize=8)
+    _save(fig, Path(path))
+
+
+def plot_true_vs_estimated(campaign, path: str | Path) -> None:
+    """Bounce, pitch and roll of the true car and of the mean estimate (the paper's Fig. 5)."""
+    from ..experiment import build_experiment
+
+    exp = build_experiment(campaign.config, road_file=campaign.data_file)
+    values = dict(zip(campaign.names, campaign.summary.mean, strict=True))
+    est = exp.simulate({k: [v] for k, v in values.items()})
+    ref = exp.simulate()
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True, constrained_layout=True)
+    for ax, (label, i, scale, unit) in zip(
+        axes, (("bounce x", 0, 1e3, "mm"), ("pitch θ", 2, 1e3, "mrad"), ("roll φ", 1, 1e3, "mrad")), strict=True
+    ):
+        truth_label = "configured car" if campaign.truth is None else "true car"
+        ax.plot(exp.t, scale * ref.q[:, i], color="C0", lw=1.5, label=truth_label)
+        ax.plot(exp.t, scale * est.q[0, :, i], color="C3", lw=1.0, ls="--", label="mean estimate")
+        ax.set_ylabel(f"{label} [{unit}]")
+    axes[0].legend()
+    axes[-1].set_xlabel("t [s]")
+    fig.suptitle(f"True and estimated responses ({campaign.config.identify.algorithm.name})")
+    _save(fig, Path(path))
+
+
+def plot_noisy_vs_clean(campaign, path: str | Path) -> None:
+    """The data run 0 identified from, over the clean responses (the paper's Fig. 4)."""
+    from ..experiment import SimulatedRun
+    from ..identification import build_task
+
+    task = build_task(campaign.config, campaign.data_file)
+    exp = task.experiment
+    clean = exp.simulate()
+    if task.measured is not None:
+        acc = task.measured.get("acc", clean.acc)
+        disp = task.measured.get("disp", clean.disp)
+        level = campaign.config.noise.level
+    else:
+        noisy = {f: v for f, v in task.reference(0).items()}
+        acc, disp, level = noisy.get("acc", clean.acc), noisy.get("disp", clean.disp), campaign.config.noise.level
+    plot_responses(SimulatedRun(experiment=exp, clean=clean, acc=acc, disp=disp, noise_level=level), path)
+
+
+def write_campaign_plots(campaigns, files, out_dir: str | Path) -> list[Path]:
+    """All figures for a set of campaign files; returns the paths written."""
+    from .tables import grouped
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    stems = {id(c): Path(f).stem for c, f in zip(campaigns, files, strict=True)}
+    for g, group in enumerate(grouped(campaigns)):
+        cfg = group[0].config
+        tag = f"{cfg.identify.objective}_{cfg.sensors}_np{cfg.noise.level:g}" + (f"_g{g}" if group[0].data_file else "")
+        p = out_dir / f"convergence_{tag}.png"
+        plot_convergence(group, p)
+        written.append(p)
+        if group[0].truth is not None:
+            p = out_dir / f"re_boxes_{tag}.png"
+            plot_re_boxes(group, p)
+            written.append(p)
+        p = out_dir / f"responses_{tag}.png"
+        plot_noisy_vs_clean(group[0], p)
+        written.append(p)
+        for c in group:
+            p = out_dir / f"true_vs_estimated_{stems[id(c)]}.png"
+            plot_true_vs_estimated(c, p)
+            written.append(p)
+    return written

@@ -51,3 +51,118 @@ def summary_table(c: Campaign) -> Table:
     )
     table.caption_justify = "left"
     return table
+
+
+# ------------------------------------------------------------------------------------------ many campaigns
+
+
+def group_key(c: Campaign) -> tuple:
+    """Campaigns that share everything but the algorithm go side by side in one table."""
+    cfg = c.config
+    return (cfg.identify.objective, cfg.sensors, cfg.noise.level, c.data_file or "", tuple(c.names))
+
+
+def group_title(c: Campaign) -> str:
+    cfg = c.config
+    src = f"data `{c.data_file}`" if c.data_file else f"Np = {100 * cfg.noise.level:g} %"
+    return f"objective {cfg.identify.objective}, sensors {cfg.sensors}, {src}"
+
+
+def grouped(campaigns: list[Campaign]) -> list[list[Campaign]]:
+    groups: dict[tuple, list[Campaign]] = {}
+    for c in campaigns:
+        groups.setdefault(group_key(c), []).append(c)
+    return list(groups.values())
+
+
+def _grid(group: list[Campaign]) -> tuple[list[str], list[list[str]]]:
+    """The paper's layout: a row per parameter (then NRE rows), Est and RE columns per algorithm."""
+    first = group[0]
+    header = ["", "true"]
+    for c in group:
+        name = c.config.identify.algorithm.name
+        header += [f"{name} est", f"{name} RE %"]
+    rows = []
+    for j, pname in enumerate(first.names):
+        row = [pname, _g(None if first.truth is None else first.truth[j])]
+        for c in group:
+            s = c.summary
+            row += [_g(s.mean[j]), _f(None if s.re_percent is None else s.re_percent[j])]
+        rows.append(row)
+    for label, getter in (
+        ("NRE of mean %", lambda s, b: s.nre_percent),
+        ("per-run NRE median %", lambda s, b: s.per_run_nre_median),
+        ("per-run NRE RMS %", lambda s, b: s.per_run_nre_rms),
+        ("CRLB NRE %", lambda s, b: b.nre_rms_percent),
+        ("NRE RMS / CRLB", lambda s, b: s.nre_over_crlb),
+        ("evaluations / run", lambda s, b: float(s.evaluations.mean())),
+        ("runs", lambda s, b: float(len(s.evaluations))),
+    ):
+        row = [label, ""]
+        for c in group:
+            value = getter(c.summary, c.bound)
+            digits = 0 if label in ("evaluations / run", "runs") else (2 if "CRLB" in label and "/" in label else 3)
+            row += ["", _f(value, digits)]
+        rows.append(row)
+    return header, rows
+
+
+def markdown(campaigns: list[Campaign]) -> str:
+    """One Markdown table per group of comparable campaigns, algorithms side by side."""
+    parts = []
+    for group in grouped(campaigns):
+        header, rows = _grid(group)
+        parts.append(f"**{group_title(group[0])}**\n")
+        parts.append("| " + " | ".join(header) + " |")
+        parts.append("|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|")
+        parts.extend("| " + " | ".join(r) + " |" for r in rows)
+        parts.append("")
+    return "\n".join(parts)
+
+
+def latex(campaigns: list[Campaign]) -> str:
+    """The same tables for LaTeX with booktabs."""
+    parts = []
+    for group in grouped(campaigns):
+        header, rows = _grid(group)
+        esc = [h.replace("%", r"\%").replace("_", r"\_") for h in header]
+        parts.append(r"\begin{table}[ht]\centering")
+        parts.append(
+            r"\caption{" + group_title(group[0]).replace("%", r"\%").replace("`", "").replace("_", r"\_") + "}"
+        )
+        parts.append(r"\begin{tabular}{l" + "r" * (len(header) - 1) + "}")
+        parts.append(r"\toprule")
+        parts.append(" & ".join(esc) + r" \\")
+        parts.append(r"\midrule")
+        for i, r in enumerate(rows):
+            if i == len(group[0].names):
+                parts.append(r"\midrule")
+            parts.append(" & ".join(cell.replace("%", r"\%").replace("–", "--") for cell in r) + r" \\")
+        parts.append(r"\bottomrule")
+        parts.append(r"\end{tabular}")
+        parts.append(r"\end{table}")
+        parts.append("")
+    return "\n".join(parts)
+
+
+CSV_COLUMNS = (
+    "file", "algorithm", "objective", "sensors", "noise_level", "runs", "parameter", "truth", "mean",
+    "re_percent", "sd_percent", "crlb_sd_percent", "nre_percent", "per_run_nre_median", "per_run_nre_rms",
+    "crlb_nre_rms_percent", "nre_over_crlb", "evaluations_per_run", "wall_s",
+)  # fmt: skip
+
+
+def csv_rows(campaigns: list[Campaign], files: list[str]) -> list[list]:
+    """Long format: one row per campaign and parameter, campaign figures repeated on each row."""
+    rows = []
+    for c, file in zip(campaigns, files, strict=True):
+        s, b, cfg = c.summary, c.bound, c.config
+        for j, name in enumerate(c.names):
+            rows.append([
+                file, cfg.identify.algorithm.name, cfg.identify.objective, cfg.sensors, cfg.noise.level,
+                len(c.records), name, None if c.truth is None else c.truth[j], s.mean[j],
+                None if s.re_percent is None else s.re_percent[j], s.re_sd_percent[j], b.re_sd_percent[j],
+                s.nre_percent, s.per_run_nre_median, s.per_run_nre_rms, b.nre_rms_percent, s.nre_over_crlb,
+                float(s.evaluations.mean()), s.wall_s,
+            ])  # fmt: skip
+    return rows
