@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import importlib
 
-from .base import REGISTRY, OptimizeResult, Optimizer, Problem, get_optimizer
+from .base import REGISTRY, Optimizer, OptimizeResult, Problem, get_optimizer
 
 ALGORITHM_MODULES = ("ga", "cpso", "abc", "de", "nelder_mead", "lsq", "hybrid")
 
