@@ -272,9 +272,13 @@ def report(
         typer.Option("-o", "--output", help="Write the report to this file instead of the terminal."),
     ] = None,
     plots: Annotated[Optional[Path], typer.Option("--plots", help="Write PNG figures into this directory.")] = None,  # noqa: UP045
+    published: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--published", help="YAML of published values to set beside ours (md, latex)."),
+    ] = None,
 ) -> None:
     """Summary tables (and figures) of campaign files: algorithms side by side, with the Cramér–Rao bound."""
-    from .report import FORMATS, collect, render
+    from .report import FORMATS, collect, load_published, render
     from .report.tables import summary_table
 
     if fmt not in FORMATS:
@@ -289,7 +293,7 @@ def report(
         for c in campaigns:
             out.print(summary_table(c))
     else:
-        text = render(campaigns, files, fmt)
+        text = render(campaigns, files, fmt, load_published(published) if published else None)
     if text is not None:
         if output is None:
             out.print(text, markup=False, highlight=False)

@@ -30,14 +30,27 @@ def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
     return [read_campaign_h5(f) for f in files], [str(f) for f in files]
 
 
-def render(campaigns: list[Campaign], files: list[str], fmt: str) -> str:
+def load_published(path: Path) -> dict:
+    """Published reference values (e.g. configs/gokdag2015/paper_tables.yaml) to set beside ours."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise InputError(f"cannot read published values ({exc.__class__.__name__})", source=str(path)) from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("tables"), list):
+        raise InputError("expected a mapping with a 'tables' list", source=str(path), key="tables")
+    return doc
+
+
+def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dict | None = None) -> str:
     """The report as text in format `fmt` (all but 'table', which is printed with rich)."""
     from . import tables
 
     if fmt == "md":
-        return tables.markdown(campaigns)
+        return tables.markdown(campaigns, published)
     if fmt == "latex":
-        return tables.latex(campaigns)
+        return tables.latex(campaigns, published)
     if fmt == "json":
         docs = [dict(campaign_json(c), file=f) for c, f in zip(campaigns, files, strict=True)]
         return json.dumps(docs, indent=2)

@@ -75,19 +75,34 @@ def grouped(campaigns: list[Campaign]) -> list[list[Campaign]]:
     return list(groups.values())
 
 
-def _grid(group: list[Campaign]) -> tuple[list[str], list[list[str]]]:
-    """The paper's layout: a row per parameter (then NRE rows), Est and RE columns per algorithm."""
+def published_for(published: dict | None, c: Campaign) -> dict | None:
+    """The published column (est, re, nre) matching a campaign's objective, noise level and algorithm."""
+    if not published:
+        return None
+    cfg = c.config
+    for table in published.get("tables", []):
+        if table.get("objective") == cfg.identify.objective and table.get("noise_level") == cfg.noise.level:
+            return table.get(cfg.identify.algorithm.name)
+    return None
+
+
+def _grid(group: list[Campaign], published: dict | None = None) -> tuple[list[str], list[list[str]]]:
+    """The paper's layout: a row per parameter (then NRE rows), Est and RE columns per algorithm,
+    and the published RE beside ours where `published` has it."""
     first = group[0]
     header = ["", "true"]
-    for c in group:
+    refs = [published_for(published, c) for c in group]
+    for c, ref in zip(group, refs, strict=True):
         name = c.config.identify.algorithm.name
-        header += [f"{name} est", f"{name} RE %"]
+        header += [f"{name} est", f"{name} RE %"] + ([f"{name} paper RE %"] if ref else [])
     rows = []
     for j, pname in enumerate(first.names):
         row = [pname, _g(None if first.truth is None else first.truth[j])]
-        for c in group:
+        for c, ref in zip(group, refs, strict=True):
             s = c.summary
             row += [_g(s.mean[j]), _f(None if s.re_percent is None else s.re_percent[j])]
+            if ref:
+                row.append(_f(ref["re"].get(pname)))
         rows.append(row)
     for label, getter in (
         ("NRE of mean %", lambda s, b: s.nre_percent),
@@ -99,19 +114,21 @@ def _grid(group: list[Campaign]) -> tuple[list[str], list[list[str]]]:
         ("runs", lambda s, b: float(len(s.evaluations))),
     ):
         row = [label, ""]
-        for c in group:
+        for c, ref in zip(group, refs, strict=True):
             value = getter(c.summary, c.bound)
             digits = 0 if label in ("evaluations / run", "runs") else (2 if "CRLB" in label and "/" in label else 3)
             row += ["", _f(value, digits)]
+            if ref:
+                row.append(_f(ref.get("nre")) if label == "NRE of mean %" else "")
         rows.append(row)
     return header, rows
 
 
-def markdown(campaigns: list[Campaign]) -> str:
+def markdown(campaigns: list[Campaign], published: dict | None = None) -> str:
     """One Markdown table per group of comparable campaigns, algorithms side by side."""
     parts = []
     for group in grouped(campaigns):
-        header, rows = _grid(group)
+        header, rows = _grid(group, published)
         parts.append(f"**{group_title(group[0])}**\n")
         parts.append("| " + " | ".join(header) + " |")
         parts.append("|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|")
@@ -120,11 +137,11 @@ def markdown(campaigns: list[Campaign]) -> str:
     return "\n".join(parts)
 
 
-def latex(campaigns: list[Campaign]) -> str:
+def latex(campaigns: list[Campaign], published: dict | None = None) -> str:
     """The same tables for LaTeX with booktabs."""
     parts = []
     for group in grouped(campaigns):
-        header, rows = _grid(group)
+        header, rows = _grid(group, published)
         esc = [h.replace("%", r"\%").replace("_", r"\_") for h in header]
         parts.append(r"\begin{table}[ht]\centering")
         parts.append(
