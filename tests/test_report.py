@@ -1,0 +1,110 @@
+"""Reports: every format from real campaign files, the figures, the published values."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from tests.conftest import BASE_CONFIG, ROOT
+from vehid_cli.campaign import run_campaign
+from vehid_cli.config import load_config
+from vehid_cli.report import load_published, render
+from vehid_cli.report.tables import CSV_COLUMNS
+from vehid_cli.results import read_campaign_h5, write_campaign_h5
+
+SMALL = [
+    "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=3",
+    "identify.algorithm.population=6", "identify.algorithm.iterations=4",
+]  # fmt: skip
+PAPER = ROOT / "configs" / "gokdag2015" / "paper_tables.yaml"
+
+
+@pytest.fixture(scope="module")
+def campaign_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("campaigns")
+    for name in ("abc", "cpso"):
+        cfg = load_config(BASE_CONFIG, SMALL + [f"identify.algorithm.name={name}", "identify.objective=f1"])
+        write_campaign_h5(d / f"{name}.h5", run_campaign(cfg, jobs=1))
+    return d
+
+
+def read_all(d):
+    files = sorted(str(p) for p in d.glob("*.h5"))
+    return [read_campaign_h5(f) for f in files], files
+
+
+def test_markdown_puts_algorithms_side_by_side_with_published_values(campaign_dir):
+    campaigns, files = read_all(campaign_dir)
+    text = render(campaigns, files, "md", load_published(PAPER))
+    assert text.count("**objective f1") == 1  # one group: same objective and noise
+    header = next(line for line in text.splitlines() if line.startswith("|  | true"))
+    assert "abc est" in header and "cpso RE %" in header and "abc paper RE %" in header
+    assert "| Ix | 500 |" in text
+    nre_row = next(line for line in text.splitlines() if line.startswith("| NRE of mean %"))
+    cells = [c.strip() for c in nre_row.strip("|").split("|")]
+    assert cells[header.strip("|").split("|").index(" abc paper RE % ")] == "0.729"  # the paper's ABC, f1, 10 %
+
+
+def test_csv_is_long_format_with_computed_numbers(campaign_dir):
+    campaigns, files = read_all(campaign_dir)
+    rows = list(csv.DictReader(io.StringIO(render(campaigns, files, "csv"))))
+    assert list(rows[0]) == list(CSV_COLUMNS)
+    assert len(rows) == 2 * 5
+    c = campaigns[0]
+    first = rows[0]
+    assert float(first["mean"]) == pytest.approx(c.summary.mean[0])
+    assert float(first["nre_percent"]) == pytest.approx(c.summary.nre_percent)
+
+
+def test_latex_and_json(campaign_dir):
+    campaigns, files = read_all(campaign_dir)
+    tex = render(campaigns, files, "latex")
+    assert "\\toprule" in tex and "\\bottomrule" in tex and "\\%" in tex
+    docs = json.loads(render(campaigns, files, "json"))
+    assert [d["file"] for d in docs] == files
+    assert all(d["runs"] == 3 and len(d["per_run_nre_percent"]) == 3 for d in docs)
+
+
+def test_report_cli_tables_and_plots(campaign_dir, tmp_path):
+    res = subprocess.run(
+        [sys.executable, "-m", "vehid_cli", "report", str(campaign_dir), "--plots", str(tmp_path / "fig")],
+        capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "NRE of mean" in res.stdout
+    pngs = sorted(p.name for p in (tmp_path / "fig").glob("*.png"))
+    assert "convergence_f1_both_np0.1.png" in pngs and "re_boxes_f1_both_np0.1.png" in pngs
+    assert sum(name.startswith("true_vs_estimated") for name in pngs) == 2
+
+
+def test_report_rejects_a_file_that_is_not_a_campaign(tmp_path):
+    bad = tmp_path / "bad.h5"
+    bad.write_text("not hdf5")
+    res = subprocess.run(
+        [sys.executable, "-m", "vehid_cli", "report", str(bad)], capture_output=True, text=True, cwd=ROOT
+    )
+    assert res.returncode == 2 and "bad.h5" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_published_tables_are_consistent():
+    """Each published NRE is the norm of its printed RE column, and each RE matches its estimate (to print
+    precision), except the one oddity the file documents (GA, f2, Np = 20 %, Iy)."""
+    doc = yaml.safe_load(PAPER.read_text())
+    truth = doc["truth"]
+    for table in doc["tables"]:
+        for algorithm in ("ga", "cpso", "abc"):
+            col = table[algorithm]
+            re = np.array([col["re"][n] for n in truth])
+            assert np.linalg.norm(re) == pytest.approx(col["nre"], abs=0.006)
+            for n, t in truth.items():
+                if (table["objective"], table["noise_level"], algorithm, n) == ("f2", 0.2, "ga", "Iy"):
+                    continue
+                implied = 100 * (col["est"][n] - t) / t
+                assert implied == pytest.approx(col["re"][n], abs=0.5 + 0.05 * abs(col["re"][n]))

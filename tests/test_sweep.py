@@ -1,0 +1,72 @@
+"""Sweeps: planning, sharding for job arrays, skipping finished campaigns."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import BASE_CONFIG, ROOT
+from vehid_cli.errors import InputError
+from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep, split_top_level
+
+SMALL = [
+    "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=2",
+    "identify.algorithm.population=6", "identify.algorithm.iterations=3",
+]  # fmt: skip
+
+
+def test_split_respects_brackets():
+    assert split_top_level("a, [1, 2], {x: 1, y: 2},b") == ["a", "[1, 2]", "{x: 1, y: 2}", "b"]
+
+
+def test_plan_is_the_cartesian_product(tmp_path):
+    vary = parse_vary(["identify.algorithm.name=ga,cpso,abc", "noise.level=0.1,0.2"])
+    planned = plan_sweep(BASE_CONFIG, SMALL, vary, tmp_path)
+    assert len(planned) == 6
+    assert {(p.config.identify.algorithm.name, p.config.noise.level) for p in planned} == {
+        (a, n) for a in ("ga", "cpso", "abc") for n in (0.1, 0.2)
+    }
+    assert len({p.path for p in planned}) == 6
+    assert len({p.config.digest() for p in planned}) == 6
+
+
+@pytest.mark.parametrize("bad", ["noise.level", "=1,2", "noise.level=", "noise.level=0.1,,0.2"])
+def test_bad_vary(bad):
+    with pytest.raises(InputError, match="--vary"):
+        parse_vary([bad])
+
+
+def test_bad_value_fails_before_anything_runs(tmp_path):
+    with pytest.raises(InputError, match="identify.algorithm.name"):
+        plan_sweep(BASE_CONFIG, SMALL, parse_vary(["identify.algorithm.name=ga,pso"]), tmp_path)
+
+
+@pytest.mark.parametrize("bad", ["0/2", "3/2", "1-2", "a/b"])
+def test_bad_shard(bad):
+    with pytest.raises(InputError, match="--shard"):
+        parse_shard(bad)
+
+
+def vehid(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT
+    )
+
+
+def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
+    sets = [x for s in SMALL for x in ("--set", s)]
+    args = ["sweep", BASE_CONFIG, "--vary", "identify.algorithm.name=de,cpso", "--vary", "noise.level=0.1,0.2"]
+    args += sets + ["-o", tmp_path, "--jobs", "1"]
+    for shard in ("1/2", "2/2"):
+        res = vehid(*args, "--shard", shard)
+        assert res.returncode == 0, res.stderr
+        assert "2 campaign(s) run" in res.stdout
+    files = sorted(p.name for p in tmp_path.glob("*.h5"))
+    assert len(files) == 4
+    assert (tmp_path / "index.csv").read_text().count("\n") == 5
+    again = vehid(*args)
+    assert "0 campaign(s) run, 4 up to date" in again.stdout
+    changed = vehid(*args, "--set", "identify.seed=9")
+    assert "4 campaign(s) run" in changed.stdout
