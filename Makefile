@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-all lint bench clean
+.PHONY: demo test test-all lint bench paper clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +34,16 @@ lint: $(STAMP)
 ## bench: speed benchmarks (not tests); results are recorded by hand in benchmarks/RESULTS.md
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_simulation.py
+
+## paper: reproduce Gokdag (2015) Tables 1-2 plus our estimators, and regenerate docs/results/gokdag2015.md
+PAPER_SWEEP := runs/gokdag2015
+CRLB_SWEEP  := runs/gokdag2015-crlb
+paper: $(STAMP)
+	$(BIN)/vehid sweep configs/gokdag2015/base.yaml -o $(PAPER_SWEEP) \
+	    --vary identify.objective=f1,f2 --vary noise.level=0.1,0.2 --vary identify.algorithm.name=ga,cpso,abc,hybrid
+	$(BIN)/vehid sweep configs/gokdag2015/base.yaml -o $(CRLB_SWEEP) \
+	    --set identify.objective=wls --set identify.algorithm.name=hybrid --vary sensors=acc,disp --vary noise.level=0.1,0.2
+	$(BIN)/python docs/results/make_gokdag2015.py $(PAPER_SWEEP) $(CRLB_SWEEP) docs/results/gokdag2015.md
 
 clean:
 	rm -rf $(VENV) runs/demo .pytest_cache
