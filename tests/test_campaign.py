@@ -158,3 +158,29 @@ def test_identify_bad_input_exits_2(tmp_path, args, fragment):
     assert res.returncode == 2, res.stderr
     assert fragment in res.stderr and "Traceback" not in res.stderr
     assert not (tmp_path / "c.h5").exists()
+
+
+def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path):
+    """Acceptance: kill -9 a running `vehid identify`, run it again, get the uninterrupted campaign's content."""
+    import os
+    import signal
+    import time
+
+    sets = [x for s in SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"] for x in ("--set", s)]
+    whole = vehid("identify", BASE_CONFIG, *sets, "--jobs", 1, "-o", tmp_path / "whole.h5")
+    assert whole.returncode == 0, whole.stderr
+    target = tmp_path / "killed.h5"
+    cmd = [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), *sets, "--jobs", "1", "-o", str(target)]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    partial = tmp_path / "killed.h5.partial"
+    deadline = time.time() + 60
+    while time.time() < deadline and len(list(partial.glob("run-*.npz"))) < 3:
+        time.sleep(0.01)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    finished_before = len(list(partial.glob("run-*.npz")))
+    assert 3 <= finished_before < 12 and not target.exists()
+    resumed = vehid("identify", BASE_CONFIG, *sets, "--jobs", 2, "-o", target)
+    assert resumed.returncode == 0, resumed.stderr
+    assert_same_content(tmp_path / "whole.h5", target)
+    assert not partial.exists()
