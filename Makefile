@@ -33,7 +33,7 @@ lint: $(STAMP)
 
 ## bench: speed benchmarks (not tests); results are recorded by hand in benchmarks/RESULTS.md
 bench: $(STAMP)
-	$(BIN)/python benchmarks/bench_simulation.py
+	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_simulation.py
 
 ## paper: reproduce Gokdag (2015) Tables 1-2 plus our estimators, and regenerate docs/results/gokdag2015.md
 PAPER_SWEEP := runs/gokdag2015

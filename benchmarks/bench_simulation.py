@@ -1,29 +1,41 @@
-"""Model evaluations per second of the full-car simulation paths (a benchmark, not a test).
+"""Model evaluations per second of the full-car simulation paths on ONE core (a benchmark, not a test).
 
-One evaluation = one parameter set simulated over the paper's experiment (3000 samples, 4 channels).
-Each figure is the median of several repeats; the machine is noisy, so compare medians only.
+One evaluation = one parameter set simulated over the paper's experiment (3000 samples, 4 channels),
+including assembling its matrices and discretising them: every candidate of an identification is new.
+Each figure is the median of several repeats; the machine is noisy, so compare medians of one run only.
+Threads are pinned to one (numba, OpenBLAS/MKL/OpenMP) before numpy loads, for the one-core figure.
 Run: make bench   (or: python benchmarks/bench_simulation.py --repeats 7)
 """
 
 from __future__ import annotations
 
-import argparse
-import platform
-import statistics
-import time
-from pathlib import Path
+import os
 
-import numpy as np
-from scipy import signal
+for _var in ("NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from vehid_cli.config import load_config
-from vehid_cli.experiment import build_experiment
+import argparse  # noqa: E402
+import platform  # noqa: E402
+import statistics  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+from scipy import signal  # noqa: E402
+
+from vehid_cli.config import load_config  # noqa: E402
+from vehid_cli.experiment import build_experiment  # noqa: E402
+from vehid_cli.sim.kernel import cubic_spring, simulate_fullcar  # noqa: E402
+from vehid_cli.sim.linear import simulate  # noqa: E402
+from vehid_cli.sim.modal import statespace_foh  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def timed(fn, repeats: int) -> float:
-    """Median wall time [s] of fn() over `repeats` calls, after one warm-up call."""
+    """Median wall time [s] of fn() over `repeats` calls, after one warm-up call (which also compiles)."""
     fn()
     times = []
     for _ in range(repeats):
@@ -33,36 +45,89 @@ def timed(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     cfg = load_config(ROOT / "configs" / "gokdag2015" / "base.yaml")
     exp = build_experiment(cfg)
+    road, dt = exp.road, exp.dt
     rng = np.random.default_rng(0)
-    print(f"# {platform.node()} {platform.processor() or platform.machine()}, python {platform.python_version()}")
-    print(f"# experiment: {exp.t.size} samples, dt = {exp.dt * 1e3:g} ms, 4 acceleration channels")
-    print(f"{'path':<28} {'batch':>5} {'median s/call':>14} {'evals/s':>10}")
+    node, machine = platform.node(), platform.machine()
+    print(f"# {node} {machine} {cpu_model()}, {os.cpu_count()} cpus, python {platform.python_version()}")
+    threads = ", ".join(f"{v}={os.environ[v]}" for v in ("NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS"))
+    print(f"# numpy {np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}, {threads}")
+    print(f"# experiment: {exp.t.size} samples, dt = {dt * 1e3:g} ms, 4 acceleration channels; repeats {args.repeats}")
+
+    def candidates(batch: int) -> dict[str, np.ndarray]:
+        """The identification's unknowns drawn in their [0.7, 1.3] search box."""
+        base = cfg.vehicle.values()
+        return {k: base[k] * rng.uniform(0.7, 1.3, batch) for k in cfg.identify.unknowns}
+
+    def lsim_loop(values: dict[str, np.ndarray]) -> None:
+        """scipy.signal.lsim one candidate at a time (it takes one system), matrices included."""
+        for i in range(next(iter(values.values())).size):
+            mats = exp.matrices({k: v[i] for k, v in values.items()})
+            A, Bs = mats.state_space()
+            Cd = np.zeros((4, 14))
+            Cd[:, :3] = mats.G
+            signal.lsim((A, Bs, Cd, np.zeros((4, 4))), road, exp.t)
+
+    def kernel(method: str, force=None, k3: float = 0.0):
+        def run(values):
+            if force is None:
+                return simulate_fullcar(exp.matrices(values), road, dt, method)
+            return simulate_fullcar(exp.matrices(values), road, dt, method, force, [k3])
+
+        return run
+
+    paths = [
+        ("exact (modal, numba)", lambda v: exp.simulate(v).acc, (1, 20, 100)),
+        ("state-space FOH (numba)", lambda v: statespace_foh(exp.matrices(v), road, dt), (1, 20, 100)),
+        ("exact-reference (numpy)", lambda v: simulate(exp.matrices(v), road, dt, "exact-reference"), (1, 20)),
+        ("newmark (numpy)", lambda v: simulate(exp.matrices(v), road, dt, "newmark"), (1, 20)),
+        ("scipy.signal.lsim (loop)", lsim_loop, (1, 20)),
+        ("kernel rk4, linear car", kernel("rk4"), (1, 20)),
+        ("kernel newmark, linear car", kernel("newmark"), (1, 20)),
+        ("kernel rk4, cubic strut", kernel("rk4", cubic_spring, 5e7), (20,)),
+        ("kernel newmark, cubic strut", kernel("newmark", cubic_spring, 5e7), (20,)),
+    ]
+    try:
+        import control  # noqa: F401  (optional: compared only if already installed)
+    except ImportError:
+        print("# python-control not installed: forced_response not compared")
+    else:
+
+        def control_loop(values: dict[str, np.ndarray]) -> None:
+            for i in range(next(iter(values.values())).size):
+                mats = exp.matrices({k: v[i] for k, v in values.items()})
+                A, Bs = mats.state_space()
+                Cd = np.zeros((4, 14))
+                Cd[:, :3] = mats.G
+                control.forced_response(control.ss(A, Bs, Cd, np.zeros((4, 4))), exp.t, road.T)
+
+        paths.append(("control.forced_response (loop)", control_loop, (1,)))
 
     rows = []
-    for integrator in ("exact", "newmark"):
-        exp_i = build_experiment(
-            cfg.model_copy(update={"simulation": cfg.simulation.model_copy(update={"integrator": integrator})})
-        )
-        for batch in (1, 20):
-            values = {"m": 1300 * rng.uniform(0.7, 1.3, batch), "Ix": 500 * rng.uniform(0.7, 1.3, batch)}
-            seconds = timed(lambda e=exp_i, v=values: e.simulate(v).acc, args.repeats)
-            rows.append((f"numpy {integrator}", batch, seconds, batch / seconds))
-
-    mats = exp.matrices()
-    A, Bs = mats.state_space()
-    Cd = np.zeros((4, 14))
-    Cd[:, :3] = mats.G
-    system = (A, Bs, Cd, np.zeros((4, 4)))
-    seconds = timed(lambda: signal.lsim(system, exp.road, exp.t), args.repeats)
-    rows.append(("scipy.signal.lsim", 1, seconds, 1 / seconds))
+    for name, fn, batches in paths:
+        for batch in batches:
+            values = candidates(batch)
+            seconds = timed(lambda f=fn, v=values: f(v), args.repeats)
+            rows.append((name, batch, seconds, batch / seconds))
+    lsim_rate = next(rate for name, batch, _, rate in rows if name.startswith("scipy") and batch == 1)
+    print(f"{'path':<30} {'batch':>5} {'median s/call':>14} {'evals/s':>10} {'x lsim':>8}")
     for name, batch, seconds, rate in rows:
-        print(f"{name:<28} {batch:>5} {seconds:>14.4f} {rate:>10.1f}")
+        print(f"{name:<30} {batch:>5} {seconds:>14.5f} {rate:>10.1f} {rate / lsim_rate:>8.1f}")
 
 
 if __name__ == "__main__":

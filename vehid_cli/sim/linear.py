@@ -1,10 +1,13 @@
 """Time integration of the linear full car, batched over parameter sets.
 
-Two integrators, both taking plain arrays so later code can batch and compile them:
+Integrators, all taking plain arrays so later code can batch and compile them:
 
 * ``exact``: the exact discretisation of M qdd + C qd + K q = B y(t) for a road that is linear between
-  samples (first-order hold), from one matrix exponential of an augmented matrix. With a
-  piecewise-linear road it is exact to round-off; this is also what ``scipy.signal.lsim`` assumes.
+  samples (first-order hold). With a piecewise-linear road it is exact to round-off; this is also what
+  ``scipy.signal.lsim`` assumes. Runs through the compiled modal recursions of ``sim.modal`` (same
+  discretisation, mode by mode; about 2000+ cars per second on one core for 3000 samples).
+* ``exact-reference``: the same discretisation from one matrix exponential of an augmented matrix and
+  a NumPy loop over time: slow, simple, kept as the reference the fast path is tested against.
 * ``newmark``: Newmark-beta with average acceleration (gamma = 1/2, beta = 1/4), as in the paper;
   second order, unconditionally stable.
 
@@ -22,8 +25,9 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_DOF, FullCarMatrices
+from .modal import modal_foh
 
-Integrator = Literal["exact", "newmark"]
+Integrator = Literal["exact", "exact-reference", "newmark"]
 
 
 @dataclass(frozen=True)
@@ -58,14 +62,17 @@ def simulate(mats: FullCarMatrices, road: NDArray, dt: float, integrator: Integr
     road = np.asarray(road, dtype=float)
     if road.ndim < 2 or road.shape[-1] != 4:
         raise ValueError(f"road must be (..., n, 4), got {road.shape}")
+    n = road.shape[-2]
+    t = np.arange(n) * dt
     if integrator == "exact":
+        q, qd, qdd, disp, acc = modal_foh(mats, road, dt)
+        return Response(t=t, q=q, qd=qd, qdd=qdd, disp=disp, acc=acc)
+    if integrator == "exact-reference":
         q, qd, qdd = _exact_foh(mats, road, dt)
     elif integrator == "newmark":
         q, qd, qdd = _newmark(mats, road, dt)
     else:
         raise ValueError(f"unknown integrator {integrator!r}")
-    n = road.shape[-2]
-    t = np.arange(n) * dt
     Gt = np.swapaxes(mats.G, -1, -2)[..., None, :, :]  # (..., 1, 3, 4)
     disp = (q[..., None, :3] @ Gt)[..., 0, :]
     acc = (qdd[..., None, :3] @ Gt)[..., 0, :]

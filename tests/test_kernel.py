@@ -1,0 +1,99 @@
+"""The compiled fixed-step kernel (RK4, Newmark) against the exact path and at its theoretical orders."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.conftest import PAPER_CAR
+from tests.reference import rel_rms
+from tests.test_linear import smooth_road
+from vehid_cli.data import time_grid
+from vehid_cli.models.fullcar import assemble
+from vehid_cli.sim.kernel import cubic_spring, integrate, simulate_fullcar
+from vehid_cli.sim.linear import simulate
+
+K3 = 5e7  # N/m³: at 3 cm of deflection the cubic force is ~ the linear spring's, so the car is clearly nonlinear
+KNOT = 8e-3  # s: the test road is linear between knots every 8 ms, so every step size below samples it exactly
+
+
+def knotted_road(t):
+    """The smooth road, piecewise linear between knots every KNOT s: the same input at every dt dividing KNOT."""
+    knots = np.arange(0.0, t[-1] + KNOT, KNOT)
+    heights = smooth_road(knots)
+    return np.stack([np.interp(t, knots, heights[:, c]) for c in range(4)], axis=-1)
+
+
+def orders(errors):
+    return np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+
+
+@pytest.mark.parametrize(("method", "order", "tol_1ms"), [("rk4", 4, 1e-6), ("newmark", 2, 1e-3)])
+def test_linear_car_agrees_with_exact_path_and_converges(method, order, tol_1ms):
+    """Zero strut force: the kernel is the linear car, so its difference from the exact FOH path is the scheme error."""
+    mats = assemble(PAPER_CAR)
+    errors = []
+    for dt in (4e-3, 2e-3, 1e-3):
+        t = time_grid(1.5, dt)
+        road = smooth_road(t)
+        exact = simulate(mats, road, dt, "exact")
+        r, res = simulate_fullcar(mats, road, dt, method)
+        assert res.unconverged.sum() == 0
+        errors.append(rel_rms(r.acc, exact.acc))
+        assert rel_rms(r.disp, exact.disp) < errors[-1]  # displacements are smoother than accelerations
+    assert errors[-1] < tol_1ms, errors
+    p = orders(errors)
+    assert np.all((p > order - 0.3) & (p < order + 0.4)), (errors, p)
+
+
+@pytest.fixture(scope="module")
+def cubic_reference():
+    """RK4 at dt = 1/16 ms on the cubic-strut car: the fine-step reference (its own error ~ 1e-12 relative)."""
+    mats = assemble(PAPER_CAR)
+    dt = KNOT / 128
+    t = time_grid(1.0, dt)
+    r, _ = simulate_fullcar(mats, knotted_road(t), dt, "rk4", cubic_spring, [K3])
+    return mats, t, r
+
+
+@pytest.mark.parametrize(("method", "order", "strides"), [("rk4", 4, (32, 16, 8, 4)), ("newmark", 2, (16, 8, 4))])
+def test_cubic_strut_converges_at_theoretical_order(cubic_reference, method, order, strides):
+    """dt-halving on a strongly nonlinear car (k3 d³ in every strut): RK4 at order 4, Newmark at order 2."""
+    mats, t_ref, ref = cubic_reference
+    linear = simulate(mats, knotted_road(t_ref), t_ref[1], "exact")
+    assert rel_rms(linear.acc, ref.acc) > 0.05  # the cubic spring matters
+    errors = []
+    for stride in strides:
+        dt = stride * t_ref[1]
+        t = t_ref[::stride]
+        r, res = simulate_fullcar(mats, knotted_road(t), dt, method, cubic_spring, [K3])
+        assert res.unconverged.sum() == 0
+        errors.append(rel_rms(r.acc, ref.acc[::stride]))
+    p = orders(errors)
+    assert np.all((p > order - 0.3) & (p < order + 0.4)), (errors, p)
+
+
+def test_batch_of_force_parameters_equals_one_at_a_time():
+    t = time_grid(0.6, 1e-3)
+    road = knotted_road(t)
+    k3 = np.array([[0.0], [2e7], [5e7]])
+    masses = np.array([1100.0, 1300.0, 1500.0])
+    mats = assemble({**PAPER_CAR, "m": masses})
+    for method in ("rk4", "newmark"):
+        rb, _ = simulate_fullcar(mats, road, 1e-3, method, cubic_spring, k3)
+        for i in range(3):
+            r1, _ = simulate_fullcar(assemble(dict(PAPER_CAR, m=masses[i])), road, 1e-3, method, cubic_spring, k3[i])
+            np.testing.assert_allclose(rb.acc[i], r1.acc, rtol=1e-12, atol=1e-12)
+
+
+def test_strut_forces_and_generic_structure():
+    """The kernel on a bare 1-DOF mass on a cubic spring driven through E: forces come back as k3 d³."""
+    m, k, dt = 2.0, 800.0, 1e-3
+    t = time_grid(0.5, dt)
+    y = 0.01 * np.sin(2 * np.pi * 3 * t)[:, None]
+    res = integrate("rk4", [[m]], [[0.0]], [[k]], [[0.0]], y, dt, cubic_spring, [1e6], D=[[1.0]], E=[[-1.0]])
+    d = res.q[0, :, 0] - y[:, 0]
+    np.testing.assert_allclose(res.force[0, :, 0], 1e6 * d**3, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(m * res.qdd[0, :, 0], -k * res.q[0, :, 0] - res.force[0, :, 0], rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="unknown method"):
+        integrate("euler", [[m]], [[0.0]], [[k]], [[0.0]], y, dt)
