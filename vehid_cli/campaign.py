@@ -174,7 +174,9 @@ _WORKER_TASK: Task | None = None
 
 def _init_worker(raw_config: dict, source: str, data_file: str | None) -> None:
     global _WORKER_TASK
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)  # one BLAS thread per worker process: see vehid_cli/__init__.py
     _WORKER_TASK = build_task(config_from_dict(raw_config, source), data_file)
 
 
