@@ -184,3 +184,12 @@ def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path):
     assert resumed.returncode == 0, resumed.stderr
     assert_same_content(tmp_path / "whole.h5", target)
     assert not partial.exists()
+
+
+def test_converged_means_no_worse_than_the_truth_on_the_same_data():
+    polished = run_campaign(small_config("identify.algorithm.name=lsq", "identify.objective=wls"), jobs=1)
+    assert polished.summary.converged == 4
+    assert all(r.cost <= r.truth_cost for r in polished.records)
+    starved = run_campaign(small_config("identify.algorithm.iterations=1"), jobs=1)  # 8 random points
+    assert starved.summary.converged == 0
+    assert all(r.cost > r.truth_cost for r in starved.records)

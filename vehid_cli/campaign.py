@@ -41,6 +41,14 @@ class RunRecord:
     wall_s: float
     history_evals: NDArray  # cumulative evaluations at each record of the best cost
     history_cost: NDArray  # best cost so far
+    truth_cost: float = float("nan")  # cost of the true parameters on this run's data (NaN: truth unknown)
+
+    @property
+    def converged(self) -> bool | None:
+        """Found the global minimum's basin: a cost no higher than the truth's on the same data (None: unknown)."""
+        if not np.isfinite(self.truth_cost):
+            return None
+        return bool(self.cost <= self.truth_cost * (1 + 1e-9))
 
     def save(self, path: Path) -> None:
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:
@@ -58,6 +66,7 @@ class RunRecord:
                 wall_s=float(z["wall_s"]),
                 history_evals=z["history_evals"],
                 history_cost=z["history_cost"],
+                truth_cost=float(z["truth_cost"]),
             )
 
 
@@ -78,6 +87,7 @@ class Summary:
     evaluations: NDArray  # (N,)
     penalised: int
     wall_s: float
+    converged: int | None = None  # runs whose cost is no higher than the truth's (None: truth unknown)
 
     @property
     def per_run_nre_median(self) -> float | None:
@@ -126,6 +136,7 @@ def summarise(names, truth, records: list[RunRecord], bound: CramerRao, wall_s: 
         evaluations=np.array([r.evaluations for r in records]),
         penalised=int(sum(r.penalised for r in records)),
         wall_s=wall_s,
+        converged=None if truth is None else int(sum(bool(r.converged) for r in records)),
     )
 
 
@@ -154,6 +165,8 @@ def identify_run(task: Task, index: int) -> RunRecord:
     """Run `index` of the campaign: its own data (noise) and its own optimizer stream."""
     ident = task.config.identify
     problem = task.problem(task.reference(index))
+    # Diagnostic, not charged to the budget: the truth's cost on this run's data tells a converged run.
+    truth_cost = float(problem.cost(task.truth[None, :])[0]) if task.truth is not None else float("nan")
     algorithm = ident.algorithm
     optimizer = get_optimizer(algorithm.name, algorithm.population, algorithm.iterations)
     result = optimizer.minimize(problem, run_streams(ident.seed, index).optimizer, budget=ident.budget)
@@ -166,6 +179,7 @@ def identify_run(task: Task, index: int) -> RunRecord:
         wall_s=result.wall_s,
         history_evals=result.history_evals,
         history_cost=result.history_cost,
+        truth_cost=truth_cost,
     )
 
 

@@ -91,6 +91,7 @@ def write_campaign_h5(path: str | Path, campaign) -> None:
         runs.create_dataset("evaluations", data=np.array([r.evaluations for r in recs]))
         runs.create_dataset("penalised", data=np.array([r.penalised for r in recs]))
         runs.create_dataset("wall_s", data=np.array([r.wall_s for r in recs]))
+        runs.create_dataset("truth_cost", data=np.array([r.truth_cost for r in recs]))
         runs.create_dataset("history_evals", data=_padded([r.history_evals for r in recs], -1).astype(np.int64))
         runs.create_dataset("history_cost", data=_padded([r.history_cost for r in recs], np.nan))
         sg = h5.create_group("summary")
@@ -104,6 +105,8 @@ def write_campaign_h5(path: str | Path, campaign) -> None:
             sg.attrs["per_run_nre_rms"] = s.per_run_nre_rms
         if s.nre_over_crlb is not None:
             sg.attrs["nre_over_crlb"] = s.nre_over_crlb
+        if s.converged is not None:
+            sg.attrs["converged_runs"] = s.converged
         sg.attrs["wall_s"] = s.wall_s
         sg.attrs["penalised"] = s.penalised
         cg = h5.create_group("crlb")
@@ -145,6 +148,7 @@ def campaign_json(campaign) -> dict:
         "nre_over_crlb": s.nre_over_crlb,
         "evaluations": evals,
         "penalised_evaluations": s.penalised,
+        "converged_runs": s.converged,
         "objective": campaign.config.identify.objective,
         "algorithm": campaign.config.identify.algorithm.name,
         "noise_level": campaign.config.noise.level,
@@ -177,6 +181,7 @@ def read_campaign_h5(path: str | Path):
             runs = h5["runs"]
             est, cost, evals = runs["estimate"][()], runs["cost"][()], runs["evaluations"][()]
             pen, wall = runs["penalised"][()], runs["wall_s"][()]
+            tcost = runs["truth_cost"][()]
             hev, hco = runs["history_evals"][()], runs["history_cost"][()]
             records = tuple(
                 RunRecord(
@@ -188,7 +193,8 @@ def read_campaign_h5(path: str | Path):
                     wall_s=float(wall[i]),
                     history_evals=hev[i][hev[i] >= 0],
                     history_cost=hco[i][~np.isnan(hco[i])],
-                )  # fmt: skip
+                    truth_cost=float(tcost[i]),
+                )
                 for i in range(len(est))
             )
             cg = h5["crlb"]

@@ -17,6 +17,10 @@ def _g(value) -> str:
     return "–" if value is None else f"{value:.6g}"
 
 
+def _count(k: int | None, n: int) -> str:
+    return "–" if k is None else f"{k}/{n}"
+
+
 def campaign_title(c: Campaign) -> str:
     cfg = c.config
     src = f"data {c.data_file}" if c.data_file else f"Np = {100 * cfg.noise.level:g} %"
@@ -47,7 +51,8 @@ def summary_table(c: Campaign) -> Table:
     table.caption = (
         f"NRE of mean {_f(s.nre_percent)} % · per-run NRE median {_f(s.per_run_nre_median)} % · "
         f"RMS {_f(s.per_run_nre_rms)} % · CRLB NRE {_f(b.nre_rms_percent)} % · NRE/CRLB {_f(s.nre_over_crlb, 2)} · "
-        f"evaluations/run {s.evaluations.mean():.0f} · penalised {s.penalised} · wall {s.wall_s:.1f} s"
+        f"evaluations/run {s.evaluations.mean():.0f} · converged {_count(s.converged, len(c.records))} · "
+        f"penalised {s.penalised} · wall {s.wall_s:.1f} s"
     )
     table.caption_justify = "left"
     return table
@@ -112,11 +117,16 @@ def _grid(group: list[Campaign], published: dict | None = None) -> tuple[list[st
         ("NRE RMS / CRLB", lambda s, b: s.nre_over_crlb),
         ("evaluations / run", lambda s, b: float(s.evaluations.mean())),
         ("runs", lambda s, b: float(len(s.evaluations))),
+        ("converged runs", lambda s, b: None if s.converged is None else float(s.converged)),
     ):
         row = [label, ""]
         for c, ref in zip(group, refs, strict=True):
             value = getter(c.summary, c.bound)
-            digits = 0 if label in ("evaluations / run", "runs") else (2 if "CRLB" in label and "/" in label else 3)
+            digits = (
+                0
+                if label in ("evaluations / run", "runs", "converged runs")
+                else (2 if "CRLB" in label and "/" in label else 3)
+            )
             row += ["", _f(value, digits)]
             if ref:
                 row.append(_f(ref.get("nre")) if label == "NRE of mean %" else "")
