@@ -12,11 +12,14 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
-## demo: simulate the paper's car on its bump (configs/gokdag2015/base.yaml), write data and a figure to runs/demo/
+## demo: the paper's car: simulate its bump run, identify it (10 runs, ABC and hybrid), report with figures
 demo: $(STAMP)
 	mkdir -p runs/demo
 	$(BIN)/vehid simulate configs/gokdag2015/base.yaml -o runs/demo/bump.csv --plot runs/demo/bump.png
-	$(BIN)/vehid simulate configs/gokdag2015/base.yaml -o runs/demo/bump.h5
+	$(BIN)/vehid identify configs/gokdag2015/base.yaml --runs 10 -o runs/demo/abc.h5
+	$(BIN)/vehid identify configs/gokdag2015/base.yaml --runs 10 -o runs/demo/hybrid.h5 \
+	    --set identify.algorithm.name=hybrid --set identify.objective=wls --set sensors=acc --json runs/demo/hybrid.json
+	$(BIN)/vehid report runs/demo --plots runs/demo/figures
 
 ## test: lint and the fast test suite (what CI runs)
 test: $(STAMP)
