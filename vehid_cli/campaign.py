@@ -248,9 +248,10 @@ class Checkpoint:
         record.save(self.directory / f"run-{record.index:05d}.npz")
 
     def remove(self) -> None:
-        for path in self.directory.iterdir():
-            path.unlink()
-        self.directory.rmdir()
+        if self.directory.is_dir():
+            for path in self.directory.iterdir():
+                path.unlink()
+            self.directory.rmdir()
 
 
 def run_campaign(
@@ -314,3 +315,26 @@ def run_campaign(
         bound=bound,
         summary=summary,
     )
+
+
+def checkpoint_dir_for(output: Path) -> Path:
+    """Where the finished runs of the campaign bound for `output` wait: `<output>.partial/`."""
+    return output.with_name(output.name + ".partial")
+
+
+def run_campaign_to_file(
+    config: Config,
+    output: Path,
+    data_file: str | Path | None = None,
+    *,
+    jobs: int | None = None,
+    on_run: Callable[[int, int], None] | None = None,
+) -> Campaign:
+    """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint."""
+    from .results import write_campaign_h5
+
+    partial = checkpoint_dir_for(Path(output))
+    campaign = run_campaign(config, data_file, jobs=jobs, checkpoint_dir=partial, on_run=on_run)
+    write_campaign_h5(output, campaign)
+    Checkpoint(partial, "").remove()
+    return campaign

@@ -59,6 +59,28 @@ def _guarded(command):
     return wrapper
 
 
+def _campaign_overrides(set_: list[str] | None, runs: int | None, seed: int | None, jobs: int | None) -> list[str]:
+    """--set lines plus the --runs/--seed shortcuts (kept in the resolved config, for provenance)."""
+    overrides = list(set_ or ())
+    if runs is not None:
+        overrides.append(f"identify.runs={runs}")
+    if seed is not None:
+        overrides.append(f"identify.seed={seed}")
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    return overrides
+
+
+def _progress(verb: str):
+    """A rich progress bar on stderr (only on a terminal: scripts and CI get clean output)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn(f"[bold]{verb}[/] {{task.description}}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        console=err, transient=True, disable=not err.is_terminal,
+    )  # fmt: skip
+
+
 def _version(value: bool) -> None:
     if value:
         out.print(f"vehid {__version__}")
@@ -150,42 +172,27 @@ def identify(
     """
     import json
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from .campaign import run_campaign
+    from .campaign import run_campaign_to_file
     from .report.tables import summary_table
-    from .results import campaign_json, write_campaign_h5
+    from .results import campaign_json
 
-    overrides = list(set_ or ())
-    if runs is not None:
-        overrides.append(f"identify.runs={runs}")
-    if seed is not None:
-        overrides.append(f"identify.seed={seed}")
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be at least 1, got {jobs}")
-    cfg = load_config(config, overrides)
+    cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
     if output is None:
         Path("runs").mkdir(exist_ok=True)
         output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
     target = check_writable(output, (".h5", ".hdf5"))
     if json_out is not None:
         check_writable(json_out, (".json",))
-    partial = target.with_name(target.name + ".partial")
-    with Progress(
-        TextColumn("[bold]identify[/] {task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err, transient=True, disable=not err.is_terminal,
-    ) as progress:  # fmt: skip
+    with _progress("identify") as progress:
         bar = progress.add_task(f"{cfg.identify.algorithm.name}/{cfg.identify.objective}", total=cfg.identify.runs)
-        campaign = run_campaign(
-            cfg, data, jobs=jobs, checkpoint_dir=partial, on_run=lambda d, n: progress.update(bar, completed=d)
+        campaign = run_campaign_to_file(
+            cfg, target, data, jobs=jobs, on_run=lambda d, n: progress.update(bar, completed=d)
         )
-    write_campaign_h5(target, campaign)
     if json_out is not None:
         from .data import atomic_path
 
         with atomic_path(json_out) as tmp:
             tmp.write_text(json.dumps(campaign_json(campaign), indent=2))
-    _remove_checkpoint(partial)
     out.print(summary_table(campaign))
     unidentifiable = campaign.bound.unidentifiable()
     if unidentifiable:
@@ -213,19 +220,10 @@ def sweep(
     Campaigns whose file already holds the same resolved config are skipped, so a sweep can be rerun
     to finish what an interrupted one left; --shard K/N splits the work among independent processes.
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from .campaign import run_campaign
-    from .results import write_campaign_h5
+    from .campaign import run_campaign_to_file
     from .sweep import parse_shard, parse_vary, plan_sweep, run_sweep, write_index
 
-    overrides = list(set_ or ())
-    if runs is not None:
-        overrides.append(f"identify.runs={runs}")
-    if seed is not None:
-        overrides.append(f"identify.seed={seed}")
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    overrides = _campaign_overrides(set_, runs, seed, jobs)
     k, n = parse_shard(shard)
     variations = parse_vary(vary)
     out_dir = output if output is not None else Path("runs") / f"sweep-{Path(config).stem}"
@@ -235,19 +233,12 @@ def sweep(
     planned = plan_sweep(config, overrides, variations, out_dir)
     write_index(out_dir, planned)
     mine = [p for p in planned if p.index % n == k - 1]
-    with Progress(
-        TextColumn("[bold]sweep[/] {task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err, transient=True, disable=not err.is_terminal,
-    ) as progress:  # fmt: skip
+    with _progress("sweep") as progress:
         bar = progress.add_task(f"shard {k}/{n}", total=len(mine))
 
         def run_one(p) -> None:
             progress.update(bar, description=p.path.stem)
-            partial = p.path.with_name(p.path.name + ".partial")
-            campaign = run_campaign(p.config, jobs=jobs, checkpoint_dir=partial)
-            write_campaign_h5(p.path, campaign)
-            _remove_checkpoint(partial)
-            s = campaign.summary
+            s = run_campaign_to_file(p.config, p.path, jobs=jobs).summary
             nre = "–" if s.nre_percent is None else f"{s.nre_percent:.3f} %"
             out.print(f"{p.path.name}: NRE of mean {nre}, {s.wall_s:.1f} s")
             progress.advance(bar)
@@ -308,13 +299,6 @@ def report(
 
         written = write_campaign_plots(campaigns, files, plots)
         out.print(f"wrote {len(written)} figure(s) to {plots}")
-
-
-def _remove_checkpoint(directory: Path) -> None:
-    if directory.is_dir():
-        for path in directory.iterdir():
-            path.unlink()
-        directory.rmdir()
 
 
 def run() -> None:
