@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-all lint bench paper clean
+.PHONY: demo test test-all lint bench bench-sweep paper clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -34,19 +34,27 @@ lint: $(STAMP)
 	$(BIN)/ruff check vehid_cli tests benchmarks
 	$(BIN)/ruff format --check vehid_cli tests benchmarks
 
-## bench: speed benchmarks (not tests); results are recorded by hand in benchmarks/RESULTS.md
+## bench: speed benchmarks (not tests); results are recorded in benchmarks/RESULTS.md
 bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_simulation.py
+	$(BIN)/python benchmarks/bench_campaign.py --repeats 3
+
+## bench-sweep: also time the whole Table 1 + 2 sweep (about 2-4 minutes)
+bench-sweep: $(STAMP)
+	$(BIN)/python benchmarks/bench_campaign.py --repeats 3 --sweep
 
 ## paper: reproduce Gokdag (2015) Tables 1-2 plus our estimators, and regenerate docs/results/gokdag2015.md
 PAPER_SWEEP := runs/gokdag2015
 CRLB_SWEEP  := runs/gokdag2015-crlb
+SEED_SWEEP  := runs/gokdag2015-seeds
 paper: $(STAMP)
 	$(BIN)/vehid sweep configs/gokdag2015/base.yaml -o $(PAPER_SWEEP) \
 	    --vary identify.objective=f1,f2 --vary noise.level=0.1,0.2 --vary identify.algorithm.name=ga,cpso,abc,hybrid
 	$(BIN)/vehid sweep configs/gokdag2015/base.yaml -o $(CRLB_SWEEP) \
 	    --set identify.objective=wls --set identify.algorithm.name=hybrid --vary sensors=acc,disp --vary noise.level=0.1,0.2
-	$(BIN)/python docs/results/make_gokdag2015.py $(PAPER_SWEEP) $(CRLB_SWEEP) docs/results/gokdag2015.md
+	$(BIN)/vehid sweep configs/gokdag2015/base.yaml -o $(SEED_SWEEP) --runs 100 \
+	    --set identify.objective=wls --set identify.algorithm.name=hybrid --vary sensors=acc,disp --vary identify.seed=7,99
+	$(BIN)/python docs/results/make_gokdag2015.py $(PAPER_SWEEP) $(CRLB_SWEEP) $(SEED_SWEEP) docs/results/gokdag2015.md
 
 clean:
 	rm -rf $(VENV) runs/demo .pytest_cache
