@@ -77,7 +77,7 @@ def main() -> None:
         crlb_md,
         "### How much a 30-run ratio moves: 100 runs with two other seeds",
         "",
-        "A 30-run RMS of NREs dominated by one parameter (Ix) scatters by roughly ±13 %, and the four campaigns above "
+        "A 30-run RMS of NREs dominated by one parameter (Ix) scatters noticeably, and the four campaigns above "
         "share their noise draws (one seed), so they are one sample. The same estimator, 100 runs, seeds 7 and 99 "
         "(`vehid report --format csv`, one row per campaign):",
         "",
