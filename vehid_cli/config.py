@@ -163,8 +163,10 @@ class Simulation(_Section):
 
     duration: Pos = Field(3.0, description="simulated time [s]")
     dt: Pos = Field(0.001, description="time step [s]")
-    integrator: Literal["exact", "newmark"] = Field(
-        "exact", description="exact: matrix exponential with first-order hold; newmark: average acceleration"
+    integrator: Literal["exact", "newmark", "exact-reference"] = Field(
+        "exact",
+        description="exact: first-order-hold exact discretisation (compiled modal recursions); newmark: average "
+        "acceleration; exact-reference: the same as exact in plain NumPy, slower, for cross-checks",
     )
 
     @model_validator(mode="after")
