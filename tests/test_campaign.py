@@ -193,3 +193,63 @@ def test_converged_means_no_worse_than_the_truth_on_the_same_data():
     starved = run_campaign(small_config("identify.algorithm.iterations=1"), jobs=1)  # 8 random points
     assert starved.summary.converged == 0
     assert all(r.cost > r.truth_cost for r in starved.records)
+
+
+def test_local_methods_do_not_start_at_the_truth():
+    """With symmetric bounds the box centre is the configured value: a 1-evaluation lsq must not land on it."""
+    c = run_campaign(small_config("identify.algorithm.name=lsq", "identify.budget=1", "identify.runs=3"), jobs=1)
+    assert all(r.evaluations == 1 for r in c.records)
+    assert np.all(c.summary.per_run_nre_percent > 1.0)
+    nominal = run_campaign(small_config("identify.algorithm.name=lsq", "identify.budget=1", "identify.start=nominal"))
+    np.testing.assert_allclose(nominal.records[0].estimate, nominal.truth)
+
+
+def test_noise_free_data_has_a_zero_bound_and_no_ratio():
+    c = run_campaign(small_config("noise.level=0", "identify.runs=2"), jobs=1)
+    assert c.bound.nre_rms_percent == 0.0 and np.all(c.bound.re_sd_percent == 0.0)
+    assert c.summary.nre_over_crlb is None
+
+
+def test_summary_against_hand_computed_numbers():
+    """Two runs, truth (10, 4): estimates (11, 4) and (10, 3) -> mean (10.5, 3.5), RE of mean (5, -12.5) %."""
+    from vehid_cli.campaign import RunRecord, summarise
+    from vehid_cli.crlb import CramerRao
+
+    recs = [
+        RunRecord(i, np.array(e), 0.0, 10, 0, 0.0, np.array([10]), np.array([0.0]))
+        for i, e in enumerate([(11.0, 4.0), (10.0, 3.0)])
+    ]
+    bound = CramerRao(("a", "b"), np.array([10.0, 4.0]), np.eye(2), np.array([3.0, 4.0]), 5.0, np.ones(2, bool), 1.0)
+    s = summarise(("a", "b"), np.array([10.0, 4.0]), recs, bound, 1.0)
+    np.testing.assert_allclose(s.re_percent, [5.0, -12.5])
+    assert s.nre_percent == pytest.approx(np.hypot(5.0, 12.5))
+    np.testing.assert_allclose(s.per_run_nre_percent, [10.0, 25.0])  # (10 %, 0) and (0, -25 %)
+    assert s.per_run_nre_rms == pytest.approx(np.sqrt((100 + 625) / 2))
+    assert s.nre_over_crlb == pytest.approx(np.sqrt((100 + 625) / 2) / 5.0)
+    np.testing.assert_allclose(s.sd, [np.sqrt(0.5), np.sqrt(0.5)])
+
+
+def test_failed_campaign_leaves_no_checkpoint_to_block_the_corrected_rerun(tmp_path):
+    from vehid_cli.campaign import Checkpoint
+
+    partial = tmp_path / "c.h5.partial"
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(small_config(), jobs=1, checkpoint_dir=partial, on_run=_interrupt_before_any_run)
+    assert not partial.exists()
+    partial.mkdir()  # an empty checkpoint left by an older version: nothing to protect, started afresh
+    Checkpoint(partial, "other").open()
+    assert not partial.exists()
+
+
+def _interrupt_before_any_run(done, total):
+    raise KeyboardInterrupt
+
+
+def test_json_is_strict_when_a_parameter_is_unidentifiable(tmp_path):
+    sets = [x for s in SMALL + ["road.bump.heights=[0.05,0.05,0.05,0.05]", "identify.runs=2"] for x in ("--set", s)]
+    res = vehid("identify", BASE_CONFIG, *sets, "--jobs", 1, "-o", tmp_path / "c.h5", "--json", tmp_path / "c.json")
+    assert res.returncode == 0, res.stderr
+    text = (tmp_path / "c.json").read_text()
+    doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON constant {c}"))
+    assert doc["crlb"]["re_sd_percent"]["Ix"] is None and doc["crlb"]["unidentifiable"] == ["Ix"]
+    assert "cannot identify Ix" in res.stdout

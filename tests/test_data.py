@@ -82,3 +82,9 @@ def test_printing_roundoff_in_time_is_tolerated(tmp_path):
     times = [round(k * 0.001, 6) + (1e-9 if k % 2 else 0) for k in range(10)]
     m = read_measurement(write(tmp_path, HEADER + rows(times)))
     assert m.dt == pytest.approx(0.001)
+
+
+def test_byte_order_mark_is_tolerated(tmp_path):
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + (HEADER + rows([0, 0.001, 0.002])).encode())
+    assert read_measurement(path).t.size == 3

@@ -170,13 +170,15 @@ def test_nelder_mead_restarts_after_collapse_or_stops_when_told():
     assert r.message == "converged" and r.evaluations < 2000 and r.cost < 1e-15
 
 
-def test_nelder_mead_budget_is_population_times_iterations_and_starts_at_the_centre():
+def test_nelder_mead_budget_is_population_times_iterations_and_starts_at_a_random_point():
     rec = Recorder(sphere)
     r = get_optimizer("nelder-mead", population=10, iterations=30).minimize(
         Problem(SPHERE5.lower, SPHERE5.upper, rec), np.random.default_rng(0)
     )
     assert r.evaluations == 300 == len(rec.all_points)
-    np.testing.assert_array_equal(rec.points[0][0], np.zeros(5))  # box centre first
+    start = np.random.default_rng(0)  # the run's stream draws the start uniformly in the box, never the centre
+    expected = SPHERE5.lower + (SPHERE5.upper - SPHERE5.lower) * start.random((1, 5))[0]
+    np.testing.assert_array_equal(rec.points[0][0], expected)
     assert len(rec.points[0]) == 6  # the initial simplex in one batch
 
 
@@ -321,3 +323,55 @@ def test_small_population_rules(name):
     else:
         r = solve("abc", SPHERE5, budget=50, population=2)
         assert r.evaluations == 50 and np.isfinite(r.cost)
+
+
+# ------------------------------------------------------------------------------------------ lsq and hybrid
+
+
+def rosenbrock_residuals(X):
+    """Rosenbrock in residual form: r = [10 (x_{i+1} - x_i²), 1 - x_i]; minimum 0 at x = 1."""
+    X = np.atleast_2d(X)
+    r = np.concatenate([10 * (X[:, 1:] - X[:, :-1] ** 2), 1 - X[:, :-1]], axis=1)
+    return np.sum(r**2, axis=1), r
+
+
+def linear_residuals(A, b):
+    def f(X):
+        r = np.atleast_2d(X) @ A.T - b
+        return np.sum(r**2, axis=1), r
+
+    return f
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_lsq_solves_a_linear_least_squares_problem_exactly(seed):
+    rng = np.random.default_rng(100 + seed)
+    A, b = rng.standard_normal((40, 4)), rng.standard_normal(40)
+    truth = np.linalg.lstsq(A, b, rcond=None)[0]
+    lo, hi = truth - 3, truth + 2
+    fn = linear_residuals(A, b)
+    r = get_optimizer("lsq").minimize(Problem(lo, hi, lambda X: fn(X)[0], fn), np.random.default_rng(seed), budget=60)
+    np.testing.assert_allclose(r.x, truth, atol=1e-7)
+    assert r.evaluations <= 60
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_lsq_and_hybrid_on_rosenbrock_4d(seed):
+    lo, hi = np.full(4, -2.0), np.full(4, 2.0)
+    problem = Problem(lo, hi, lambda X: rosenbrock_residuals(X)[0], rosenbrock_residuals)
+    for name, budget in (("lsq", 300), ("hybrid", 1000)):
+        r = get_optimizer(name).minimize(problem, np.random.default_rng(seed), budget=budget)
+        assert r.evaluations <= budget
+        # TRF from a random start in [-2, 2]^4 reaches the global minimum on these seeds (4-D Rosenbrock also
+        # has a local minimum near (-0.78, 0.61, 0.38, 0.15) with cost 3.70, which a local method may find).
+        np.testing.assert_allclose(r.x, 1.0, atol=1e-6)
+        assert r.cost < 1e-12
+
+
+def test_lsq_respects_the_box_when_the_minimum_lies_outside():
+    A, b = np.eye(2), np.array([3.0, -3.0])  # unconstrained minimum (3, -3)
+    fn = linear_residuals(A, b)
+    r = get_optimizer("lsq").minimize(
+        Problem(np.full(2, -1.0), np.full(2, 1.0), lambda X: fn(X)[0], fn), np.random.default_rng(0), budget=100
+    )
+    np.testing.assert_allclose(r.x, [1.0, -1.0], atol=1e-8)

@@ -108,3 +108,20 @@ def test_published_tables_are_consistent():
                     continue
                 implied = 100 * (col["est"][n] - t) / t
                 assert implied == pytest.approx(col["re"][n], abs=0.5 + 0.05 * abs(col["re"][n]))
+
+
+def test_table_format_writes_to_a_file_and_directories_skip_other_h5(campaign_dir, tmp_path):
+    sim = campaign_dir / "zz_simulation.h5"
+    subprocess.run(
+        [sys.executable, "-m", "vehid_cli", "simulate", str(BASE_CONFIG), "-o", str(sim)], cwd=ROOT, check=True
+    )
+    try:
+        res = subprocess.run(
+            [sys.executable, "-m", "vehid_cli", "report", str(campaign_dir), "-o", str(tmp_path / "t.txt")],
+            capture_output=True, text=True, cwd=ROOT,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        text = (tmp_path / "t.txt").read_text()
+        assert text.count("NRE of mean") == 2  # the two campaigns; the simulation file is not one
+    finally:
+        sim.unlink()

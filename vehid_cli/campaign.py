@@ -169,7 +169,8 @@ def identify_run(task: Task, index: int) -> RunRecord:
     truth_cost = float(problem.cost(task.truth[None, :])[0]) if task.truth is not None else float("nan")
     algorithm = ident.algorithm
     optimizer = get_optimizer(algorithm.name, algorithm.population, algorithm.iterations)
-    result = optimizer.minimize(problem, run_streams(ident.seed, index).optimizer, budget=ident.budget)
+    x0 = task.nominal if ident.start == "nominal" else None
+    result = optimizer.minimize(problem, run_streams(ident.seed, index).optimizer, budget=ident.budget, x0=x0)
     return RunRecord(
         index=index,
         estimate=result.x,
@@ -200,8 +201,12 @@ def _worker_run(index: int) -> RunRecord:
 
 
 def campaign_key(config: Config, data_file: str | None) -> str:
-    """Identity of a campaign's results: the resolved config and the bytes of the data file."""
-    h = hashlib.sha256(config.digest().encode())
+    """Identity of a campaign's results: the resolved config, the data file's bytes and the code version
+    (runs of different code are never mixed in one campaign)."""
+    from . import __version__
+    from .provenance import git_commit
+
+    h = hashlib.sha256(f"{config.digest()} {__version__} {git_commit()}".encode())
     if data_file is not None:
         h.update(Path(data_file).read_bytes())
     return h.hexdigest()
@@ -215,8 +220,11 @@ class Checkpoint:
         self.key = key
 
     def open(self) -> dict[int, RunRecord]:
-        """Create the directory, or read back the runs it holds (refusing another campaign's runs)."""
+        """Read back the runs the directory holds (refusing another campaign's runs). A checkpoint without
+        runs (a campaign that failed before finishing one) holds nothing to protect and is started afresh."""
         stamp = self.directory / "campaign.json"
+        if self.directory.exists() and not any(self.directory.glob("run-*.npz")):
+            self.remove()
         if self.directory.exists():
             try:
                 meta = json.loads(stamp.read_text())
@@ -230,10 +238,6 @@ class Checkpoint:
                     "checkpoint belongs to a different config or data file; remove it or choose another -o",
                     source=str(self.directory),
                 )
-        else:
-            self.directory.mkdir(parents=True)
-            with atomic_path(stamp) as tmp:
-                tmp.write_text(json.dumps({"key": self.key}))
         done = {}
         for path in sorted(self.directory.glob("run-*.npz")):
             try:
@@ -245,6 +249,11 @@ class Checkpoint:
         return done
 
     def save(self, record: RunRecord) -> None:
+        """Persist one finished run (creating the checkpoint, stamped with the campaign key, on the first)."""
+        if not self.directory.exists():
+            self.directory.mkdir(parents=True)
+            with atomic_path(self.directory / "campaign.json") as tmp:
+                tmp.write_text(json.dumps({"key": self.key}))
         record.save(self.directory / f"run-{record.index:05d}.npz")
 
     def remove(self) -> None:
@@ -284,8 +293,11 @@ def run_campaign(
 
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(todo) or 1))
     if jobs == 1:
-        for index in todo:
-            finished(identify_run(task, index))
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(1):  # the same BLAS threading as the workers of a parallel campaign
+            for index in todo:
+                finished(identify_run(task, index))
     else:
         raw = config.model_dump(mode="json", exclude_none=True)
         with ProcessPoolExecutor(jobs, initializer=_init_worker, initargs=(raw, config.source, data_file)) as pool:

@@ -170,11 +170,10 @@ def identify(
     identical for any --jobs. Finished runs are kept in <output>.partial/ until the campaign completes:
     rerun the same command to resume an interrupted campaign.
     """
-    import json
 
     from .campaign import run_campaign_to_file
     from .report.tables import summary_table
-    from .results import campaign_json
+    from .results import campaign_json, to_json
 
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
     if output is None:
@@ -192,7 +191,7 @@ def identify(
         from .data import atomic_path
 
         with atomic_path(json_out) as tmp:
-            tmp.write_text(json.dumps(campaign_json(campaign), indent=2))
+            tmp.write_text(to_json(campaign_json(campaign)))
     out.print(summary_table(campaign))
     unidentifiable = campaign.bound.unidentifiable()
     if unidentifiable:
@@ -280,9 +279,15 @@ def report(
         raise InputError("--plots must name a directory", source=str(plots))
     campaigns, files = collect(paths)
     if fmt == "table":
-        text = None
-        for c in campaigns:
-            out.print(summary_table(c))
+        if output is None:
+            for c in campaigns:
+                out.print(summary_table(c))
+            text = None
+        else:
+            record = Console(record=True, width=160, file=open(os.devnull, "w"))  # noqa: SIM115
+            for c in campaigns:
+                record.print(summary_table(c))
+            text = record.export_text()
     else:
         text = render(campaigns, files, fmt, load_published(published) if published else None)
     if text is not None:

@@ -27,8 +27,6 @@ VEHICLE_PARAMETERS = (
     "m", "mf", "mr", "Ix", "Iy", "a1", "a2", "b1", "b2",
     "kf", "kr", "ktf", "ktr", "kR", "cf", "cr",
 )  # fmt: skip
-ALGORITHMS = ("ga", "cpso", "abc", "de", "nelder-mead", "lsq", "hybrid")
-OBJECTIVES = ("f1", "f2", "wls")
 
 
 class _Section(BaseModel):
@@ -187,7 +185,7 @@ class Noise(_Section):
 class Algorithm(_Section):
     """Identification algorithm and its budget."""
 
-    name: Literal["ga", "cpso", "abc", "de", "nelder-mead", "lsq", "hybrid"] = "abc"
+    name: str = Field("abc", description="an optimizer of vehid_cli/optimizers (SPEC section 3 names)")
     population: Annotated[int, Field(ge=2)] = 20
     iterations: Annotated[int, Field(ge=1)] = 50
 
@@ -195,7 +193,7 @@ class Algorithm(_Section):
 class Identify(_Section):
     """What to identify and how. Bounds are relative to the configured (true or nominal) values."""
 
-    unknowns: tuple[str, ...] = ("m", "Ix", "Iy", "a1", "b1")
+    unknowns: Annotated[tuple[str, ...], Field(min_length=1)] = ("m", "Ix", "Iy", "a1", "b1")
     bounds: tuple[Pos, Pos] = Field((0.7, 1.3), description="search range as factors of the configured values")
     limits: dict[str, tuple[Finite, Finite]] = Field(
         default_factory=dict, description="absolute search range per unknown, overriding 'bounds'"
@@ -206,6 +204,11 @@ class Identify(_Section):
     seed: Annotated[int, Field(ge=0)] = 2015
     budget: Annotated[int, Field(ge=1)] | None = Field(
         None, description="model evaluations per run; default population x iterations"
+    )
+    start: Literal["random", "nominal"] = Field(
+        "random",
+        description="where local methods (lsq, nelder-mead) start: a random point in the box from the run's "
+        "stream, or the configured values",
     )
     truth: Literal["auto", "config", "none"] = Field(
         "auto",
@@ -237,6 +240,12 @@ class Config(_Section):
             if name in seen:
                 raise _KeyedError("identify.unknowns", f"'{name}' is listed twice")
             seen.add(name)
+        for pair in (("a1", "a2"), ("b1", "b2")):
+            if set(pair) <= seen:
+                raise _KeyedError(
+                    "identify.unknowns", f"'{pair[0]}' and '{pair[1]}' cannot both be unknown: their sum is fixed"
+                )
+        _check_algorithm(ident.algorithm)
         for name in ident.limits:
             if name not in ident.unknowns:
                 raise _KeyedError(
@@ -287,6 +296,23 @@ class Config(_Section):
         """SHA-256 of the resolved config, independent of key order and formatting."""
         canonical = json.dumps(self.model_dump(mode="json", exclude_none=True), sort_keys=True)
         return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def _check_algorithm(algorithm: Algorithm) -> None:
+    """The algorithm exists (the optimizer registry is the one list of names) and its population suffices."""
+    from .optimizers import REGISTRY, load_all
+
+    load_all()
+    cls = REGISTRY.get(algorithm.name)
+    if cls is None:
+        hint = _did_you_mean(algorithm.name, REGISTRY)
+        known = "" if hint else f" (known: {', '.join(sorted(REGISTRY))})"
+        raise _KeyedError("identify.algorithm.name", f"unknown algorithm '{algorithm.name}'{hint}{known}")
+    if algorithm.population < cls.min_population:
+        raise _KeyedError(
+            "identify.algorithm.population",
+            f"{algorithm.name} needs a population of at least {cls.min_population}, got {algorithm.population}",
+        )
 
 
 class _KeyedError(ValueError):

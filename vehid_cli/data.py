@@ -61,7 +61,7 @@ def read_table(path: str | Path) -> Table:
     """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column."""
     source = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a byte-order mark (spreadsheet exports)
     except FileNotFoundError:
         raise InputError("file not found", source=source) from None
     except IsADirectoryError:

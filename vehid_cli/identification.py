@@ -8,6 +8,7 @@ simulation of the whole population.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -79,10 +80,18 @@ class Task:
 
         return Problem(self.lower, self.upper, cost, cost_and_residuals, names=names)
 
+    @property
+    def noise_free(self) -> bool:
+        """Simulated data without noise: the bound is zero (the weights keep a floor only to stay finite)."""
+        return self.measured is None and self.config.noise.level == 0
+
     def bound(self) -> CramerRao:
         """The Cramér–Rao bound of this experiment at the truth (or at the nominal car when it is unknown)."""
         at = self.truth if self.truth is not None else self.nominal
-        return cramer_rao(self.experiment, self.names, at, self.sigma)
+        bound = cramer_rao(self.experiment, self.names, at, self.sigma)
+        if self.noise_free:  # the bound scales with sigma, and sigma is zero
+            bound = dataclasses.replace(bound, re_sd_percent=np.zeros_like(bound.re_sd_percent), nre_rms_percent=0.0)
+        return bound
 
 
 def build_task(config: Config, data_file: str | Path | None = None) -> Task:

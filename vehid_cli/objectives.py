@@ -44,6 +44,9 @@ class Objective:
         """Cost of each response in the batch (...,)."""
         if self.name == "wls":
             return np.mean(self.residuals(response) ** 2, axis=-1)
+        return self._eq8(response)
+
+    def _eq8(self, response: Response) -> NDArray:
         num = 0.0
         den = 0.0
         for family, ref in self.reference.items():
@@ -62,5 +65,7 @@ class Objective:
         return np.concatenate(parts, axis=-1)
 
     def costs_and_residuals(self, response: Response) -> tuple[NDArray, NDArray]:
-        """Both from one simulation."""
-        return self.costs(response), self.residuals(response)
+        """Both from one simulation (the wls residuals computed once)."""
+        residuals = self.residuals(response)
+        costs = np.mean(residuals**2, axis=-1) if self.name == "wls" else self._eq8(response)
+        return costs, residuals

@@ -120,12 +120,33 @@ def write_campaign_h5(path: str | Path, campaign) -> None:
             ng.create_dataset(family, data=sigma)
 
 
+def finite_or_none(value) -> float | None:
+    """JSON has no Infinity or NaN: a bound that does not exist (unidentifiable) is null."""
+    return None if value is None or not np.isfinite(value) else float(value)
+
+
+def to_json(doc) -> str:
+    """Strict JSON text: every non-finite number anywhere in `doc` becomes null."""
+    import json
+
+    def clean(x):
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        if isinstance(x, float):
+            return finite_or_none(x)
+        return x
+
+    return json.dumps(clean(doc), indent=2, allow_nan=False)
+
+
 def campaign_json(campaign) -> dict:
-    """SPEC section 5 `identify` object (plus a few extra keys)."""
+    """SPEC section 5 `identify` object (plus a few extra keys); strict JSON (no NaN or Infinity)."""
     s, b, names = campaign.summary, campaign.bound, list(campaign.names)
 
     def obj(values):
-        return None if values is None else {n: float(v) for n, v in zip(names, values, strict=True)}
+        return None if values is None else {n: finite_or_none(v) for n, v in zip(names, values, strict=True)}
 
     evals = [int(e) for e in s.evaluations]
     return {
@@ -137,7 +158,7 @@ def campaign_json(campaign) -> dict:
         "per_run_nre_percent": None if s.per_run_nre_percent is None else [float(v) for v in s.per_run_nre_percent],
         "crlb": {
             "re_sd_percent": obj(b.re_sd_percent),
-            "nre_rms_percent": b.nre_rms_percent,
+            "nre_rms_percent": finite_or_none(b.nre_rms_percent),
             "unidentifiable": b.unidentifiable(),
         },
         "evaluations_per_run": float(np.mean(evals)),

@@ -130,6 +130,11 @@ class Run:
         self.history_cost.append(self.best_cost)
         return residuals
 
+    def start(self, x0: NDArray | None) -> NDArray:
+        """Where a local method starts: x0 when given, else a uniform draw in the box from the run's stream
+        (never the box centre: with symmetric bounds that is the configured value, often the truth)."""
+        return self.uniform(1)[0] if x0 is None else np.clip(x0, self.problem.lower, self.problem.upper)
+
     def uniform(self, n: int) -> NDArray:
         """n points drawn uniformly in the box."""
         lo, hi = self.problem.lower, self.problem.upper
@@ -140,10 +145,11 @@ class Optimizer(ABC):
     """Base of all algorithms. Subclasses set ``name`` and implement ``_initialize`` and ``_step``."""
 
     name: ClassVar[str]
+    min_population: ClassVar[int] = 2
 
     def __init__(self, population: int = 20, iterations: int = 50, **options: Any):
-        if population < 2:
-            raise ValueError("population must be at least 2")
+        if population < self.min_population:
+            raise ValueError(f"{self.name} needs a population of at least {self.min_population}")
         if iterations < 1:
             raise ValueError("iterations must be at least 1")
         self.population = int(population)

@@ -53,11 +53,10 @@ class DE(Optimizer):
     """DE/rand/1/bin with F = 0.5 (optionally dithered), CR = 0.9 and bounce-back bounds."""
 
     name = "de"
+    min_population = 4  # DE/rand/1 draws three partners distinct from the target
 
     def __init__(self, population: int = 20, iterations: int = 50, **options: Any):
         super().__init__(population, iterations, **options)
-        if self.population < 4:
-            raise ValueError("DE/rand/1 needs a population of at least 4")
         self.F = float(options.get("F", 0.5))
         self.CR = float(options.get("CR", 0.9))
         self.dither = bool(options.get("dither", False))

@@ -21,6 +21,7 @@ class Hybrid(Optimizer):
     """Global phase (`global_algorithm`, `global_fraction` of the budget), then the `lsq` polish."""
 
     name = "hybrid"
+    min_population = 4  # its default global phase is DE
 
     def __init__(self, population: int = 20, iterations: int = 50, **options: Any):
         super().__init__(population, iterations, **options)

@@ -49,13 +49,12 @@ def polish(run: Run, x0: NDArray, max_nfev: int | None = None) -> NDArray:
 
 @register
 class LeastSquares(Optimizer):
-    """Local trust-region least squares from x0 (or the box centre); stops when converged or out of budget."""
+    """Local trust-region least squares from x0 (or a random point in the box), until converged or out of budget."""
 
     name = "lsq"
 
     def _initialize(self, run: Run, x0: NDArray | None) -> Any:
-        lo, hi = run.problem.lower, run.problem.upper
-        return {"x": (lo + hi) / 2 if x0 is None else x0}
+        return {"x": run.start(x0)}
 
     def _step(self, run: Run, state: Any) -> bool | None:
         try:

@@ -24,7 +24,8 @@ Choices (documented):
   standard coefficients are used.
 * Bounds: every trial point is clipped into the box before it is evaluated, and the simplex stores the
   clipped point (so stored vertices and costs always agree). Shrink points stay inside by convexity.
-* Start: ``x0`` when given, else the box centre. Initial simplex: ``x0 + h_j e_j`` with
+* Start: ``x0`` when given, else a uniform random point in the box (from the run's stream).
+  Initial simplex: ``x0 + h_j e_j`` with
   ``h_j = initial_step (ub_j - lb_j)`` (default 5 % of the range), taken in the negative direction when the
   positive one would leave the box.
 * Restart: when the simplex has collapsed (largest vertex distance from the best, relative to the box
@@ -87,8 +88,7 @@ class NelderMead(Optimizer):
         return np.clip(x + np.diag(h), lo, hi)
 
     def _initialize(self, run: Run, x0: NDArray | None) -> _SimplexState:
-        lo, hi = run.problem.lower, run.problem.upper
-        start = (lo + hi) / 2 if x0 is None else np.clip(x0, lo, hi)
+        start = run.start(x0)
         x = np.vstack([start, self._simplex_around(run, start)])
         state = _SimplexState(x=x, f=np.full(len(x), np.inf))
         state.f = run.evaluate(x)

@@ -4,22 +4,31 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 from pathlib import Path
 
 from ..campaign import Campaign
 from ..errors import InputError
-from ..results import campaign_json, read_campaign_h5
+from ..results import CAMPAIGN_KIND, campaign_json, read_campaign_h5, to_json
 
 FORMATS = ("table", "md", "csv", "latex", "json")
 
 
+def is_campaign_file(path: Path) -> bool:
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            return h5.attrs.get("kind") == CAMPAIGN_KIND
+    except OSError:
+        return False
+
+
 def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
-    """Read campaign files, expanding directories to the *.h5 files in them (sorted)."""
+    """Read campaign files; a directory contributes the campaign files in it (other .h5 files are skipped)."""
     files: list[Path] = []
     for path in paths:
         if path.is_dir():
-            found = sorted(path.glob("*.h5"))
+            found = [f for f in sorted(path.glob("*.h5")) if is_campaign_file(f)]
             if not found:
                 raise InputError("directory holds no campaign files (*.h5)", source=str(path))
             files.extend(found)
@@ -53,7 +62,7 @@ def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dic
         return tables.latex(campaigns, published)
     if fmt == "json":
         docs = [dict(campaign_json(c), file=f) for c, f in zip(campaigns, files, strict=True)]
-        return json.dumps(docs, indent=2)
+        return to_json(docs)
     if fmt == "csv":
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")

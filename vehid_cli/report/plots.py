@@ -151,15 +151,20 @@ def plot_noisy_vs_clean(campaign, path: str | Path) -> None:
 
 def write_campaign_plots(campaigns, files, out_dir: str | Path) -> list[Path]:
     """All figures for a set of campaign files; returns the paths written."""
+    from . import tables
     from .tables import grouped
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     stems = {id(c): Path(f).stem for c, f in zip(campaigns, files, strict=True)}
+    if len(set(stems.values())) < len(stems):  # same file names from different directories
+        stems = {id(c): f"{Path(f).parent.name}_{Path(f).stem}" for c, f in zip(campaigns, files, strict=True)}
     for g, group in enumerate(grouped(campaigns)):
         cfg = group[0].config
-        tag = f"{cfg.identify.objective}_{cfg.sensors}_np{cfg.noise.level:g}" + (f"_g{g}" if group[0].data_file else "")
+        tag = f"{cfg.identify.objective}_{cfg.sensors}_np{cfg.noise.level:g}"
+        if any(tables.group_key(other[0])[3:] != tables.group_key(group[0])[3:] for other in grouped(campaigns)):
+            tag += f"_g{g}"  # groups that differ in data file or unknowns must not overwrite each other
         p = out_dir / f"convergence_{tag}.png"
         plot_convergence(group, p)
         written.append(p)

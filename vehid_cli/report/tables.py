@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 from rich.table import Table
 
 from ..campaign import Campaign
@@ -37,7 +38,8 @@ def summary_table(c: Campaign) -> Table:
     for col in ("parameter", "truth", "mean", "RE of mean %", "sd over runs %", "CRLB sd %", "sd/CRLB"):
         table.add_column(col, justify="left" if col == "parameter" else "right")
     for j, name in enumerate(c.names):
-        ratio = s.re_sd_percent[j] / b.re_sd_percent[j] if b.re_sd_percent[j] > 0 else None
+        finite = np.isfinite(b.re_sd_percent[j]) and b.re_sd_percent[j] > 0
+        ratio = s.re_sd_percent[j] / b.re_sd_percent[j] if finite else None
         flag = "" if b.identifiable[j] else " (not identifiable)"
         table.add_row(
             name + flag,
