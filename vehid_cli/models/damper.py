@@ -1,0 +1,327 @@
+"""Damper force laws (Fleps-Dezasse 2013; Spencer et al. 1997), run through the compiled kernel.
+
+Every model is a numba force law of the kernel's shape ``law(d, dd, z, params, f_out, zd_out)`` driven
+on a virtual test bench: the kernel's input channels are the bench's
+
+    d = [x, v, u_cr, u_cf, u_rr, u_rf]
+
+displacement x [m] (extension positive), velocity v [m/s] (rebound positive: Fleps-Dezasse's convention),
+and the control input u [0..1] delayed by each of the four delays (compression/rebound x rising/falling),
+prepared per candidate by the bench so the delay is an exact time shift. ``f_out[0]`` is the damper
+force [N], positive in rebound; the other outputs are zero.
+
+Common to every model (the "front end", parameters first in each row):
+
+* gas spring ``F_gas = k1 (x - x0)``: preload and stiffness of the gas charge (Fleps-Dezasse section 2);
+* backlash: a dead zone of width ``gap`` at each reversal (play operator, smoothed): the damper proper
+  sees x_b and v_b instead of x and v;
+* control-input dynamics: a first-order lag with time constant T and the delays above; T and the delay
+  are chosen by compression/rebound and rising/falling u with the smooth switch of Eq. 4-5.
+
+The models proper: ``viscous`` (c0 v), ``bingham`` (c0 v + fc tanh(v / v_eps)), ``gas_spring`` (none),
+``bouc_wen`` (Spencer's extended model, Eq. 1-3 with n = 2), ``generalized_bouc_wen`` (its seven
+parameters as tables over u with compression and rebound sets blended by Eq. 4-5) and ``force_map``
+(a table over velocity and delayed control input, Eq. 6).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+# ------------------------------------------------------------------------------------------ front end
+
+FRONT = ("k1", "x0", "gap", "T_comp_rise", "T_comp_fall", "T_reb_rise", "T_reb_fall", "v_switch")
+N_FRONT = len(FRONT)
+DELAYS = ("tau_comp_rise", "tau_comp_fall", "tau_reb_rise", "tau_reb_fall")  # applied by the bench
+N_FRONT_STATES = 2  # x_b (backlash), u_f (lagged control input)
+P0 = N_FRONT + len(DELAYS)  # where a model's own parameters start in a row
+BW_SET = ("c0", "k0", "c1", "alpha", "beta", "gamma", "delta")  # Bouc-Wen parameters that depend on u and side
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _switch(v, eps):  # pragma: no cover - compiled
+    """Eq. 5: 0 in compression, 1 in rebound, smooth over |v| ~ eps."""
+    return 0.5 * math.tanh(v / eps) + 0.5
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _motion(d, z, p, zd):  # pragma: no cover - compiled
+    """Backlash (a smoothed play operator of width gap): the piston motion (x_b, v_b) the damper proper sees;
+    writes the rate of z[0] = x_b. No backlash (gap = 0): the bench motion itself."""
+    x, v, gap = d[0], d[1], p[2]
+    if gap > 0.0:
+        e = x - z[0]
+        engaged = 0.5 * (1.0 + math.tanh((math.tanh(v / p[7]) * e - 0.5 * gap) / (0.05 * gap)))
+        zd[0] = v * engaged
+        return z[0], v * engaged
+    zd[0] = v
+    return x, v
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _control(d, z, p, zd, v):  # pragma: no cover - compiled
+    """Control-input dynamics: the delayed command (channels 2-5: delays for compression/rebound x rising/
+    falling) through a first-order lag whose time constant is chosen the same way, blended by Eq. 4-5.
+    Writes the rate of z[1] = u_f and returns the control input the damper sees."""
+    s = _switch(v, p[7])
+    target_rise = (1 - s) * d[2] + s * d[4]
+    target_fall = (1 - s) * d[3] + s * d[5]
+    r = 0.5 * math.tanh((0.5 * (target_rise + target_fall) - z[1]) / 1e-3) + 0.5  # rising: command above u_f
+    target = r * target_rise + (1 - r) * target_fall
+    T = r * ((1 - s) * p[3] + s * p[5]) + (1 - r) * ((1 - s) * p[4] + s * p[6])
+    if T > 0.0:
+        zd[1] = (target - z[1]) / T
+        return z[1]
+    zd[1] = 0.0
+    return target
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _finish(x, p, f_out, force):  # pragma: no cover - compiled
+    f_out[0] = force + p[0] * (x - p[1])
+    for i in range(1, f_out.shape[0]):
+        f_out[i] = 0.0
+
+
+# ------------------------------------------------------------------------------------------ force laws
+
+
+@numba.njit(cache=True, error_model="numpy")
+def viscous_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
+    """F = c0 v + gas. params: front, c0."""
+    xb, vb = _motion(d, z, p, zd)
+    zd[1] = 0.0
+    _finish(d[0], p, f_out, p[P0] * vb)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def gas_spring_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
+    """F = k1 (x - x0) only."""
+    _motion(d, z, p, zd)
+    zd[1] = 0.0
+    _finish(d[0], p, f_out, 0.0)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def bingham_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
+    """F = c0 v + fc tanh(v / v_eps) + gas (viscous plus smoothed Coulomb friction). params: front, c0, fc, v_eps."""
+    xb, vb = _motion(d, z, p, zd)
+    zd[1] = 0.0
+    c0, fc, veps = p[P0], p[P0 + 1], p[P0 + 2]
+    _finish(d[0], p, f_out, c0 * vb + fc * math.tanh(vb / veps))
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _bouc_wen(xb, vb, y, zz, c0, k0, c1, alpha, beta, gamma, delta):  # pragma: no cover - compiled
+    """Spencer's extended Bouc-Wen with n = 2 (Fleps-Dezasse Eq. 1-3): (force without gas, ydot, zdot)."""
+    ydot = (alpha * zz + c0 * vb + k0 * (xb - y)) / (c0 + c1)
+    w = vb - ydot
+    zdot = -gamma * abs(w) * zz * abs(zz) - beta * w * zz * zz + delta * w
+    return c0 * w + k0 * (xb - y) + alpha * zz, ydot, zdot
+
+
+@numba.njit(cache=True, error_model="numpy")
+def bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
+    """Spencer's extended Bouc-Wen; states z[2] = y (internal displacement), z[3] = z (hysteretic).
+    params: front, c0, k0, c1, alpha, beta, gamma, delta."""
+    xb, vb = _motion(d, z, p, zd)
+    zd[1] = 0.0
+    q = P0
+    force, ydot, zdot = _bouc_wen(xb, vb, z[2], z[3], p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6])
+    zd[2] = ydot
+    zd[3] = zdot
+    _finish(d[0], p, f_out, force)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _table_1d(nodes, values, m, u):  # pragma: no cover - compiled
+    """Linear interpolation in a table of m nodes (held constant outside)."""
+    if m == 1 or u <= nodes[0]:
+        return values[0]
+    if u >= nodes[m - 1]:
+        return values[m - 1]
+    j = 0
+    while nodes[j + 1] < u:
+        j += 1
+    t = (u - nodes[j]) / (nodes[j + 1] - nodes[j])
+    return (1 - t) * values[j] + t * values[j + 1]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def generalized_bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
+    """Bouc-Wen whose 7 parameters are tables over u, one set for compression and one for rebound, blended
+    by Eq. 4-5. params: front, m, u_nodes (m), comp set (7 x m, parameter-major), rebound set (7 x m)."""
+    xb, vb = _motion(d, z, p, zd)
+    u = _control(d, z, p, zd, vb)
+    q = P0
+    m = int(p[q])
+    nodes = p[q + 1 : q + 1 + m]
+    comp = q + 1 + m
+    reb = comp + 7 * m
+    s = _switch(vb, p[7])
+    th = np.empty(7)
+    for i in range(7):
+        c = _table_1d(nodes, p[comp + i * m : comp + (i + 1) * m], m, u)
+        r = _table_1d(nodes, p[reb + i * m : reb + (i + 1) * m], m, u)
+        th[i] = s * r + (1 - s) * c
+    force, ydot, zdot = _bouc_wen(xb, vb, z[2], z[3], th[0], th[1], th[2], th[3], th[4], th[5], th[6])
+    zd[2] = ydot
+    zd[3] = zdot
+    _finish(d[0], p, f_out, force)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def force_map_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
+    """Eq. 6: F = table(v, u) + gas, bilinear in velocity and delayed control input (held outside the grid).
+    params: front, nv, nu, v_nodes (nv), u_nodes (nu), forces (nv x nu, velocity-major)."""
+    xb, vb = _motion(d, z, p, zd)
+    u = _control(d, z, p, zd, vb)
+    q = P0
+    nv, nu = int(p[q]), int(p[q + 1])
+    vn = p[q + 2 : q + 2 + nv]
+    un = p[q + 2 + nv : q + 2 + nv + nu]
+    F = p[q + 2 + nv + nu : q + 2 + nv + nu + nv * nu]
+    # bilinear: interpolate each velocity row in u, then across velocity
+    rows = np.empty(nv)
+    for i in range(nv):
+        rows[i] = _table_1d(un, F[i * nu : (i + 1) * nu], nu, u)
+    if vb <= vn[0] or vb >= vn[nv - 1]:  # extrapolate linearly in velocity (forces keep growing)
+        j = 0 if vb <= vn[0] else nv - 2
+        t = (vb - vn[j]) / (vn[j + 1] - vn[j])
+        force = (1 - t) * rows[j] + t * rows[j + 1]
+    else:
+        force = _table_1d(vn, rows, nv, vb)
+    _finish(d[0], p, f_out, force)
+
+
+# ------------------------------------------------------------------------------------------ model catalogue
+
+
+@dataclass(frozen=True)
+class DamperModel:
+    """A damper model: its force law, its parameter names (after the front end) and internal states."""
+
+    name: str
+    law: object  # numba dispatcher
+    parameters: tuple[str, ...]
+    n_states: int  # total, front end included
+    uses_control: bool
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)  # physical limits
+
+    def layout(self, table_shape: tuple[int, ...] = ()) -> tuple[str, ...]:
+        """All parameter names of a row: the front end, then the model's own (tables expanded)."""
+        return FRONT + DELAYS + self.expand(table_shape)
+
+    def expand(self, table_shape: tuple[int, ...]) -> tuple[str, ...]:
+        if self.name == "generalized_bouc_wen":
+            (m,) = table_shape or (1,)
+            names = ["m"] + [f"u_node_{j + 1}" for j in range(m)]
+            for side in ("comp", "reb"):
+                names += [f"{p}_{side}" + (f"_{j + 1}" if m > 1 else "") for p in BW_SET for j in range(m)]
+            return tuple(names)
+        if self.name == "force_map":
+            nv, nu = table_shape
+            names = ["nv", "nu"] + [f"v_node_{i + 1}" for i in range(nv)] + [f"u_node_{j + 1}" for j in range(nu)]
+            return tuple(names + [f"F_{i + 1}_{j + 1}" for i in range(nv) for j in range(nu)])
+        return self.parameters
+
+
+MODELS = {
+    m.name: m
+    for m in (
+        DamperModel("gas_spring", gas_spring_law, (), N_FRONT_STATES, False),
+        DamperModel("viscous", viscous_law, ("c0",), N_FRONT_STATES, False, {"c0": (0.0, np.inf)}),
+        DamperModel(
+            "bingham",
+            bingham_law,
+            ("c0", "fc", "v_eps"),
+            N_FRONT_STATES,
+            False,
+            {"c0": (0.0, np.inf), "fc": (0.0, np.inf), "v_eps": (1e-6, np.inf)},
+        ),
+        DamperModel(
+            "bouc_wen",
+            bouc_wen_law,
+            BW_SET,
+            N_FRONT_STATES + 2,
+            False,
+            {"c0": (0.0, np.inf), "k0": (0.0, np.inf), "c1": (1e-9, np.inf), "delta": (0.0, np.inf)},
+        ),
+        DamperModel("generalized_bouc_wen", generalized_bouc_wen_law, (), N_FRONT_STATES + 2, True),
+        DamperModel("force_map", force_map_law, (), N_FRONT_STATES, True),
+    )  # fmt: skip
+}
+
+
+# ------------------------------------------------------------------------------------------ simulation
+
+
+def delayed_controls(t: NDArray, u: NDArray, delays: NDArray) -> NDArray:
+    """(P, n, 4): the control input u(t) (n,) delayed by each candidate's four delays (P, 4) [s]."""
+    delays = np.atleast_2d(delays)
+    out = np.empty((delays.shape[0], t.size, 4))
+    for p in range(delays.shape[0]):
+        for k in range(4):
+            out[p, :, k] = np.interp(t - delays[p, k], t, u)
+    return out
+
+
+@dataclass(frozen=True)
+class BenchRun:
+    """The force of a batch of candidate dampers on one bench history, and whether each stayed finite."""
+
+    t: NDArray  # (n,) [s]
+    force: NDArray  # (P, n) [N]
+    stable: NDArray  # (P,) bool
+
+
+def simulate_damper(
+    model: DamperModel,
+    rows: NDArray,
+    t: NDArray,
+    x: NDArray,
+    v: NDArray,
+    u: NDArray | None = None,
+    substeps: int = 1,
+    method: str = "rk4",
+) -> BenchRun:
+    """Force of P candidates (rows (P, n_par) in `model.layout` order) on the bench history x, v, u.
+
+    The kernel integrates at dt / substeps with every input linear between samples; the force is
+    returned at the bench's samples. A candidate whose internal states blow up gets NaN forces and
+    stable = False.
+    """
+    from ..sim.kernel import integrate_bench
+
+    rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    P, n = rows.shape[0], t.size
+    dt = float(t[1] - t[0])
+    u = np.zeros(n) if u is None else np.asarray(u, dtype=float)
+    channels = 6 if model.uses_control else 2
+    road = np.empty((P, n, channels))
+    road[:, :, 0], road[:, :, 1] = x, v
+    if model.uses_control:
+        road[:, :, 2:] = delayed_controls(t, u, rows[:, N_FRONT : N_FRONT + 4])
+    if substeps > 1:  # finer integration of the same inputs (linear between the bench's samples)
+        fine = np.linspace(t[0], t[-1], (n - 1) * substeps + 1)
+        coarse = road
+        road = np.empty((P, fine.size, channels))
+        for r in range(P):
+            for c in range(channels):
+                road[r, :, c] = np.interp(fine, t, coarse[r, :, c])
+    z0 = np.zeros((P, model.n_states))
+    z0[:, 0] = x[0]  # backlash play starts centred on the piston
+    z0[:, 1] = u[0]
+    if model.n_states > N_FRONT_STATES:
+        z0[:, 2] = x[0]  # Bouc-Wen internal displacement starts where the piston is: no initial spring force
+    with np.errstate(all="ignore"):
+        forces = integrate_bench(model.law, rows, road, dt / substeps, z0)
+    force = forces[:, ::substeps, 0]
+    stable = np.all(np.isfinite(force), axis=1)
+    force = np.where(stable[:, None], force, np.nan)
+    return BenchRun(t=t, force=force, stable=stable)
