@@ -1,0 +1,231 @@
+"""Damper identification (Fleps-Dezasse section 4): the cost J, bounded fits, the step-by-step procedure,
+and the real-time check.
+
+J (Eq. 7) is the mean squared force error over the variance of the measured force. A candidate whose
+simulation blows up gets a finite penalty larger than the initial cost, as in the paper, so an
+optimizer (Nelder–Mead by default, as the paper's Simplex, or any of the project's) never stops on it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .bench import BenchHistory
+from .models.damper import DELAYS, FRONT, MODELS, DamperModel, simulate_damper
+from .optimizers import Problem, get_optimizer
+
+PENALTY_FACTOR = 10.0  # an unstable candidate costs this many times the initial J (at least 10)
+
+
+def cost_J(measured: NDArray, simulated: NDArray) -> NDArray:
+    """Eq. 7: mean squared error over the variance of the measured force (mean removed); (..., n) -> (...)."""
+    measured = np.asarray(measured, dtype=float)
+    return np.mean((measured - simulated) ** 2, axis=-1) / np.var(measured)
+
+
+@dataclass(frozen=True)
+class DamperSpec:
+    """A damper model with every parameter valued: the row the kernel runs, by name."""
+
+    model: str
+    values: Mapping[str, float]
+    table_shape: tuple[int, ...] = ()
+
+    @property
+    def damper(self) -> DamperModel:
+        return MODELS[self.model]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.damper.layout(self.table_shape)
+
+    def row(self) -> NDArray:
+        missing = [n for n in self.names if n not in self.values]
+        if missing:
+            raise KeyError(f"{self.model}: no value for {missing}")
+        return np.array([float(self.values[n]) for n in self.names])
+
+    def rows(self, unknowns: Sequence[str], X: NDArray) -> NDArray:
+        """Rows for a batch of candidates: the spec's values with `unknowns` replaced by the columns of X."""
+        base = self.row()
+        out = np.repeat(base[None, :], len(X), axis=0)
+        index = {n: i for i, n in enumerate(self.names)}
+        for j, name in enumerate(unknowns):
+            out[:, index[name]] = X[:, j]
+        return out
+
+    def with_values(self, values: Mapping[str, float]) -> DamperSpec:
+        return DamperSpec(self.model, {**self.values, **values}, self.table_shape)
+
+    def simulate(self, history: BenchHistory, substeps: int = 1) -> NDArray:
+        """Force (n,) of this damper on the history."""
+        return simulate_damper(
+            self.damper, self.row()[None, :], history.t, history.x, history.v, history.u, substeps
+        ).force[0]
+
+
+def default_values(model: str, table_shape: tuple[int, ...] = ()) -> dict[str, float]:
+    """Neutral starting values: no gas, no backlash, no lag or delay, mid-range damper parameters."""
+    values = {n: 0.0 for n in FRONT + DELAYS}
+    values["v_switch"] = 0.01
+    typical = dict(c0=1000.0, fc=100.0, v_eps=0.01, k0=100.0, c1=10000.0, alpha=500.0, beta=1e5, gamma=1e5, delta=300.0)
+    for name in MODELS[model].layout(table_shape)[len(values) :]:
+        base = name.split("_")[0] if name.split("_")[0] in typical else name
+        values[name] = typical.get(base, 0.0)
+    if model == "generalized_bouc_wen":
+        (m,) = table_shape or (1,)
+        values["m"] = m
+        for j in range(m):
+            values[f"u_node_{j + 1}"] = j / max(m - 1, 1)
+    return values
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One identification: the values found, J before and after, and the effort."""
+
+    spec: DamperSpec
+    unknowns: tuple[str, ...]
+    J_initial: float
+    J: float
+    evaluations: int
+    penalised: int
+    wall_s: float
+    history_evals: NDArray = field(repr=False, default_factory=lambda: np.zeros(0))
+    history_cost: NDArray = field(repr=False, default_factory=lambda: np.zeros(0))
+
+
+def fit(
+    spec: DamperSpec,
+    history: BenchHistory,
+    unknowns: Sequence[str],
+    bounds: Mapping[str, tuple[float, float]],
+    *,
+    algorithm: str = "nelder-mead",
+    budget: int = 2000,
+    population: int = 20,
+    rng: np.random.Generator,
+    substeps: int = 1,
+) -> Fit:
+    """Minimise J over `unknowns` in their bounds, starting from the spec's values."""
+    if history.force is None:
+        raise ValueError("a fit needs a measured force")
+    unknowns = tuple(unknowns)
+    lower = np.array([bounds[n][0] for n in unknowns], dtype=float)
+    upper = np.array([bounds[n][1] for n in unknowns], dtype=float)
+    x0 = np.clip(np.array([spec.values[n] for n in unknowns], dtype=float), lower, upper)
+    model = spec.damper
+
+    def cost(X: NDArray) -> NDArray:
+        run = simulate_damper(model, spec.rows(unknowns, X), history.t, history.x, history.v, history.u, substeps)
+        return cost_J(history.force, run.force)
+
+    J0 = float(cost(x0[None, :])[0])
+    penalty = PENALTY_FACTOR * max(J0 if np.isfinite(J0) else 1.0, 1.0)
+    problem = Problem(lower, upper, cost, penalty=penalty, names=unknowns)
+    optimizer = get_optimizer(algorithm, population=population, iterations=max(1, budget // population))
+    result = optimizer.minimize(problem, rng, budget=budget, x0=x0)
+    best = spec.with_values(dict(zip(unknowns, result.x, strict=True)))
+    return Fit(
+        spec=best,
+        unknowns=unknowns,
+        J_initial=J0,
+        J=float(result.cost),
+        evaluations=result.evaluations + 1,
+        penalised=result.penalised,
+        wall_s=result.wall_s,
+        history_evals=result.history_evals,
+        history_cost=result.history_cost,
+    )
+
+
+def scaled_bounds(values: Mapping[str, float], names: Sequence[str], low: float = 0.1, high: float = 10.0):
+    """Bounds by scaling the starting values (the paper's choice), with a symmetric range for values near 0."""
+    out = {}
+    for n in names:
+        v = float(values[n])
+        out[n] = (min(low * v, high * v), max(low * v, high * v)) if abs(v) > 1e-12 else (-1.0, 1.0)
+    return out
+
+
+# ------------------------------------------------------------------------------------------ step by step
+
+
+@dataclass(frozen=True)
+class Step:
+    """One stage of the step-by-step identification (Fleps-Dezasse section 4.2)."""
+
+    name: str
+    history: BenchHistory
+    unknowns: tuple[str, ...]
+    bounds: Mapping[str, tuple[float, float]]
+
+
+def step_by_step(
+    spec: DamperSpec,
+    steps: Sequence[Step],
+    *,
+    algorithm: str = "nelder-mead",
+    budget: int = 2000,
+    rng: np.random.Generator,
+    substeps: int = 1,
+) -> list[Fit]:
+    """Run the stages in order, each starting from (and keeping) what the previous ones found."""
+    fits = []
+    for step in steps:
+        result = fit(
+            spec, step.history, step.unknowns, step.bounds, algorithm=algorithm, budget=budget, rng=rng,
+            substeps=substeps,
+        )  # fmt: skip
+        fits.append(result)
+        spec = result.spec
+    return fits
+
+
+# ------------------------------------------------------------------------------------------ real time
+
+
+@dataclass(frozen=True)
+class RealTime:
+    """Fixed-step RK4 at the real-time step: stable or not, how fast, and the largest stable step."""
+
+    model: str
+    dt: float  # the step checked [s]
+    stable: bool
+    realtime_factor: float  # simulated time / wall time (> 1: faster than real time)
+    largest_stable_dt: float  # [s], from a bisection on the step
+
+
+def _stable_at(spec: DamperSpec, history: BenchHistory, dt: float) -> tuple[bool, float]:
+    t = np.arange(0.0, history.t[-1] - history.t[0], dt) + history.t[0]
+    x, v, u = (np.interp(t, history.t, a) for a in (history.x, history.v, history.u))
+    start = time.perf_counter()
+    run = simulate_damper(spec.damper, spec.row()[None, :], t, x, v, u)
+    wall = time.perf_counter() - start
+    ok = bool(run.stable[0]) and bool(np.all(np.abs(run.force) < 1e9))
+    return ok, (t[-1] - t[0]) / max(wall, 1e-9)
+
+
+def realtime_check(spec: DamperSpec, history: BenchHistory, dt: float = 1e-3) -> RealTime:
+    """Simulate with fixed-step RK4 at `dt`; find the largest stable step between 10 µs and 50 ms."""
+    _stable_at(spec, history, dt)  # compile
+    stable, rtf = _stable_at(spec, history, dt)
+    lo, hi = 1e-5, 5e-2
+    if _stable_at(spec, history, hi)[0]:
+        largest = hi
+    elif not _stable_at(spec, history, lo)[0]:
+        largest = 0.0
+    else:
+        for _ in range(20):  # geometric bisection
+            mid = np.sqrt(lo * hi)
+            if _stable_at(spec, history, mid)[0]:
+                lo = mid
+            else:
+                hi = mid
+        largest = lo
+    return RealTime(spec.model, dt, stable, rtf, float(largest))
