@@ -3,11 +3,12 @@
 Every model is a numba force law of the kernel's shape ``law(d, dd, z, params, f_out, zd_out)`` driven
 on a virtual test bench: the kernel's input channels are the bench's
 
-    d = [x, v, u_cr, u_cf, u_rr, u_rf]
+    d = [x, v, u_delayed, rising]
 
 displacement x [m] (extension positive), velocity v [m/s] (rebound positive: Fleps-Dezasse's convention),
-and the control input u [0..1] delayed by each of the four delays (compression/rebound x rising/falling),
-prepared per candidate by the bench so the delay is an exact time shift. ``f_out[0]`` is the damper
+and, for models with a control input, the command u [0..1] with each change delayed by the candidate's
+delay for its direction and stroke, and the direction of the latest change (prepared per candidate by the
+bench: the delay is an exact time shift). ``f_out[0]`` is the damper
 force [N], positive in rebound; the other outputs are zero.
 
 Common to every model (the "front end", parameters first in each row):
@@ -15,8 +16,8 @@ Common to every model (the "front end", parameters first in each row):
 * gas spring ``F_gas = k1 (x - x0)``: preload and stiffness of the gas charge (Fleps-Dezasse section 2);
 * backlash: a dead zone of width ``gap`` at each reversal (play operator, smoothed): the damper proper
   sees x_b and v_b instead of x and v;
-* control-input dynamics: a first-order lag with time constant T and the delays above; T and the delay
-  are chosen by compression/rebound and rising/falling u with the smooth switch of Eq. 4-5.
+* control-input dynamics: a delay and a first-order lag, both chosen by the direction of the command's
+  change (rising/falling) and by the stroke (compression/rebound, the lag blended by Eq. 4-5).
 
 The models proper: ``viscous`` (c0 v), ``bingham`` (c0 v + fc tanh(v / v_eps)), ``gas_spring`` (none),
 ``bouc_wen`` (Spencer's extended model, Eq. 1-3 with n = 2), ``generalized_bouc_wen`` (its seven
@@ -65,20 +66,18 @@ def _motion(d, z, p, zd):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def _control(d, z, p, zd, v):  # pragma: no cover - compiled
-    """Control-input dynamics: the delayed command (channels 2-5: delays for compression/rebound x rising/
-    falling) through a first-order lag whose time constant is chosen the same way, blended by Eq. 4-5.
-    Writes the rate of z[1] = u_f and returns the control input the damper sees."""
+    """Control-input dynamics: the delayed command d[2] (each change of u takes effect after the delay of its
+    direction and of the stroke it happens in; prepared by the bench) through a first-order lag whose time
+    constant is chosen by the direction of the latest change (d[3]: 1 rising, 0 falling) and blended between
+    compression and rebound by Eq. 4-5. Writes the rate of z[1] = u_f and returns the input the damper sees."""
     s = _switch(v, p[7])
-    target_rise = (1 - s) * d[2] + s * d[4]
-    target_fall = (1 - s) * d[3] + s * d[5]
-    r = 0.5 * math.tanh((0.5 * (target_rise + target_fall) - z[1]) / 1e-3) + 0.5  # rising: command above u_f
-    target = r * target_rise + (1 - r) * target_fall
+    r = d[3]
     T = r * ((1 - s) * p[3] + s * p[5]) + (1 - r) * ((1 - s) * p[4] + s * p[6])
     if T > 0.0:
-        zd[1] = (target - z[1]) / T
+        zd[1] = (d[2] - z[1]) / T
         return z[1]
     zd[1] = 0.0
-    return target
+    return d[2]
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -261,13 +260,31 @@ MODELS = {
 # ------------------------------------------------------------------------------------------ simulation
 
 
-def delayed_controls(t: NDArray, u: NDArray, delays: NDArray) -> NDArray:
-    """(P, n, 4): the control input u(t) (n,) delayed by each candidate's four delays (P, 4) [s]."""
+def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray) -> NDArray:
+    """(P, n, 2): the delayed command and the direction of its latest change, per candidate.
+
+    Each change of the command u (n,) between samples i-1 and i takes effect at t_i + tau, with tau the
+    candidate's delay (P, 4: compression/rebound x rising/falling, DELAYS order) for the change's direction
+    and the stroke (sign of v) it happens in. A change that would overtake a later one is merged into it.
+    """
     delays = np.atleast_2d(delays)
-    out = np.empty((delays.shape[0], t.size, 4))
-    for p in range(delays.shape[0]):
-        for k in range(4):
-            out[p, :, k] = np.interp(t - delays[p, k], t, u)
+    P, n = delays.shape[0], t.size
+    change = np.diff(u, prepend=u[0])
+    rising = change > 0
+    rebound = v > 0
+    # DELAYS = tau_comp_rise, tau_comp_fall, tau_reb_rise, tau_reb_fall
+    which = np.where(rebound, 2, 0) + np.where(rising, 0, 1)
+    moved = np.flatnonzero(change != 0)
+    out = np.empty((P, n, 2))
+    out[:, :, 0], out[:, :, 1] = u[0], 1.0  # before any change takes effect: the initial command
+    if moved.size == 0:
+        return out
+    for p in range(P):
+        effective = np.maximum.accumulate(t[moved] + delays[p, which[moved]])
+        j = np.searchsorted(effective, t, side="right") - 1  # the latest change that has taken effect
+        hit = j >= 0
+        out[p, hit, 0] = u[moved[j[hit]]]
+        out[p, hit, 1] = rising[moved[j[hit]]]
     return out
 
 
@@ -302,11 +319,11 @@ def simulate_damper(
     P, n = rows.shape[0], t.size
     dt = float(t[1] - t[0])
     u = np.zeros(n) if u is None else np.asarray(u, dtype=float)
-    channels = 6 if model.uses_control else 2
+    channels = 4 if model.uses_control else 2
     road = np.empty((P, n, channels))
     road[:, :, 0], road[:, :, 1] = x, v
     if model.uses_control:
-        road[:, :, 2:] = delayed_controls(t, u, rows[:, N_FRONT : N_FRONT + 4])
+        road[:, :, 2:] = delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4])
     if substeps > 1:  # finer integration of the same inputs (linear between the bench's samples)
         fine = np.linspace(t[0], t[-1], (n - 1) * substeps + 1)
         coarse = road
