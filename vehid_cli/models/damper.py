@@ -14,8 +14,8 @@ force [N], positive in rebound; the other outputs are zero.
 Common to every model (the "front end", parameters first in each row):
 
 * gas spring ``F_gas = k1 (x - x0)``: preload and stiffness of the gas charge (Fleps-Dezasse section 2);
-* backlash: a dead zone of width ``gap`` at each reversal (play operator, smoothed): the damper proper
-  sees x_b and v_b instead of x and v;
+* backlash: a dead zone of width ``gap`` at each reversal (the play operator, applied exactly to the
+  prescribed motion by the bench): the damper proper sees x_b and v_b instead of x and v;
 * control-input dynamics: a delay and a first-order lag, both chosen by the direction of the command's
   change (rising/falling) and by the stroke (compression/rebound, the lag blended by Eq. 4-5).
 
@@ -39,48 +39,48 @@ from numpy.typing import NDArray
 FRONT = ("k1", "x0", "gap", "T_comp_rise", "T_comp_fall", "T_reb_rise", "T_reb_fall", "v_switch")
 N_FRONT = len(FRONT)
 DELAYS = ("tau_comp_rise", "tau_comp_fall", "tau_reb_rise", "tau_reb_fall")  # applied by the bench
-N_FRONT_STATES = 2  # x_b (backlash), u_f (lagged control input)
+CONTROL_STATE = 1  # models with a control input carry u_f (the lagged input) as their last state
 P0 = N_FRONT + len(DELAYS)  # where a model's own parameters start in a row
 BW_SET = ("c0", "k0", "c1", "alpha", "beta", "gamma", "delta")  # Bouc-Wen parameters that depend on u and side
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(error_model="numpy", inline="always")
 def _switch(v, eps):  # pragma: no cover - compiled
     """Eq. 5: 0 in compression, 1 in rebound, smooth over |v| ~ eps."""
     return 0.5 * math.tanh(v / eps) + 0.5
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _motion(d, z, p, zd):  # pragma: no cover - compiled
-    """Backlash (a smoothed play operator of width gap): the piston motion (x_b, v_b) the damper proper sees;
-    writes the rate of z[0] = x_b. No backlash (gap = 0): the bench motion itself."""
-    x, v, gap = d[0], d[1], p[2]
-    if gap > 0.0:
-        e = x - z[0]
-        engaged = 0.5 * (1.0 + math.tanh((math.tanh(v / p[7]) * e - 0.5 * gap) / (0.05 * gap)))
-        zd[0] = v * engaged
-        return z[0], v * engaged
-    zd[0] = v
-    return x, v
+@numba.njit(cache=True)
+def play(x, v, gap):  # pragma: no cover - compiled
+    """Backlash on prescribed motion: the piston (x_b, v_b) follows x through a play of width gap, resting
+    after each reversal until the gap is taken up (the play operator, exact; x_b starts centred)."""
+    n = x.shape[0]
+    xb, vb = np.empty(n), np.empty(n)
+    xb[0], vb[0] = x[0], v[0]
+    half = 0.5 * gap
+    for k in range(1, n):
+        xb[k] = min(max(xb[k - 1], x[k] - half), x[k] + half)
+        vb[k] = v[k] if xb[k] != xb[k - 1] else 0.0
+    return xb, vb
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _control(d, z, p, zd, v):  # pragma: no cover - compiled
+@numba.njit(error_model="numpy", inline="always")
+def _control(d, z, p, zd, v, i):  # pragma: no cover - compiled
     """Control-input dynamics: the delayed command d[2] (each change of u takes effect after the delay of its
     direction and of the stroke it happens in; prepared by the bench) through a first-order lag whose time
     constant is chosen by the direction of the latest change (d[3]: 1 rising, 0 falling) and blended between
-    compression and rebound by Eq. 4-5. Writes the rate of z[1] = u_f and returns the input the damper sees."""
+    compression and rebound by Eq. 4-5. Writes the rate of z[i] = u_f and returns the input the damper sees."""
     s = _switch(v, p[7])
     r = d[3]
     T = r * ((1 - s) * p[3] + s * p[5]) + (1 - r) * ((1 - s) * p[4] + s * p[6])
     if T > 0.0:
-        zd[1] = (d[2] - z[1]) / T
-        return z[1]
-    zd[1] = 0.0
+        zd[i] = (d[2] - z[i]) / T
+        return z[i]
+    zd[i] = 0.0
     return d[2]
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(error_model="numpy", inline="always")
 def _finish(x, p, f_out, force):  # pragma: no cover - compiled
     f_out[0] = force + p[0] * (x - p[1])
     for i in range(1, f_out.shape[0]):
@@ -93,29 +93,24 @@ def _finish(x, p, f_out, force):  # pragma: no cover - compiled
 @numba.njit(cache=True, error_model="numpy")
 def viscous_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """F = c0 v + gas. params: front, c0."""
-    xb, vb = _motion(d, z, p, zd)
-    zd[1] = 0.0
-    _finish(d[0], p, f_out, p[P0] * vb)
+    _finish(d[0], p, f_out, p[P0] * d[1])
 
 
 @numba.njit(cache=True, error_model="numpy")
 def gas_spring_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """F = k1 (x - x0) only."""
-    _motion(d, z, p, zd)
-    zd[1] = 0.0
     _finish(d[0], p, f_out, 0.0)
 
 
 @numba.njit(cache=True, error_model="numpy")
 def bingham_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """F = c0 v + fc tanh(v / v_eps) + gas (viscous plus smoothed Coulomb friction). params: front, c0, fc, v_eps."""
-    xb, vb = _motion(d, z, p, zd)
-    zd[1] = 0.0
+    vb = d[1]
     c0, fc, veps = p[P0], p[P0 + 1], p[P0 + 2]
     _finish(d[0], p, f_out, c0 * vb + fc * math.tanh(vb / veps))
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(error_model="numpy", inline="always")
 def _bouc_wen(xb, vb, y, zz, c0, k0, c1, alpha, beta, gamma, delta):  # pragma: no cover - compiled
     """Spencer's extended Bouc-Wen with n = 2 (Fleps-Dezasse Eq. 1-3): (force without gas, ydot, zdot)."""
     ydot = (alpha * zz + c0 * vb + k0 * (xb - y)) / (c0 + c1)
@@ -126,18 +121,17 @@ def _bouc_wen(xb, vb, y, zz, c0, k0, c1, alpha, beta, gamma, delta):  # pragma: 
 
 @numba.njit(cache=True, error_model="numpy")
 def bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
-    """Spencer's extended Bouc-Wen; states z[2] = y (internal displacement), z[3] = z (hysteretic).
+    """Spencer's extended Bouc-Wen; states z[0] = y (internal displacement), z[1] = z (hysteretic).
     params: front, c0, k0, c1, alpha, beta, gamma, delta."""
-    xb, vb = _motion(d, z, p, zd)
-    zd[1] = 0.0
+    xb, vb = d[0], d[1]
     q = P0
-    force, ydot, zdot = _bouc_wen(xb, vb, z[2], z[3], p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6])
-    zd[2] = ydot
-    zd[3] = zdot
+    force, ydot, zdot = _bouc_wen(xb, vb, z[0], z[1], p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6])
+    zd[0] = ydot
+    zd[1] = zdot
     _finish(d[0], p, f_out, force)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(error_model="numpy", inline="always")
 def _table_1d(nodes, values, m, u):  # pragma: no cover - compiled
     """Linear interpolation in a table of m nodes (held constant outside)."""
     if m == 1 or u <= nodes[0]:
@@ -155,22 +149,25 @@ def _table_1d(nodes, values, m, u):  # pragma: no cover - compiled
 def generalized_bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """Bouc-Wen whose 7 parameters are tables over u, one set for compression and one for rebound, blended
     by Eq. 4-5. params: front, m, u_nodes (m), comp set (7 x m, parameter-major), rebound set (7 x m)."""
-    xb, vb = _motion(d, z, p, zd)
-    u = _control(d, z, p, zd, vb)
+    xb, vb = d[0], d[1]
+    u = _control(d, z, p, zd, vb, 2)
     q = P0
     m = int(p[q])
     nodes = p[q + 1 : q + 1 + m]
     comp = q + 1 + m
     reb = comp + 7 * m
     s = _switch(vb, p[7])
-    th = np.empty(7)
-    for i in range(7):
+
+    def blended(i):  # parameter i of the Bouc-Wen set at the current u, compression and rebound blended
         c = _table_1d(nodes, p[comp + i * m : comp + (i + 1) * m], m, u)
         r = _table_1d(nodes, p[reb + i * m : reb + (i + 1) * m], m, u)
-        th[i] = s * r + (1 - s) * c
-    force, ydot, zdot = _bouc_wen(xb, vb, z[2], z[3], th[0], th[1], th[2], th[3], th[4], th[5], th[6])
-    zd[2] = ydot
-    zd[3] = zdot
+        return s * r + (1 - s) * c
+
+    force, ydot, zdot = _bouc_wen(
+        xb, vb, z[0], z[1], blended(0), blended(1), blended(2), blended(3), blended(4), blended(5), blended(6)
+    )
+    zd[0] = ydot
+    zd[1] = zdot
     _finish(d[0], p, f_out, force)
 
 
@@ -178,23 +175,24 @@ def generalized_bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - comp
 def force_map_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """Eq. 6: F = table(v, u) + gas, bilinear in velocity and delayed control input (held outside the grid).
     params: front, nv, nu, v_nodes (nv), u_nodes (nu), forces (nv x nu, velocity-major)."""
-    xb, vb = _motion(d, z, p, zd)
-    u = _control(d, z, p, zd, vb)
+    vb = d[1]
+    u = _control(d, z, p, zd, vb, 0)
     q = P0
     nv, nu = int(p[q]), int(p[q + 1])
     vn = p[q + 2 : q + 2 + nv]
     un = p[q + 2 + nv : q + 2 + nv + nu]
     F = p[q + 2 + nv + nu : q + 2 + nv + nu + nv * nu]
-    # bilinear: interpolate each velocity row in u, then across velocity
-    rows = np.empty(nv)
-    for i in range(nv):
-        rows[i] = _table_1d(un, F[i * nu : (i + 1) * nu], nu, u)
-    if vb <= vn[0] or vb >= vn[nv - 1]:  # extrapolate linearly in velocity (forces keep growing)
-        j = 0 if vb <= vn[0] else nv - 2
-        t = (vb - vn[j]) / (vn[j + 1] - vn[j])
-        force = (1 - t) * rows[j] + t * rows[j + 1]
-    else:
-        force = _table_1d(vn, rows, nv, vb)
+    # bilinear: the velocity interval (extrapolated linearly outside the grid), each of its two rows in u
+    j = 0
+    if vb >= vn[nv - 1]:
+        j = nv - 2
+    elif vb > vn[0]:
+        while vn[j + 1] < vb:
+            j += 1
+    t = (vb - vn[j]) / (vn[j + 1] - vn[j])
+    lo = _table_1d(un, F[j * nu : (j + 1) * nu], nu, u)
+    hi = _table_1d(un, F[(j + 1) * nu : (j + 2) * nu], nu, u)
+    force = (1 - t) * lo + t * hi
     _finish(d[0], p, f_out, force)
 
 
@@ -208,7 +206,7 @@ class DamperModel:
     name: str
     law: object  # numba dispatcher
     parameters: tuple[str, ...]
-    n_states: int  # total, front end included
+    n_states: int  # internal states: Bouc-Wen's y and z first, then u_f when the model has a control input
     uses_control: bool
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)  # physical limits
 
@@ -233,13 +231,13 @@ class DamperModel:
 MODELS = {
     m.name: m
     for m in (
-        DamperModel("gas_spring", gas_spring_law, (), N_FRONT_STATES, False),
-        DamperModel("viscous", viscous_law, ("c0",), N_FRONT_STATES, False, {"c0": (0.0, np.inf)}),
+        DamperModel("gas_spring", gas_spring_law, (), 0, False),
+        DamperModel("viscous", viscous_law, ("c0",), 0, False, {"c0": (0.0, np.inf)}),
         DamperModel(
             "bingham",
             bingham_law,
             ("c0", "fc", "v_eps"),
-            N_FRONT_STATES,
+            0,
             False,
             {"c0": (0.0, np.inf), "fc": (0.0, np.inf), "v_eps": (1e-6, np.inf)},
         ),
@@ -247,12 +245,12 @@ MODELS = {
             "bouc_wen",
             bouc_wen_law,
             BW_SET,
-            N_FRONT_STATES + 2,
+            2,
             False,
             {"c0": (0.0, np.inf), "k0": (0.0, np.inf), "c1": (1e-9, np.inf), "delta": (0.0, np.inf)},
         ),
-        DamperModel("generalized_bouc_wen", generalized_bouc_wen_law, (), N_FRONT_STATES + 2, True),
-        DamperModel("force_map", force_map_law, (), N_FRONT_STATES, True),
+        DamperModel("generalized_bouc_wen", generalized_bouc_wen_law, (), 2 + CONTROL_STATE, True),
+        DamperModel("force_map", force_map_law, (), CONTROL_STATE, True),
     )  # fmt: skip
 }
 
@@ -322,6 +320,10 @@ def simulate_damper(
     channels = 4 if model.uses_control else 2
     road = np.empty((P, n, channels))
     road[:, :, 0], road[:, :, 1] = x, v
+    for r in np.flatnonzero(rows[:, 2] > 0):  # backlash: the piston's motion through the play
+        road[r, :, 0], road[r, :, 1] = play(
+            np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float), rows[r, 2]
+        )
     if model.uses_control:
         road[:, :, 2:] = delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4])
     if substeps > 1:  # finer integration of the same inputs (linear between the bench's samples)
@@ -332,10 +334,10 @@ def simulate_damper(
             for c in range(channels):
                 road[r, :, c] = np.interp(fine, t, coarse[r, :, c])
     z0 = np.zeros((P, model.n_states))
-    z0[:, 0] = x[0]  # backlash play starts centred on the piston
-    z0[:, 1] = u[0]
-    if model.n_states > N_FRONT_STATES:
-        z0[:, 2] = x[0]  # Bouc-Wen internal displacement starts where the piston is: no initial spring force
+    if model.uses_control:
+        z0[:, -1] = u[0]  # the lagged input starts at the command
+    if model.name in ("bouc_wen", "generalized_bouc_wen"):
+        z0[:, 0] = x[0]  # Bouc-Wen internal displacement starts where the piston is: no initial spring force
     with np.errstate(all="ignore"):
         forces = integrate_bench(model.law, rows, road, dt / substeps, z0)
     force = forces[:, ::substeps, 0]
