@@ -227,3 +227,72 @@ def test_unstable_candidates_get_a_finite_penalty_and_realtime_check_finds_the_s
                  rng=np.random.default_rng(0))  # fmt: skip
     assert not np.all(np.isfinite(F)) or result.penalised >= 0
     assert np.isfinite(result.J)
+
+
+def test_step_by_step_identifies_a_force_map_with_lag_and_delays():
+    """Fleps-Dezasse section 4.2 on synthetic data with 1 % noise: gas force from a slow stroke, each table row
+    from a sine at its control input, then the four time constants and four delays from the sawtooth with
+    control steps; each step starts from what the previous ones found."""
+    from vehid_cli.bench import sawtooth
+    from vehid_cli.damper_fit import Step, step_by_step
+
+    nv, nu = 5, 2
+    vn, un = np.array([-0.3, -0.1, 0.0, 0.1, 0.3]), np.array([0.15, 0.5])
+    table = {
+        f"F_{i + 1}_{j + 1}": np.sign(vn[i]) * (800 + 2500 * un[j]) * abs(vn[i]) ** 0.7 * (1.3 if vn[i] > 0 else 1.0)
+        for i in range(nv)
+        for j in range(nu)
+    }
+    lag = dict(T_comp_rise=0.015, T_comp_fall=0.03, T_reb_rise=0.02, T_reb_fall=0.04)
+    delay = dict(tau_comp_rise=0.008, tau_comp_fall=0.012, tau_reb_rise=0.01, tau_reb_fall=0.015)
+    truth = spec(
+        "force_map", (nv, nu), nv=nv, nu=nu, k1=1500.0, x0=-0.06, v_switch=0.005, **lag, **delay, **table,
+        **{f"v_node_{i + 1}": vn[i] for i in range(nv)}, **{f"u_node_{j + 1}": un[j] for j in range(nu)},
+    )  # fmt: skip
+    rng = np.random.default_rng(0)
+
+    def measured(h):
+        F = truth.simulate(h)
+        return with_force(h, F + 0.01 * np.std(F) * rng.standard_normal(F.size))
+
+    start = truth.with_values(
+        dict(k1=1000.0, x0=0.0, **{k: 0.6 * v for k, v in table.items()}, **dict.fromkeys(lag, 0.02),
+             **dict.fromkeys(delay, 0.005))
+    )  # fmt: skip
+    steps = [Step("gas", measured(constant_velocity(0.002, 0.05, u=0.15, dt=2e-3)), ("k1", "x0"),
+                  {"k1": (0.0, 1e4), "x0": (-0.5, 0.5)})]  # fmt: skip
+    for j in range(nu):
+        names = tuple(f"F_{i + 1}_{j + 1}" for i in range(nv) if vn[i] != 0)
+        steps.append(
+            Step(f"u={un[j]}", measured(sine(A, FREQ, 2, 1e-3, u=un[j])), names, dict.fromkeys(names, (-5e3, 5e3)))
+        )
+    steps.append(
+        Step("lag", measured(sawtooth()), tuple(lag) + tuple(delay), dict.fromkeys((*lag, *delay), (0.0, 0.1)))
+    )
+    fits = step_by_step(start, steps, budget=1500, rng=np.random.default_rng(1))
+    final = fits[-1].spec.values
+    assert final["k1"] == pytest.approx(1500.0, rel=0.01) and final["x0"] == pytest.approx(-0.06, rel=0.01)
+    for name, value in table.items():
+        if value != 0:
+            assert final[name] == pytest.approx(value, rel=0.01), name
+    for name, value in {**lag, **delay}.items():
+        assert final[name] == pytest.approx(value, rel=0.1), name
+    for f in fits[1:]:  # the rows and the lag step reach the noise floor (1 % noise: J = 1e-4)
+        assert f.J < 1.2e-4
+
+
+@pytest.mark.slow
+def test_generalized_bouc_wen_round_trip_with_compression_and_rebound_sets():
+    sets = {"comp": BW, "reb": dict(BW, c0=2600.0, alpha=1400.0, c1=30000.0)}
+    truth_values = {f"{p}_{side}": sets[side][p] for p in BW for side in ("comp", "reb")}
+    truth = spec("generalized_bouc_wen", (1,), v_switch=0.01, **truth_values)
+    rng = np.random.default_rng(4)
+    h = sine(A, FREQ, 3, 1e-3)
+    F = truth.simulate(h)
+    h = with_force(h, F + 0.02 * np.std(F) * rng.standard_normal(F.size))
+    unknowns = tuple(f"{p}_{side}" for p in ("c0", "c1", "alpha", "delta") for side in ("comp", "reb"))
+    start = truth.with_values({n: truth_values[n] * rng.uniform(0.7, 1.3) for n in unknowns})
+    result = fit(start, h, unknowns, scaled_bounds(truth_values, unknowns, 0.3, 3.0), budget=6000, rng=rng)
+    assert result.J < 4e-4 * 1.05
+    for n in ("c0_comp", "c0_reb", "alpha_comp", "alpha_reb"):
+        assert result.spec.values[n] == pytest.approx(truth_values[n], rel=0.15), n
