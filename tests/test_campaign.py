@@ -253,3 +253,18 @@ def test_json_is_strict_when_a_parameter_is_unidentifiable(tmp_path):
     doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON constant {c}"))
     assert doc["crlb"]["re_sd_percent"]["Ix"] is None and doc["crlb"]["unidentifiable"] == ["Ix"]
     assert "cannot identify Ix" in res.stdout
+
+
+@pytest.mark.parametrize("run, inadequate", [("bump_run_A.csv", True), ("bump_run_linear.csv", False)])
+def test_identify_says_when_the_model_is_wrong(run, inadequate):
+    """bump_run_A holds an effect the linear car lacks: with the noise estimated from the data alone, the residual
+    power at the fit is far above the noise; the linear control run fits to the noise floor."""
+    data = needs_shared(VEHICLE_DATA / run)
+    cfg = load_config(
+        BASE_CONFIG,
+        ["identify.runs=1", "identify.algorithm.name=hybrid", "identify.objective=wls", "noise.level=0"],
+    )
+    s = run_campaign(cfg, data, jobs=1).summary
+    assert s.model_inadequate is inadequate
+    if not inadequate:
+        assert s.chi2_median == pytest.approx(1.0, abs=5 * np.sqrt(2 / s.residual_samples))

@@ -42,6 +42,7 @@ class RunRecord:
     history_evals: NDArray  # cumulative evaluations at each record of the best cost
     history_cost: NDArray  # best cost so far
     truth_cost: float = float("nan")  # cost of the true parameters on this run's data (NaN: truth unknown)
+    chi2: float = float("nan")  # noise-weighted residual power per sample at the estimate (~1 for an adequate model)
 
     @property
     def converged(self) -> bool | None:
@@ -67,6 +68,7 @@ class RunRecord:
                 history_evals=z["history_evals"],
                 history_cost=z["history_cost"],
                 truth_cost=float(z["truth_cost"]),
+                chi2=float(z["chi2"]),
             )
 
 
@@ -88,6 +90,19 @@ class Summary:
     penalised: int
     wall_s: float
     converged: int | None = None  # runs whose cost is no higher than the truth's (None: truth unknown)
+    chi2_median: float = float("nan")  # median over runs of the residual power over the noise power
+    residual_samples: int = 0  # R, the number of weighted residuals behind chi2
+
+    @property
+    def chi2_limit(self) -> float:
+        """Largest chi² per sample an adequate model gives: 1 + 5 sd of a chi² mean over R samples."""
+        return 1.0 + 5.0 * np.sqrt(2.0 / max(self.residual_samples, 1))
+
+    @property
+    def model_inadequate(self) -> bool:
+        """The residual is far above the noise the data implies: the model lacks something (or the noise level
+        set by noise.level is too small)."""
+        return bool(np.isfinite(self.chi2_median) and self.chi2_median > self.chi2_limit)
 
     @property
     def per_run_nre_median(self) -> float | None:
@@ -112,7 +127,9 @@ class Summary:
         return 100.0 * self.sd / np.abs(ref)
 
 
-def summarise(names, truth, records: list[RunRecord], bound: CramerRao, wall_s: float) -> Summary:
+def summarise(
+    names, truth, records: list[RunRecord], bound: CramerRao, wall_s: float, residual_samples: int = 0
+) -> Summary:
     """Statistics of a list of runs against the truth (when known) and the Cramér–Rao bound."""
     est = np.array([r.estimate for r in records])
     mean, sd = est.mean(axis=0), est.std(axis=0, ddof=1) if len(records) > 1 else np.zeros(est.shape[1])
@@ -137,6 +154,8 @@ def summarise(names, truth, records: list[RunRecord], bound: CramerRao, wall_s: 
         penalised=int(sum(r.penalised for r in records)),
         wall_s=wall_s,
         converged=None if truth is None else int(sum(bool(r.converged) for r in records)),
+        chi2_median=float(np.median([r.chi2 for r in records])),
+        residual_samples=residual_samples,
     )
 
 
@@ -171,6 +190,9 @@ def identify_run(task: Task, index: int) -> RunRecord:
     optimizer = get_optimizer(algorithm.name, algorithm.population, algorithm.iterations)
     x0 = task.nominal if ident.start == "nominal" else None
     result = optimizer.minimize(problem, run_streams(ident.seed, index).optimizer, budget=ident.budget, x0=x0)
+    # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits.
+    _, residuals = problem.residuals(result.x[None, :])
+    chi2 = float(np.mean(residuals**2))
     return RunRecord(
         index=index,
         estimate=result.x,
@@ -181,6 +203,7 @@ def identify_run(task: Task, index: int) -> RunRecord:
         history_evals=result.history_evals,
         history_cost=result.history_cost,
         truth_cost=truth_cost,
+        chi2=chi2,
     )
 
 
@@ -312,7 +335,9 @@ def run_campaign(
                     future.cancel()
                 raise
     records = tuple(done[i] for i in range(n_runs))
-    summary = summarise(task.names, task.truth, list(records), bound, time.perf_counter() - start)
+    summary = summarise(
+        task.names, task.truth, list(records), bound, time.perf_counter() - start, task.residual_samples
+    )
     return Campaign(
         config=config,
         data_file=data_file,

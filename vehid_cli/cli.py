@@ -16,7 +16,7 @@ import typer
 from rich.console import Console
 
 from . import __version__
-from .config import load_config
+from .config import DamperConfig, load_config
 from .data import check_writable, write_measurement_csv
 from .errors import InputError
 from .experiment import build_experiment, run_streams, simulate_measurement
@@ -123,6 +123,11 @@ def simulate(
         raise InputError(f"--seed must be a non-negative integer, got {seed}")
     cfg = load_config(config, set_ or ())
     seed = cfg.identify.seed if seed is None else seed
+    if isinstance(cfg, DamperConfig):
+        if road is not None:
+            raise InputError("--road is for vehicle configs; a damper config takes its motion from 'bench'")
+        _simulate_damper(cfg, config, target, plot, seed)
+        return
     experiment = build_experiment(cfg, road_file=road)
     run = simulate_measurement(experiment, run_streams(seed, 0).noise)
     if target.suffix.lower() == ".csv":
@@ -144,6 +149,62 @@ def simulate(
         f"wrote {target}: {experiment.t.size} samples at dt = {experiment.dt * 1e3:g} ms, "
         f"noise Np = {100 * cfg.noise.level:g} %" + (f"; figure {plot}" if plot else "")
     )
+
+
+def _simulate_damper(cfg: DamperConfig, config: Path, target: Path, plot: Path | None, seed: int) -> None:
+    """`vehid simulate` for a damper: the configured bench run, force noise from run 0's noise stream."""
+    from .damper_campaign import simulate_bench, write_bench_csv, write_bench_h5
+
+    run = simulate_bench(cfg, run_streams(seed, 0).noise)
+    h = run.history
+    if target.suffix.lower() == ".csv":
+        comments = [
+            f"vehid {__version__} simulate {config}",
+            f"config sha256 {cfg.digest()}",
+            f"damper {cfg.damper.model} on a {cfg.bench.excitation} bench; force noise {100 * cfg.noise.level:g} % "
+            f"of std (sigma {run.sigma:.6g} N), seed {seed}",
+            "units: t [s], x [m], v [m/s], u [-], force [N]",
+        ]
+        write_bench_csv(target, h, comments)
+    else:
+        write_bench_h5(target, cfg, run, seed)
+    if plot is not None:
+        from .report.damper_plots import plot_bench
+
+        plot_bench(h, run.clean, plot, f"{cfg.damper.model} on a {cfg.bench.excitation} bench")
+    out.print(
+        f"wrote {target}: {h.t.size} samples at dt = {h.dt * 1e3:g} ms, force noise {100 * cfg.noise.level:g} %"
+        + (f"; figure {plot}" if plot else "")
+    )
+
+
+def _identify_damper(
+    cfg: DamperConfig, config: Path, data: Path | None, output: Path | None, json_out: Path | None
+) -> None:
+    """`vehid identify` for a damper: a campaign on synthetic data, one fit (plus validation) on measured data."""
+    from .damper_campaign import result_json, run_identification, write_result_h5
+    from .damper_report import parameter_table
+    from .results import to_json
+
+    if output is None:
+        Path("runs").mkdir(exist_ok=True)
+        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+    target = check_writable(output, (".h5", ".hdf5"))
+    if json_out is not None:
+        check_writable(json_out, (".json",))
+    measured = data is not None or (cfg.data is not None and cfg.data.file is not None)
+    total = 1 if measured else cfg.identify.runs
+    with _progress("identify") as progress:
+        bar = progress.add_task(f"{cfg.damper.model}/{cfg.identify.algorithm.name}", total=total)
+        result = run_identification(cfg, data, on_run=lambda d, n: progress.update(bar, completed=d))
+    write_result_h5(target, result)
+    if json_out is not None:
+        from .data import atomic_path
+
+        with atomic_path(json_out) as tmp:
+            tmp.write_text(to_json(result_json(result)))
+    out.print(parameter_table(result, str(target)))
+    out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
 
 
 @app.command()
@@ -176,6 +237,9 @@ def identify(
     from .results import campaign_json, to_json
 
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
+    if isinstance(cfg, DamperConfig):
+        _identify_damper(cfg, config, data, output, json_out)
+        return
     if output is None:
         Path("runs").mkdir(exist_ok=True)
         output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
@@ -193,6 +257,14 @@ def identify(
         with atomic_path(json_out) as tmp:
             tmp.write_text(to_json(campaign_json(campaign)))
     out.print(summary_table(campaign))
+    s = campaign.summary
+    if s.model_inadequate:
+        out.print(
+            f"[yellow]warning:[/] at the estimates the residual power is {s.chi2_median:.3g} times the noise power "
+            f"the data implies (an adequate model gives at most {s.chi2_limit:.3g}, noise from "
+            f"{campaign.sigma_source}): the model lacks something, or noise.level is too small; the estimates are "
+            "then biased"
+        )
     unidentifiable = campaign.bound.unidentifiable()
     if unidentifiable:
         out.print(f"[yellow]warning:[/] the sensors cannot identify {', '.join(unidentifiable)} (Fisher information)")
@@ -277,6 +349,10 @@ def report(
         check_writable(output, (".md", ".csv", ".tex", ".json", ".txt"))
     if plots is not None and plots.exists() and not plots.is_dir():
         raise InputError("--plots must name a directory", source=str(plots))
+    damper_files = _damper_result_files(paths)
+    if damper_files:
+        _report_dampers(damper_files, fmt, output, plots)
+        return
     campaigns, files = collect(paths)
     if fmt == "table":
         if output is None:
@@ -303,6 +379,55 @@ def report(
         from .report.plots import write_campaign_plots
 
         written = write_campaign_plots(campaigns, files, plots)
+        out.print(f"wrote {len(written)} figure(s) to {plots}")
+
+
+def _damper_result_files(paths: list[Path]) -> list[Path]:
+    """The damper results files among `paths` (directories searched for *.h5); [] when there are none.
+    Mixing damper results with vehicle campaign files is an error: they make different tables."""
+    from .damper_campaign import is_result_file
+
+    files = []
+    for path in paths:
+        files += [f for f in sorted(path.glob("*.h5")) if is_result_file(f)] if path.is_dir() else [path]
+    damper = [f for f in files if f.suffix.lower() in (".h5", ".hdf5") and f.is_file() and is_result_file(f)]
+    if damper and len(damper) != len(files) and not all(p.is_dir() for p in paths):
+        other = next(f for f in files if f not in damper)
+        raise InputError(
+            "is not a damper results file; report damper and vehicle results separately", source=str(other)
+        )
+    return damper
+
+
+def _report_dampers(files: list[Path], fmt: str, output: Path | None, plots: Path | None) -> None:
+    """`vehid report` for damper results: tables (table, md, csv, json) and force figures."""
+    from . import damper_report as dr
+    from .damper_campaign import read_result_h5
+
+    results = [read_result_h5(f) for f in files]
+    names = [str(f) for f in files]
+    if fmt == "latex":
+        raise InputError("--format latex is not available for damper results; use table, md, csv or json")
+    if fmt == "table":
+        console = out if output is None else Console(record=True, width=160, file=open(os.devnull, "w"))  # noqa: SIM115
+        for res, name in zip(results, names, strict=True):
+            console.print(dr.parameter_table(res, name))
+        text = None if output is None else console.export_text()
+    else:
+        text = {"md": dr.markdown, "csv": dr.csv_text, "json": dr.json_text}[fmt](results, names)
+    if text is not None:
+        if output is None:
+            out.print(text, markup=False, highlight=False)
+        else:
+            from .data import atomic_path
+
+            with atomic_path(output) as tmp:
+                tmp.write_text(text)
+            out.print(f"wrote {output}")
+    if plots is not None:
+        from .report.damper_plots import write_damper_plots
+
+        written = write_damper_plots(results, [dr.label(r, n) for r, n in zip(results, names, strict=True)], plots)
         out.print(f"wrote {len(written)} figure(s) to {plots}")
 
 

@@ -298,6 +298,247 @@ class Config(_Section):
         return hashlib.sha256(canonical.encode()).hexdigest()
 
 
+# ------------------------------------------------------------------------------------------ dampers
+
+DAMPER_STRUCTURAL = ("m", "nv", "nu")  # table sizes: set by damper.table, never identified
+
+
+class DamperSection(_Section):
+    """The damper model (Fleps-Dezasse section 3) and its parameter values [SI: N, m, s; u in 0..1]."""
+
+    model: str = Field(description="viscous, bingham, gas_spring, bouc_wen, generalized_bouc_wen or force_map")
+    table: tuple[Annotated[int, Field(ge=1, le=50)], ...] = Field(
+        (), description="table shape: [m] nodes over u (generalized_bouc_wen), [nv, nu] (force_map)"
+    )
+    parameters: dict[str, Finite] = Field(
+        default_factory=dict,
+        description="values by name: the truth for synthetic data, the start for fits; the rest from defaults",
+    )
+
+
+class BenchSection(_Section):
+    """The virtual test bench (Fleps-Dezasse section 4.2) that synthetic data is simulated on."""
+
+    excitation: Literal["sine", "sawtooth", "constant_velocity"] = "sine"
+    amplitude: Pos = Field(0.025, description="displacement amplitude [m] (stroke/2 for constant_velocity)")
+    frequency: Pos = Field(0.8, description="sine frequency [Hz]")
+    velocity: Pos = Field(0.15, description="|velocity| of sawtooth and constant_velocity [m/s]")
+    cycles: Pos = Field(3.0, description="number of periods (sine, sawtooth)")
+    dt: Pos = Field(0.001, description="sampling step of the bench history [s]")
+    control: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = Field(
+        0.0, description="control input u [0..1] (sine, constant_velocity; the base level of the sawtooth)"
+    )
+    steps: tuple[tuple[NonNeg, Annotated[float, Field(ge=0, le=1)]], ...] | None = Field(
+        None, description="control steps [(time [s], u), ...] of the sawtooth; default the paper's 15-50-15 %"
+    )
+    substeps: Annotated[int, Field(ge=1, le=1000)] = Field(
+        1, description="integration steps per sample: the integrator runs at dt / substeps"
+    )
+
+    @model_validator(mode="after")
+    def _grid(self) -> BenchSection:
+        samples = self.cycles / self.frequency / self.dt if self.excitation == "sine" else 0
+        if samples > 2_000_000:
+            raise ValueError(f"the sine holds {samples:.3g} samples; keep it below 2 million")
+        return self
+
+
+class DataColumns(_Section):
+    """Column names of a bench file; velocity is differentiated from displacement and control is 0 when absent."""
+
+    time: str = "t"
+    displacement: str = "x"
+    force: str = "force"
+    velocity: str | None = None
+    control: str | None = None
+
+
+class DataUnits(_Section):
+    """Units of the columns (see vehid_cli.bench.UNITS)."""
+
+    time: str = "s"
+    displacement: str = "m"
+    force: str = "N"
+    velocity: str = "m/s"
+    control: str = "1"
+
+
+class DamperData(_Section):
+    """Measured bench runs: the training file, its columns and units, and held-out validation files."""
+
+    file: str | None = Field(None, description="training run (CSV); relative paths are relative to the config")
+    columns: DataColumns = DataColumns()
+    units: DataUnits = DataUnits()
+    window: tuple[NonNeg, Pos] | None = Field(None, description="use only start <= t < stop [s] of each file")
+    decimate: Annotated[int, Field(ge=1, le=1000)] = Field(1, description="keep every n-th sample (for speed)")
+    sample_rate: Pos | None = Field(
+        None,
+        description="nominal sampling rate [Hz] of files whose time column was printed with too few digits to be "
+        "uniform: time is rebuilt as t0 + k / rate after checking it increases and agrees within 5 %",
+    )
+    validate_files: tuple[str, ...] = Field((), alias="validate", description="held-out runs, same columns")
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=False, populate_by_name=True)
+
+    @model_validator(mode="after")
+    def _window(self) -> DamperData:
+        from .bench import UNITS
+
+        for role, table in UNITS.items():
+            unit = getattr(self.units, role)
+            if unit not in table:
+                column = getattr(self.columns, role)
+                of = f" of column '{column}'" if column else ""
+                raise _KeyedError(
+                    f"data.units.{role}",
+                    f"unknown {role} unit '{unit}'{of}{_did_you_mean(unit, table)} (known: {', '.join(table)})",
+                )
+        if self.window is not None and not self.window[0] < self.window[1]:
+            raise _KeyedError("data.window", f"start {self.window[0]:g} s must be before stop {self.window[1]:g} s")
+        return self
+
+
+class DamperNoise(_Section):
+    """Force noise of synthetic bench data: sigma = level * std(clean force)."""
+
+    level: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = Field(0.0, description="0.02 = 2 %")
+
+
+class DamperIdentify(_Section):
+    """What to identify and how (cost J, Fleps-Dezasse Eq. 7). Bounds are factors of the configured values."""
+
+    unknowns: Annotated[tuple[str, ...], Field(min_length=1)]
+    bounds: tuple[Pos, Pos] = Field((0.1, 10.0), description="search range as factors of the configured values")
+    limits: dict[str, tuple[Finite, Finite]] = Field(
+        default_factory=dict, description="absolute search range per unknown [SI], overriding 'bounds'"
+    )
+    algorithm: Algorithm = Algorithm(name="nelder-mead", population=20, iterations=100)
+    budget: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="model evaluations per fit; default population x iterations"
+    )
+    runs: Annotated[int, Field(ge=1)] = 10
+    seed: Annotated[int, Field(ge=0)] = 2013
+    start: Literal["auto", "random", "config"] = Field(
+        "auto",
+        description="where a fit starts: a random point in the box (from the run's stream) or the configured "
+        "values; auto: random for synthetic data, config for measured data",
+    )
+    truth: Literal["auto", "config", "none"] = Field(
+        "auto", description="are the configured values the truth? auto: yes for synthetic data, no for files"
+    )
+    realtime_dt: Pos = Field(0.001, description="step of the real-time check (fixed-step RK4) [s]")
+
+
+class DamperConfig(_Section):
+    """A damper on a test bench: the model, the bench (or measured files), the noise, the identification."""
+
+    system: Literal["damper"]
+    damper: DamperSection
+    bench: BenchSection = BenchSection()
+    data: DamperData | None = None
+    noise: DamperNoise = DamperNoise()
+    identify: DamperIdentify
+
+    _source: str = PrivateAttr(default="<config>")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> DamperConfig:
+        from .models.damper import MODELS
+
+        d, ident = self.damper, self.identify
+        if d.model not in MODELS:
+            hint = _did_you_mean(d.model, MODELS)
+            raise _KeyedError("damper.model", f"unknown damper model '{d.model}'{hint} (known: {', '.join(MODELS)})")
+        want = {"generalized_bouc_wen": 1, "force_map": 2}.get(d.model, 0)
+        if d.model == "generalized_bouc_wen" and not d.table:
+            pass  # one node: u-independent parameters
+        elif len(d.table) != want:
+            shape = {0: "no table (leave it out)", 1: "[m] nodes over u", 2: "[nv, nu]"}[want]
+            raise _KeyedError("damper.table", f"{d.model} takes {shape}, got {list(d.table)}")
+        if d.model == "force_map" and min(d.table) < 2:
+            raise _KeyedError("damper.table", f"a force map needs at least 2 x 2 nodes, got {list(d.table)}")
+        names = self.parameter_names()
+        for name in d.parameters:
+            if name not in names:
+                raise _KeyedError(
+                    f"damper.parameters.{name}", f"'{name}' is not a parameter of {d.model}{_did_you_mean(name, names)}"
+                )
+        for name in DAMPER_STRUCTURAL:
+            if name in d.parameters and d.parameters[name] != self.values()[name]:
+                raise _KeyedError(f"damper.parameters.{name}", f"'{name}' is the table size: set it in damper.table")
+        seen = set()
+        for name in ident.unknowns:
+            if name not in names:
+                hint = _did_you_mean(name, names)
+                raise _KeyedError("identify.unknowns", f"'{name}' is not a parameter of {d.model}{hint}")
+            if name in DAMPER_STRUCTURAL:
+                raise _KeyedError("identify.unknowns", f"'{name}' is a table size, not an identifiable parameter")
+            if name in seen:
+                raise _KeyedError("identify.unknowns", f"'{name}' is listed twice")
+            seen.add(name)
+        _check_algorithm(ident.algorithm)
+        for name in ident.limits:
+            if name not in ident.unknowns:
+                raise _KeyedError(
+                    f"identify.limits.{name}", f"'{name}' is not one of the unknowns {list(ident.unknowns)}"
+                )
+        lo_f, hi_f = ident.bounds
+        if not lo_f < hi_f:
+            raise _KeyedError("identify.bounds", f"lower factor {lo_f:g} must be below upper factor {hi_f:g}")
+        values = self.values()
+        for name, (lo, hi) in self.search_box().items():
+            key = f"identify.limits.{name}" if name in ident.limits else "identify.bounds"
+            if not lo < hi:
+                raise _KeyedError(key, f"lower limit {lo:g} must be below upper limit {hi:g}")
+            if not lo <= values[name] <= hi:
+                raise _KeyedError(
+                    key, f"the search range [{lo:g}, {hi:g}] of '{name}' excludes its configured value {values[name]:g}"
+                )
+        return self
+
+    def parameter_names(self) -> tuple[str, ...]:
+        """Every parameter of the configured model, in the kernel's row order."""
+        from .models.damper import MODELS
+
+        return MODELS[self.damper.model].layout(self.table_shape)
+
+    @property
+    def table_shape(self) -> tuple[int, ...]:
+        return tuple(self.damper.table)
+
+    def values(self) -> dict[str, float]:
+        """All parameter values: the configured ones over the neutral defaults (damper_fit.default_values)."""
+        from .damper_fit import default_values
+
+        return {**default_values(self.damper.model, self.table_shape), **self.damper.parameters}
+
+    def search_box(self) -> dict[str, tuple[float, float]]:
+        """Search range of each unknown [SI]: 'limits' where given, else 'bounds' x configured value
+        (a symmetric range of +-1 for values at 0, where a factor means nothing)."""
+        from .damper_fit import scaled_bounds
+
+        ident = self.identify
+        scaled = scaled_bounds(self.values(), ident.unknowns, *ident.bounds)
+        return {n: tuple(ident.limits.get(n, scaled[n])) for n in ident.unknowns}
+
+    @property
+    def source(self) -> str:
+        """The file the config was read from (for messages and relative paths)."""
+        return self._source
+
+    def to_yaml(self) -> str:
+        """The resolved config as YAML text (defaults filled in, overrides applied)."""
+        return yaml.safe_dump(self.model_dump(mode="json", exclude_none=True, by_alias=True), sort_keys=False)
+
+    def digest(self) -> str:
+        """SHA-256 of the resolved config, independent of key order and formatting."""
+        canonical = json.dumps(self.model_dump(mode="json", exclude_none=True, by_alias=True), sort_keys=True)
+        return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+AnyConfig = Union[Config, DamperConfig]  # noqa: UP007
+
+
 def _check_algorithm(algorithm: Algorithm) -> None:
     """The algorithm exists (the optimizer registry is the one list of names) and its population suffices."""
     from .optimizers import REGISTRY, load_all
@@ -326,7 +567,7 @@ class _KeyedError(ValueError):
 # ------------------------------------------------------------------------------------------ loading
 
 
-def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Config:
+def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Config | DamperConfig:
     """Read a YAML config, apply `--set dotted.key=value` overrides, validate. Raises InputError."""
     path = Path(path)
     source = str(path)
@@ -351,6 +592,8 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
         raise InputError(f"expected a mapping of sections at the top level, got {type(raw).__name__}", source=source)
     raw = apply_overrides(raw, overrides, source=source)
     cfg = config_from_dict(raw, source=source)
+    if isinstance(cfg, DamperConfig):
+        return _resolve_damper_paths(cfg, path)
     if cfg.road.file is not None and not Path(cfg.road.file).is_absolute():
         resolved = (path.parent / cfg.road.file).as_posix()
         cfg = cfg.model_copy(update={"road": cfg.road.model_copy(update={"file": resolved})})
@@ -358,12 +601,32 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
     return cfg
 
 
-def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config:
-    """Validate a plain dict (e.g. parsed YAML) into a Config. Raises InputError naming the key."""
+def _resolve_damper_paths(cfg: DamperConfig, path: Path) -> DamperConfig:
+    """Data files named relative to the config file are resolved against its directory."""
+    data = cfg.data
+    if data is None:
+        return cfg
+
+    def resolve(name: str) -> str:
+        return name if Path(name).is_absolute() else (path.parent / name).as_posix()
+
+    update = {"validate_files": tuple(resolve(f) for f in data.validate_files)}
+    if data.file is not None:
+        update["file"] = resolve(data.file)
+    source = cfg.source
+    cfg = cfg.model_copy(update={"data": data.model_copy(update=update)})
+    cfg._source = source
+    return cfg
+
+
+def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config | DamperConfig:
+    """Validate a plain dict (e.g. parsed YAML) into a Config, or a DamperConfig when `system: damper`.
+    Raises InputError naming the key."""
+    root = DamperConfig if isinstance(raw, dict) and raw.get("system") == "damper" else Config
     try:
-        cfg = Config.model_validate(raw)
+        cfg = root.model_validate(raw)
     except ValidationError as exc:
-        raise InputError(_explain(exc), source=source) from None
+        raise InputError(_explain(exc, root), source=source) from None
     except _KeyedError as exc:  # raised from a validator outside pydantic's wrapping
         raise InputError(str(exc), source=source, key=exc.key) from None
     cfg._source = source
@@ -421,9 +684,9 @@ def _described_as(word: str, model: type[BaseModel] | None) -> str:
     return ""
 
 
-def _model_at(loc: tuple) -> type[BaseModel] | None:
+def _model_at(loc: tuple, root: type[BaseModel] | None = None) -> type[BaseModel] | None:
     """The pydantic model class that validates the mapping at `loc` inside a Config (None if not a model)."""
-    model: Any = Config
+    model: Any = Config if root is None else root
     for part in loc:
         if not (isinstance(model, type) and issubclass(model, BaseModel)) or part not in model.model_fields:
             return None
@@ -440,7 +703,7 @@ def _unwrap_model(annotation: Any) -> Any:
     return annotation
 
 
-def _explain(exc: ValidationError) -> str:
+def _explain(exc: ValidationError, root: type[BaseModel] | None = None) -> str:
     """Turn pydantic's errors into one paragraph: each names its dotted key and what was expected."""
     lines = []
     for err in exc.errors(include_url=False):
@@ -452,8 +715,8 @@ def _explain(exc: ValidationError) -> str:
             lines.append(f"'{ctx_error.key}': {ctx_error}")
             continue
         if kind == "extra_forbidden":
-            parent = _model_at(loc[:-1])
-            known = list(parent.model_fields) if parent else []
+            parent = _model_at(loc[:-1], root)
+            known = [f.alias or n for n, f in parent.model_fields.items()] if parent else []
             hint = _did_you_mean(str(loc[-1]), known) or _described_as(str(loc[-1]), parent)
             listing = f" (known keys: {', '.join(known)})" if known and not hint else ""
             lines.append(f"'{key}': unknown key{hint}{listing}")

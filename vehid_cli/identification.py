@@ -81,6 +81,11 @@ class Task:
         return Problem(self.lower, self.upper, cost, cost_and_residuals, names=names)
 
     @property
+    def residual_samples(self) -> int:
+        """R: how many weighted residuals the objective's channels give (4 channels per family)."""
+        return int(self.experiment.t.size * 4 * len(self.families))
+
+    @property
     def noise_free(self) -> bool:
         """Simulated data without noise: the bound is zero (the weights keep a floor only to stay finite)."""
         return self.measured is None and self.config.noise.level == 0

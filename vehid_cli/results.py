@@ -92,6 +92,7 @@ def write_campaign_h5(path: str | Path, campaign) -> None:
         runs.create_dataset("penalised", data=np.array([r.penalised for r in recs]))
         runs.create_dataset("wall_s", data=np.array([r.wall_s for r in recs]))
         runs.create_dataset("truth_cost", data=np.array([r.truth_cost for r in recs]))
+        runs.create_dataset("chi2", data=np.array([r.chi2 for r in recs]))
         runs.create_dataset("history_evals", data=_padded([r.history_evals for r in recs], -1).astype(np.int64))
         runs.create_dataset("history_cost", data=_padded([r.history_cost for r in recs], np.nan))
         sg = h5.create_group("summary")
@@ -107,6 +108,8 @@ def write_campaign_h5(path: str | Path, campaign) -> None:
             sg.attrs["nre_over_crlb"] = s.nre_over_crlb
         if s.converged is not None:
             sg.attrs["converged_runs"] = s.converged
+        sg.attrs["chi2_median"] = s.chi2_median
+        sg.attrs["residual_samples"] = s.residual_samples
         sg.attrs["wall_s"] = s.wall_s
         sg.attrs["penalised"] = s.penalised
         cg = h5.create_group("crlb")
@@ -170,6 +173,8 @@ def campaign_json(campaign) -> dict:
         "evaluations": evals,
         "penalised_evaluations": s.penalised,
         "converged_runs": s.converged,
+        "chi2_per_sample": s.chi2_median,
+        "model_inadequate": s.model_inadequate,
         "objective": campaign.config.identify.objective,
         "algorithm": campaign.config.identify.algorithm.name,
         "noise_level": campaign.config.noise.level,
@@ -203,6 +208,7 @@ def read_campaign_h5(path: str | Path):
             est, cost, evals = runs["estimate"][()], runs["cost"][()], runs["evaluations"][()]
             pen, wall = runs["penalised"][()], runs["wall_s"][()]
             tcost = runs["truth_cost"][()]
+            chi2 = runs["chi2"][()]
             hev, hco = runs["history_evals"][()], runs["history_cost"][()]
             records = tuple(
                 RunRecord(
@@ -215,6 +221,7 @@ def read_campaign_h5(path: str | Path):
                     history_evals=hev[i][hev[i] >= 0],
                     history_cost=hco[i][~np.isnan(hco[i])],
                     truth_cost=float(tcost[i]),
+                    chi2=float(chi2[i]),
                 )
                 for i in range(len(est))
             )
@@ -228,7 +235,10 @@ def read_campaign_h5(path: str | Path):
                 identifiable=cg["identifiable"][()],
                 condition=float(cg.attrs["condition"]),
             )
-            summary = summarise(names, truth, list(records), bound, float(h5["summary"].attrs["wall_s"]))
+            summary = summarise(
+                names, truth, list(records), bound, float(h5["summary"].attrs["wall_s"]),
+                int(h5["summary"].attrs["residual_samples"]),
+            )  # fmt: skip
             bounds = h5["bounds"][()]
             sigma = {k: h5["noise_sigma"][k][()] for k in h5["noise_sigma"]}
             return Campaign(

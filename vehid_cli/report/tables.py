@@ -53,6 +53,7 @@ def summary_table(c: Campaign) -> Table:
     table.caption = (
         f"NRE of mean {_f(s.nre_percent)} % · per-run NRE median {_f(s.per_run_nre_median)} % · "
         f"RMS {_f(s.per_run_nre_rms)} % · CRLB NRE {_f(b.nre_rms_percent)} % · NRE/CRLB {_f(s.nre_over_crlb, 2)} · "
+        f"χ²/sample {_f(s.chi2_median, 2)} · "
         f"evaluations/run {s.evaluations.mean():.0f} · converged {_count(s.converged, len(c.records))} · "
         f"penalised {s.penalised} · wall {s.wall_s:.1f} s"
     )

@@ -1,0 +1,175 @@
+"""Dampers through the command line: simulate -> identify round trip, a measured-data fit, bad input -> exit 2.
+
+The truth of the round trip is the configured parameter set; J is recomputed here from the stored traces with
+numpy (Fleps-Dezasse Eq. 7), independently of vehid's cost function.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+
+from tests.conftest import ROOT, SHARED, needs_shared
+
+MR = SHARED / "data" / "measured" / "mr_damper_labcontrol" / "data"
+TRUTH = {"k1": 2000.0, "x0": -0.05, "c0": 1500.0, "fc": 200.0, "v_eps": 0.02}
+LEVEL = 0.02  # force noise, fraction of the clean force's std
+
+
+def vehid(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+
+
+def synthetic_config(tmp_path, **identify):
+    cfg = {
+        "system": "damper",
+        "damper": {"model": "bingham", "parameters": TRUTH},
+        "bench": {"excitation": "sine", "amplitude": 0.025, "frequency": 0.8, "cycles": 2, "dt": 0.002},
+        "noise": {"level": LEVEL},
+        "identify": {"unknowns": ["k1", "c0", "fc"], "bounds": [0.5, 2.0], "budget": 300, "runs": 3, **identify},
+    }
+    path = tmp_path / "damper.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def J(measured, model):
+    return float(np.mean((measured - model) ** 2) / np.var(measured))
+
+
+def test_simulate_identify_round_trip(tmp_path):
+    config = synthetic_config(tmp_path)
+    bench, fig = tmp_path / "bench.csv", tmp_path / "bench.png"
+    res = vehid("simulate", config, "-o", bench, "--plot", fig)
+    assert res.returncode == 0, res.stderr
+    lines = [line for line in bench.read_text().splitlines() if not line.startswith("#")]
+    table = np.genfromtxt(lines, delimiter=",", names=True)
+    assert table.dtype.names == ("t", "x", "v", "u", "force")
+    np.testing.assert_allclose(table["x"], 0.025 * np.sin(2 * np.pi * 0.8 * table["t"]), atol=1e-9)
+    assert fig.read_bytes()[:4] == b"\x89PNG"
+
+    # the campaign: 3 runs, each with its own noise; estimates near the truth, J at the noise floor
+    out, js = tmp_path / "campaign.h5", tmp_path / "campaign.json"
+    res = vehid("identify", config, "-o", out, "--json", js)
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(js.read_text())
+    assert doc["runs"] == 3 and doc["truth"] == {n: TRUTH[n] for n in ("k1", "c0", "fc")}
+    for name, value in doc["mean"].items():
+        assert value == pytest.approx(TRUTH[name], rel=0.03), name
+    assert np.allclose(doc["J"], LEVEL**2, rtol=0.3)  # white noise of sigma = LEVEL std(F): J -> LEVEL^2
+    assert len(set(doc["J"])) == 3  # three noise realisations
+    with h5py.File(out) as h5:
+        assert h5.attrs["kind"] == "vehid.damper" and "system: damper" in h5.attrs["config_yaml"]
+        tr = h5["traces/00"]
+        assert J(tr["measured"][()], tr["model"][()]) == pytest.approx(doc["J"][0], rel=1e-9)
+        assert bool(h5["realtime"].attrs["stable"])
+
+    # identify from the simulated file: one fit from a random start, the truth declared
+    out2 = tmp_path / "fromfile.h5"
+    sets = ["--set", "identify.truth=config", "--set", "identify.start=random"]
+    res = vehid("identify", config, "--data", bench, "-o", out2, *sets)
+    assert res.returncode == 0, res.stderr
+    with h5py.File(out2) as h5:
+        est = dict(zip([n.decode() for n in h5["parameters"][()]], h5["runs/estimate"][0], strict=True))
+        assert h5.attrs["data_file"] == str(bench)
+        measured = h5["traces/00/measured"][()]
+    for name, value in est.items():
+        assert value == pytest.approx(TRUTH[name], rel=0.05), name
+    np.testing.assert_allclose(measured, table["force"], rtol=1e-9)  # the file's force column, unchanged
+
+    # report: markdown and the figure of the run
+    res = vehid("report", out, out2, "--format", "md", "--plots", tmp_path / "figs")
+    assert res.returncode == 0, res.stderr
+    assert "#### Cost J (Eq. 7)" in res.stdout and "Real-time check" in res.stdout
+    assert len(list((tmp_path / "figs").glob("*.png"))) == 2
+
+
+def test_measured_mr_damper_small_window(tmp_path):
+    """A Bingham fit on 6 s of ensaio1.1, validated on the same window of ensaio2.1."""
+    data = needs_shared(MR / "ensaio1.1.csv")
+    out = tmp_path / "mr.h5"
+    sets = [
+        "data.window=[0, 6]", f"data.validate=[{MR / 'ensaio2.1.csv'}]", "identify.budget=400",
+        "identify.unknowns=[k1, x0, c0, fc]",
+    ]  # fmt: skip
+    args = [a for s in sets for a in ("--set", s)]
+    res = vehid("identify", ROOT / "configs" / "dampers" / "mr_bingham.yaml", "-o", out, *args)
+    assert res.returncode == 0, res.stderr
+    raw = np.genfromtxt(data, delimiter=",", names=True)
+    with h5py.File(out) as h5:
+        train, held = h5["traces/00"], h5["traces/01"]
+        keep = slice(0, train["t"].size)
+        assert abs(train["t"].size - 600) <= 1  # 6 s at 10 ms (the edge sample depends on round-off)
+        np.testing.assert_allclose(train["measured"][()], raw["force_N"][keep])
+        np.testing.assert_allclose(train["x"][()], 1e-3 * raw["pos_mm"][keep])
+        J_train = J(train["measured"][()], train["model"][()])
+        assert J_train == pytest.approx(float(h5["runs/J"][0]), rel=1e-9)
+        assert J(held["measured"][()], held["model"][()]) == pytest.approx(float(h5["validation/J"][0]), rel=1e-9)
+    assert J_train < 0.1  # a viscous + friction + spring model explains over 90 % of the force variance
+
+
+# ------------------------------------------------------------------------------------------ bad input
+
+
+def bench_csv(tmp_path, mutate=None):
+    t = np.arange(200) * 0.01
+    x = 10 * np.sin(2 * np.pi * t)
+    force = 50 * np.cos(2 * np.pi * t)
+    if mutate:
+        t, x, force = mutate(t.copy(), x.copy(), force.copy())
+    path = tmp_path / "run.csv"
+    rows = "\n".join(f"{a:.6g},{b:.6g},{c:.6g}" for a, b, c in zip(t, x, force, strict=True))
+    path.write_text("t_s,pos_mm,force_N\n" + rows + "\n")
+    return path
+
+
+def measured_config(tmp_path, data):
+    cfg = {
+        "system": "damper",
+        "damper": {"model": "viscous", "parameters": {"c0": 1000.0}},
+        "data": {"file": str(data), "columns": {"time": "t_s", "displacement": "pos_mm", "force": "force_N"},
+                 "units": {"displacement": "mm"}},
+        "identify": {"unknowns": ["c0"], "budget": 20},
+    }  # fmt: skip
+    path = tmp_path / "measured.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def _swap(t, x, f):
+    t[5], t[6] = t[6], t[5]
+    return t, x, f
+
+
+def _nan(t, x, f):
+    f[17] = np.nan
+    return t, x, f
+
+
+@pytest.mark.parametrize(
+    "mutate, sets, expected",
+    [
+        (None, ["data.columns.force=force_kN"], ["force_kN", "not in the file"]),
+        (None, ["data.units.force=kipp"], ["data.units.force", "force_N", "kipp"]),
+        (_swap, [], ["t_s", "increase"]),
+        (_nan, [], ["force_N", "NaN"]),
+        (None, ["damper.model=bouc_wn"], ["damper.model", "bouc_wen"]),
+        (None, ["damper.parameters.c00=5"], ["c00", "did you mean 'c0'"]),
+    ],
+    ids=["column", "unit", "time", "nan", "model", "parameter"],
+)
+def test_bad_input_exits_2_naming_the_column_or_key(tmp_path, mutate, sets, expected):
+    config = measured_config(tmp_path, bench_csv(tmp_path, mutate))
+    out = tmp_path / "out.h5"
+    res = vehid("identify", config, "-o", out, *[a for s in sets for a in ("--set", s)])
+    assert res.returncode == 2, (res.stdout, res.stderr)
+    for word in expected:
+        assert word in res.stderr, (word, res.stderr)
+    assert "Traceback" not in res.stderr and not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["measured.yaml", "run.csv"]
