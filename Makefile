@@ -58,3 +58,8 @@ paper: $(STAMP)
 
 clean:
 	rm -rf $(VENV) runs/demo .pytest_cache
+
+## dampers: identify the measured dampers of configs/dampers/ and regenerate docs/results/dampers.md (about 5 minutes)
+.PHONY: dampers
+dampers: $(STAMP)
+	$(BIN)/python docs/results/make_dampers.py runs/dampers docs/results/dampers.md

@@ -61,7 +61,7 @@ def cubic_spring(d, dd, z, params, f_out, zd_out):  # pragma: no cover - compile
         f_out[i] = k3 * d[i] * d[i] * d[i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
 def _rates(q, v, z, y, yd, Minv, C, K, B, D, E, force, par, d, dd, f, zd, rhs, a):  # pragma: no cover
     """Acceleration a and internal rates zd at state (q, v, z) and road (y, yd); f gets the strut forces."""
     nq, ns, nu = q.shape[0], d.shape[0], y.shape[0]
@@ -92,7 +92,7 @@ def _rates(q, v, z, y, yd, Minv, C, K, B, D, E, force, par, d, dd, f, zd, rhs, a
         a[i] = acc
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
 def _rk4_step(q, v, z, a, f, zd, y0, y1, dt, Minv, C, K, B, D, E, force, par, W):  # pragma: no cover - compiled
     """One RK4 step of (q, v, z) in place. On entry a, f, zd hold the rates at the old state (stage 1);
     on exit the rates at the new state, ready for the output and the next step. W is scratch."""
@@ -138,7 +138,7 @@ def _rk4_step(q, v, z, a, f, zd, y0, y1, dt, Minv, C, K, B, D, E, force, par, W)
     _rates(q, v, z, y1, yd, Minv, C, K, B, D, E, force, par, d, dd, f, zd, rhs, a)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
 def _newmark_step(q, v, z, a, f, zd, y0, y1, dt, M, C, K, B, D, E, Khat_inv, force, par, W):  # pragma: no cover
     """One average-acceleration Newmark step (trapezoidal rule for z) in place; returns 1 if the
     fixed-point iteration did not converge. a, f, zd: rates at the old state on entry, new on exit."""
@@ -211,7 +211,7 @@ def _newmark_step(q, v, z, a, f, zd, y0, y1, dt, M, C, K, B, D, E, Khat_inv, for
     return failed
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
 def _integrate(
     method,
     M,
@@ -451,7 +451,7 @@ def simulate_fullcar(
 # ------------------------------------------------------------------------------------------ test bench
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
 def _bench_rk4(force, params, road, dt, z0, out_f):  # pragma: no cover - compiled
     """RK4 for a strut on a test bench: the motion is prescribed (the road channels, linear between samples),
     so only the force law's internal states are integrated; same law interface as ``_integrate``. Bench laws
