@@ -173,3 +173,42 @@ def test_bad_input_exits_2_naming_the_column_or_key(tmp_path, mutate, sets, expe
         assert word in res.stderr, (word, res.stderr)
     assert "Traceback" not in res.stderr and not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["measured.yaml", "run.csv"]
+
+
+STAGED = ROOT / "configs" / "dampers" / "synthetic_force_map_steps.yaml"
+
+
+def test_a_stage_may_only_name_unknowns(tmp_path):
+    from vehid_cli.config import load_config
+    from vehid_cli.errors import InputError
+
+    raw = yaml.safe_load(STAGED.read_text())
+    raw["identify"]["stages"][0]["unknowns"] = ["k1", "x0", "c0"]
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    with pytest.raises(InputError, match="'c0' is not one of identify.unknowns"):
+        load_config(path)
+
+
+def test_every_unknown_needs_a_stage():
+    from vehid_cli.config import load_config
+    from vehid_cli.errors import InputError
+
+    with pytest.raises(InputError, match="no stage identifies"):
+        load_config(STAGED, ["identify.unknowns=[k1, x0, F_1_1]", "identify.stages=[{name: g, unknowns: [k1, x0]}]"])
+
+
+@pytest.mark.slow
+def test_step_by_step_from_the_cli(tmp_path):
+    """The shipped step-by-step config, one run: gas force and map rows come back to 1 %."""
+    import json
+
+    out = tmp_path / "fm.h5"
+    res = subprocess.run(
+        [sys.executable, "-m", "vehid_cli", "identify", str(STAGED), "--set", "identify.runs=1", "-o", str(out),
+         "--json", str(tmp_path / "fm.json")], capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    doc = json.loads((tmp_path / "fm.json").read_text())
+    for name in ("k1", "F_1_1", "F_5_2"):
+        assert abs(doc["re_percent"][name]) < 1.0, (name, doc["re_percent"][name])

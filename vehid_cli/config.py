@@ -404,6 +404,16 @@ class DamperNoise(_Section):
     level: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = Field(0.0, description="0.02 = 2 %")
 
 
+class DamperStage(_Section):
+    """One stage of the step-by-step identification (Fleps-Dezasse section 4.2): its unknowns, fitted on its
+    own experiment: a bench excitation (synthetic data) or a measured file."""
+
+    name: str
+    unknowns: Annotated[tuple[str, ...], Field(min_length=1)]
+    bench: BenchSection | None = Field(None, description="the excitation of this stage (synthetic data)")
+    file: str | None = Field(None, description="the measured run of this stage (relative to the config)")
+
+
 class DamperIdentify(_Section):
     """What to identify and how (cost J, Fleps-Dezasse Eq. 7). Bounds are factors of the configured values."""
 
@@ -427,6 +437,12 @@ class DamperIdentify(_Section):
         "auto", description="are the configured values the truth? auto: yes for synthetic data, no for files"
     )
     realtime_dt: Pos = Field(0.001, description="step of the real-time check (fixed-step RK4) [s]")
+    stages: tuple[DamperStage, ...] = Field(
+        (),
+        description="step-by-step identification: stages in order, each starting from what the previous found "
+        "(e.g. gas force on a slow stroke, then the model per control input on sines, then lag and delays on "
+        "the sawtooth); their unknowns together are identify.unknowns",
+    )
 
 
 class DamperConfig(_Section):
@@ -477,6 +493,20 @@ class DamperConfig(_Section):
                 raise _KeyedError("identify.unknowns", f"'{name}' is listed twice")
             seen.add(name)
         _check_algorithm(ident.algorithm)
+        staged: list[str] = []
+        for k, stage in enumerate(ident.stages):
+            for name in stage.unknowns:
+                if name not in seen:
+                    raise _KeyedError(
+                        f"identify.stages.{k}.unknowns",
+                        f"'{name}' is not one of identify.unknowns {list(ident.unknowns)}",
+                    )
+                staged.append(name)
+            if stage.bench is not None and stage.file is not None:
+                raise _KeyedError(f"identify.stages.{k}", "give a stage either a bench excitation or a file, not both")
+        if ident.stages and set(staged) != seen:
+            missing = sorted(seen - set(staged))
+            raise _KeyedError("identify.stages", f"no stage identifies {missing}: every unknown needs a stage")
         for name in ident.limits:
             if name not in ident.unknowns:
                 raise _KeyedError(
@@ -603,18 +633,21 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
 
 def _resolve_damper_paths(cfg: DamperConfig, path: Path) -> DamperConfig:
     """Data files named relative to the config file are resolved against its directory."""
-    data = cfg.data
-    if data is None:
-        return cfg
 
     def resolve(name: str) -> str:
         return name if Path(name).is_absolute() else (path.parent / name).as_posix()
 
-    update = {"validate_files": tuple(resolve(f) for f in data.validate_files)}
-    if data.file is not None:
-        update["file"] = resolve(data.file)
     source = cfg.source
-    cfg = cfg.model_copy(update={"data": data.model_copy(update=update)})
+    stages = tuple(
+        s.model_copy(update={"file": resolve(s.file)}) if s.file is not None else s for s in cfg.identify.stages
+    )
+    cfg = cfg.model_copy(update={"identify": cfg.identify.model_copy(update={"stages": stages})})
+    data = cfg.data
+    if data is not None:
+        update = {"validate_files": tuple(resolve(f) for f in data.validate_files)}
+        if data.file is not None:
+            update["file"] = resolve(data.file)
+        cfg = cfg.model_copy(update={"data": data.model_copy(update=update)})
     cfg._source = source
     return cfg
 

@@ -34,9 +34,10 @@ BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "
 # ------------------------------------------------------------------------------------------ bench data
 
 
-def bench_history(cfg: DamperConfig) -> BenchHistory:
-    """The configured virtual-bench excitation (motion and control input, no force yet)."""
-    b = cfg.bench
+def bench_history(cfg: DamperConfig, bench=None) -> BenchHistory:
+    """The configured virtual-bench excitation (motion and control input, no force yet); `bench` replaces
+    the config's bench section (a stage's own excitation)."""
+    b = bench if bench is not None else cfg.bench
     if b.excitation == "sine":
         return sine(b.amplitude, b.frequency, b.cycles, b.dt, b.control)
     if b.excitation == "sawtooth":
@@ -60,9 +61,10 @@ class SimulatedBench:
     sigma: float  # force noise standard deviation [N]
 
 
-def simulate_bench(cfg: DamperConfig, noise_rng: np.random.Generator) -> SimulatedBench:
-    """Simulate the configured damper on the configured bench; noise sigma = level * std(clean force)."""
-    history = bench_history(cfg)
+def simulate_bench(cfg: DamperConfig, noise_rng: np.random.Generator, bench=None) -> SimulatedBench:
+    """Simulate the configured damper on the configured bench (or a stage's `bench`); noise sigma = level *
+    std(clean force)."""
+    history = bench_history(cfg, bench)
     clean = configured_spec(cfg).simulate(history, cfg.bench.substeps)
     if not np.all(np.isfinite(clean)):
         raise InputError(
@@ -285,6 +287,48 @@ def _fit_once(cfg, spec, history, names, box, start, rng) -> tuple:
     )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class _Staged:
+    """The outcome of a step-by-step identification, shaped like one fit (the last stage's J)."""
+
+    spec: DamperSpec
+    J: float
+    J_initial: float
+    evaluations: int
+    penalised: int
+    wall_s: float
+    history_evals: NDArray
+    history_cost: NDArray
+    stage_J: tuple[float, ...]
+    histories: tuple[BenchHistory, ...]
+
+
+def _fit_in_stages(cfg, spec, measured, names, box, start, noise_rng, rng) -> _Staged:
+    """Fleps-Dezasse section 4.2: each stage fits its unknowns on its own experiment, starting from (and keeping)
+    what the stages before it found; synthetic stages draw their noise from the run's noise stream in order."""
+    if start is not None:
+        spec = spec.with_values(dict(zip(names, start, strict=True)))
+    fits, histories = [], []
+    for stage in cfg.identify.stages:
+        if stage.file is not None:
+            history = load_measured(cfg, stage.file)
+        elif measured is not None and stage.bench is None:
+            history = measured
+        else:
+            history = simulate_bench(cfg, noise_rng, stage.bench).history
+        result = _fit_once(cfg, spec, history, stage.unknowns, {n: box[n] for n in stage.unknowns}, None, rng)
+        spec = result.spec
+        fits.append(result)
+        histories.append(history)
+    evals = np.concatenate([f.history_evals + sum(g.evaluations for g in fits[:k]) for k, f in enumerate(fits)])
+    return _Staged(
+        spec=spec, J=fits[-1].J, J_initial=fits[0].J_initial, evaluations=sum(f.evaluations for f in fits),
+        penalised=sum(f.penalised for f in fits), wall_s=sum(f.wall_s for f in fits), history_evals=evals,
+        history_cost=np.concatenate([f.history_cost for f in fits]), stage_J=tuple(f.J for f in fits),
+        histories=tuple(histories),
+    )  # fmt: skip
+
+
 def _trace(name: str, history: BenchHistory, spec: DamperSpec, substeps: int) -> Trace:
     model = spec.simulate(history, substeps)
     return Trace(name, history.t, history.x, history.v, history.force, model, float(cost_J(history.force, model)))
@@ -315,7 +359,11 @@ def run_identification(
         streams = run_streams(seed, r)
         history = simulate_bench(cfg, streams.noise).history if synthetic else measured
         x0 = _start_point(cfg, lower, upper, synthetic, streams.optimizer)
-        result = _fit_once(cfg, spec, history, names, box, x0, streams.optimizer)
+        if cfg.identify.stages:
+            result = _fit_in_stages(cfg, spec, measured, names, box, x0, streams.noise, streams.optimizer)
+            history = result.histories[-1]
+        else:
+            result = _fit_once(cfg, spec, history, names, box, x0, streams.optimizer)
         J_truth = float(cost_J(history.force, spec.simulate(history, cfg.bench.substeps))) if truth_known else np.nan
         runs.append(
             DamperRun(
@@ -327,8 +375,12 @@ def run_identification(
         )  # fmt: skip
         if r == 0:
             final = result.spec
-            label = Path(str(data_file)).stem if data_file else f"bench-{history.source.removeprefix('bench:')}"
-            traces.append(_trace(f"train:{label}", history, final, cfg.bench.substeps))
+            if cfg.identify.stages:
+                for stage, h in zip(cfg.identify.stages, result.histories, strict=True):
+                    traces.append(_trace(f"stage:{stage.name}", h, final, cfg.bench.substeps))
+            else:
+                label = Path(str(data_file)).stem if data_file else f"bench-{history.source.removeprefix('bench:')}"
+                traces.append(_trace(f"train:{label}", history, final, cfg.bench.substeps))
         if on_run is not None:
             on_run(r + 1, n_runs)
     if synthetic:  # the real-time check runs on the bench of run 0

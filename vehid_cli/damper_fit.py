@@ -82,6 +82,11 @@ def default_values(model: str, table_shape: tuple[int, ...] = ()) -> dict[str, f
         values["m"] = m
         for j in range(m):
             values[f"u_node_{j + 1}"] = j / max(m - 1, 1)
+    if model == "force_map":  # the table size, evenly spread nodes, a flat (zero) map
+        nv, nu = table_shape
+        values.update(nv=nv, nu=nu)
+        values.update({f"v_node_{i + 1}": v for i, v in enumerate(np.linspace(-0.5, 0.5, nv))})
+        values.update({f"u_node_{j + 1}": u for j, u in enumerate(np.linspace(0.0, 1.0, nu))})
     return values
 
 
