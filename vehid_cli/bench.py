@@ -138,9 +138,13 @@ def read_bench(
     columns: Mapping[str, str | None],
     units: Mapping[str, str],
     source_key: str = "data",
+    sample_rate: float | None = None,
 ) -> BenchHistory:
     """A measured bench run: columns named by the config (time, displacement, force; velocity and control
-    optional), converted to SI. The velocity, when not measured, is the central difference of x."""
+    optional), converted to SI. The velocity, when not measured, is the central difference of x.
+
+    `sample_rate` [Hz] declares the rate of a file whose time column was printed with too few digits to be
+    uniform: the column must then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it."""
     table = read_table(path)
     src = table.source
     for role in ("time", "displacement", "force"):
@@ -160,12 +164,22 @@ def read_bench(
         check_finite(table.columns[name], name, src)
         values[role] = table.columns[name] * factors[role]
     t = values["time"]
-    check_time(t, src, column=str(columns["time"]))
+    if sample_rate is None:
+        dt = check_time(t, src, column=str(columns["time"]))
+    else:
+        dt = 1.0 / sample_rate
+        steps = np.diff(t)
+        if t.size < 3 or np.any(np.abs(steps - dt) > 0.05 * dt):
+            bad = int(np.argmax(np.abs(steps - dt))) if steps.size else 0
+            raise InputError(
+                f"column '{columns['time']}' does not follow data.sample_rate = {sample_rate:g} Hz (step {dt:g} s) "
+                f"within 5 %: step {steps[bad] if steps.size else float('nan'):g} s at data row {bad + 2}",
+                source=src,
+            )
+    t = t[0] + np.arange(t.size) * dt
     x = values["displacement"]
     v = values.get("velocity")
     if v is None:
         v = np.gradient(x, t)
     u = values.get("control", np.zeros(t.size))
-    t0 = t[0]
-    t = t0 + np.arange(t.size) * float(np.median(np.diff(t)))
     return BenchHistory(t, x, v, u, values["force"], source=src)

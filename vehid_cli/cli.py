@@ -355,31 +355,42 @@ def report(
         return
     campaigns, files = collect(paths)
     if fmt == "table":
-        if output is None:
-            for c in campaigns:
-                out.print(summary_table(c))
-            text = None
-        else:
-            record = Console(record=True, width=160, file=open(os.devnull, "w"))  # noqa: SIM115
-            for c in campaigns:
-                record.print(summary_table(c))
-            text = record.export_text()
+        text = _tables(output, [summary_table(c) for c in campaigns])
     else:
         text = render(campaigns, files, fmt, load_published(published) if published else None)
-    if text is not None:
-        if output is None:
-            out.print(text, markup=False, highlight=False)
-        else:
-            from .data import atomic_path
-
-            with atomic_path(output) as tmp:
-                tmp.write_text(text)
-            out.print(f"wrote {output}")
+    _emit(text, output)
     if plots is not None:
         from .report.plots import write_campaign_plots
 
         written = write_campaign_plots(campaigns, files, plots)
         out.print(f"wrote {len(written)} figure(s) to {plots}")
+
+
+def _tables(output: Path | None, tables: list) -> str | None:
+    """Rich tables: printed to the terminal, or rendered as plain text for --output."""
+    if output is None:
+        for table in tables:
+            out.print(table)
+        return None
+    with open(os.devnull, "w") as sink:
+        record = Console(record=True, width=160, file=sink)
+        for table in tables:
+            record.print(table)
+        return record.export_text()
+
+
+def _emit(text: str | None, output: Path | None) -> None:
+    """A report's text: to the terminal, or written atomically to --output."""
+    if text is None:
+        return
+    if output is None:
+        out.print(text, markup=False, highlight=False)
+        return
+    from .data import atomic_path
+
+    with atomic_path(output) as tmp:
+        tmp.write_text(text)
+    out.print(f"wrote {output}")
 
 
 def _damper_result_files(paths: list[Path]) -> list[Path]:
@@ -409,21 +420,10 @@ def _report_dampers(files: list[Path], fmt: str, output: Path | None, plots: Pat
     if fmt == "latex":
         raise InputError("--format latex is not available for damper results; use table, md, csv or json")
     if fmt == "table":
-        console = out if output is None else Console(record=True, width=160, file=open(os.devnull, "w"))  # noqa: SIM115
-        for res, name in zip(results, names, strict=True):
-            console.print(dr.parameter_table(res, name))
-        text = None if output is None else console.export_text()
+        text = _tables(output, [dr.parameter_table(res, name) for res, name in zip(results, names, strict=True)])
     else:
         text = {"md": dr.markdown, "csv": dr.csv_text, "json": dr.json_text}[fmt](results, names)
-    if text is not None:
-        if output is None:
-            out.print(text, markup=False, highlight=False)
-        else:
-            from .data import atomic_path
-
-            with atomic_path(output) as tmp:
-                tmp.write_text(text)
-            out.print(f"wrote {output}")
+    _emit(text, output)
     if plots is not None:
         from .report.damper_plots import write_damper_plots
 

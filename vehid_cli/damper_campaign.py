@@ -118,7 +118,7 @@ def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
         columns = data.columns.model_dump()
         units, window, step = data.units.model_dump(), data.window, data.decimate
     rate = None if data is None else data.sample_rate
-    history = read_bench(path, columns, units) if rate is None else _read_at_rate(path, columns, units, rate)
+    history = read_bench(path, columns, units, sample_rate=rate)
     if window is not None:
         history = history.window(history.t[0] + window[0], history.t[0] + window[1])
     if step > 1:
@@ -132,44 +132,6 @@ def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
     if np.var(history.force) == 0:
         raise InputError(f"column '{columns['force']}' is constant: J is undefined", source=str(path))
     return history
-
-
-def _read_at_rate(path, columns: dict, units: dict, rate: float) -> BenchHistory:
-    """read_bench for a file whose time column is rounded (e.g. 7 significant digits at 1024 Hz): the time
-    column must increase and its steps agree with 1 / rate [s] within 5 %; the grid is rebuilt from the rate."""
-    from .bench import convert
-    from .data import check_finite, read_table
-
-    table = read_table(path)
-    name = columns["time"]
-    if name not in table.columns:  # let read_bench name the missing column (or any other problem)
-        return read_bench(path, columns, units)
-    t = table.columns[name] * convert("time", units.get("time", "s"), "data.units.time")
-    steps = np.diff(t)
-    dt = 1.0 / rate
-    if t.size < 3 or not np.all(np.isfinite(t)) or np.any(np.abs(steps - dt) > 0.05 * dt):
-        bad = int(np.argmax(np.abs(steps - dt))) if t.size > 1 and np.all(np.isfinite(t)) else 0
-        raise InputError(
-            f"column '{name}' does not follow data.sample_rate = {rate:g} Hz (step {dt:g} s) within 5 %: "
-            f"step {steps[bad] if steps.size else float('nan'):g} s at data row {bad + 2}",
-            source=str(path),
-        )
-    src, values = table.source, {}
-    for role, column in columns.items():  # the checks of read_bench, on the table already read
-        if not column:
-            continue
-        if column not in table.columns:
-            raise InputError(
-                f"column '{column}' (the {role}) is not in the file; columns present: {', '.join(table.columns)}",
-                source=src,
-            )
-        check_finite(table.columns[column], column, src)
-        default = {"time": "s", "displacement": "m", "force": "N", "velocity": "m/s", "control": "1"}[role]
-        values[role] = table.columns[column] * convert(role, units.get(role, default), f"data.units.{role}")
-    t = t[0] + np.arange(t.size) * dt
-    x = values["displacement"]
-    v = values.get("velocity", np.gradient(x, t))
-    return BenchHistory(t, x, v, values.get("control", np.zeros(t.size)), values["force"], source=src)
 
 
 # ------------------------------------------------------------------------------------------ identification
@@ -489,21 +451,13 @@ def is_result_file(path: str | Path) -> bool:
 
 def read_result_h5(path: str | Path) -> DamperResult:
     """Read a damper results file back (InputError for a file that is not one)."""
-    import h5py
     import yaml
 
     from .config import config_from_dict
+    from .results import open_results
 
     source = str(path)
-    try:
-        h5 = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise InputError("results file not found", source=source) from None
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file ({exc})", source=source) from None
-    with h5:
-        if h5.attrs.get("kind") != RESULT_KIND:
-            raise InputError(f"not a vehid damper results file (kind {h5.attrs.get('kind')!r})", source=source)
+    with open_results(path, RESULT_KIND, "damper results file") as h5:
         try:
             cfg = config_from_dict(yaml.safe_load(h5.attrs["config_yaml"]), source=f"{source}:config_yaml")
             g = h5["runs"]

@@ -181,6 +181,24 @@ def campaign_json(campaign) -> dict:
     }
 
 
+def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
+    """Open a results file for reading, checking its kind; InputError for a missing, unreadable or other file."""
+    from .errors import InputError
+
+    source = str(path)
+    try:
+        h5 = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise InputError(f"{what} not found", source=source) from None
+    except OSError as exc:
+        raise InputError(f"not a readable HDF5 file ({exc})", source=source) from None
+    if h5.attrs.get("kind") != kind:
+        found = h5.attrs.get("kind")
+        h5.close()
+        raise InputError(f"not a vehid {what} (kind {found!r})", source=source)
+    return h5
+
+
 def read_campaign_h5(path: str | Path):
     """Read a campaign file back into a `Campaign` (raises InputError for a file that is not one)."""
     import yaml
@@ -191,15 +209,7 @@ def read_campaign_h5(path: str | Path):
     from .errors import InputError
 
     source = str(path)
-    try:
-        h5 = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise InputError("campaign file not found", source=source) from None
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file ({exc})", source=source) from None
-    with h5:
-        if h5.attrs.get("kind") != CAMPAIGN_KIND:
-            raise InputError(f"not a vehid campaign file (kind {h5.attrs.get('kind')!r})", source=source)
+    with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
         try:
             config = config_from_dict(yaml.safe_load(h5.attrs["config_yaml"]), source=f"{source}:config_yaml")
             names = tuple(n.decode() if isinstance(n, bytes) else str(n) for n in h5["parameters"][()])
