@@ -126,13 +126,19 @@ def fit(
     x0 = np.clip(np.array([spec.values[n] for n in unknowns], dtype=float), lower, upper)
     model = spec.damper
 
-    def cost(X: NDArray) -> NDArray:
+    scale = np.sqrt(history.force.size * np.var(history.force))  # J = sum of squared residuals
+
+    def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
         run = simulate_damper(model, spec.rows(unknowns, X), history.t, history.x, history.v, history.u, substeps)
-        return cost_J(history.force, run.force)
+        residuals = (history.force[None, :] - run.force) / scale
+        return np.sum(residuals**2, axis=1), residuals
+
+    def cost(X: NDArray) -> NDArray:
+        return cost_and_residuals(X)[0]
 
     J0 = float(cost(x0[None, :])[0])
     penalty = PENALTY_FACTOR * max(J0 if np.isfinite(J0) else 1.0, 1.0)
-    problem = Problem(lower, upper, cost, penalty=penalty, names=unknowns)
+    problem = Problem(lower, upper, cost, residuals=cost_and_residuals, penalty=penalty, names=unknowns)
     optimizer = get_optimizer(algorithm, population=population, iterations=max(1, budget // population))
     result = optimizer.minimize(problem, rng, budget=budget, x0=x0)
     best = spec.with_values(dict(zip(unknowns, result.x, strict=True)))

@@ -259,30 +259,53 @@ MODELS = {
 
 
 def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray) -> NDArray:
-    """(P, n, 2): the delayed command and the direction of its latest change, per candidate.
+    """(P, n, 2): the delayed command and the direction of its latest change (1 rising, 0 falling), per candidate.
 
-    Each change of the command u (n,) between samples i-1 and i takes effect at t_i + tau, with tau the
-    candidate's delay (P, 4: compression/rebound x rising/falling, DELAYS order) for the change's direction
-    and the stroke (sign of v) it happens in. A change that would overtake a later one is merged into it.
+    Each change of the command u (n,), between samples i-1 and i, takes effect at t_i + tau with tau the
+    candidate's delay (P, 4: DELAYS order) for the change's direction and the stroke (sign of v) it happens in.
+    A change is laid on the sample grid as a one-sample ramp that starts at its exact effective time, so the
+    delayed command (and the cost) moves continuously with tau instead of in whole samples. A change that would
+    overtake a later one is merged into it. Commands that change at most samples (not steps) are shifted by
+    interpolation instead.
     """
     delays = np.atleast_2d(delays)
     P, n = delays.shape[0], t.size
+    dt = float(t[1] - t[0])
     change = np.diff(u, prepend=u[0])
     rising = change > 0
-    rebound = v > 0
-    # DELAYS = tau_comp_rise, tau_comp_fall, tau_reb_rise, tau_reb_fall
-    which = np.where(rebound, 2, 0) + np.where(rising, 0, 1)
+    which = np.where(v > 0, 2, 0) + np.where(rising, 0, 1)  # tau_comp_rise, tau_comp_fall, tau_reb_rise, ..._fall
     moved = np.flatnonzero(change != 0)
     out = np.empty((P, n, 2))
     out[:, :, 0], out[:, :, 1] = u[0], 1.0  # before any change takes effect: the initial command
     if moved.size == 0:
         return out
     for p in range(P):
-        effective = np.maximum.accumulate(t[moved] + delays[p, which[moved]])
-        j = np.searchsorted(effective, t, side="right") - 1  # the latest change that has taken effect
+        tau = delays[p, which]
+        if moved.size > n // 10:  # a continuous command: shift it by its local delay
+            out[p, :, 0] = np.interp(t - tau, t, u)
+            out[p, :, 1] = np.where(change > 0, 1.0, np.where(change < 0, 0.0, np.nan))
+            out[p, :, 1] = _hold(out[p, :, 1])
+            continue
+        effective = np.maximum.accumulate(t[moved] - dt + tau[moved])  # the ramp of change i spans one step
+        level = np.full(n, u[0])
+        for e, jump in zip(effective, change[moved], strict=True):
+            level += jump * np.clip((t - e) / dt, 0.0, 1.0)
+        out[p, :, 0] = level
+        j = np.searchsorted(effective + dt, t, side="right") - 1  # the latest change completed by t
         hit = j >= 0
-        out[p, hit, 0] = u[moved[j[hit]]]
         out[p, hit, 1] = rising[moved[j[hit]]]
+    return out
+
+
+def _hold(flags: NDArray) -> NDArray:
+    """Forward-fill NaNs (samples without a change keep the last direction; rising before any)."""
+    out = flags.copy()
+    last = 1.0
+    for k in range(out.size):
+        if np.isnan(out[k]):
+            out[k] = last
+        else:
+            last = out[k]
     return out
 
 
