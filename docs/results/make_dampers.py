@@ -59,11 +59,12 @@ step checked.
 **Friction damper.** Bingham fails here: the fit leans on a stiff spring k1 and a very wide smoothing
 velocity v_eps to imitate the pre-sliding slope at the reversals, which is amplitude-specific, so the held-out J
 is several times the training J. Adding backlash helps Bingham a little, not enough. Bouc-Wen describes the
-sticking-slipping transition as a hysteretic state and carries over to the other amplitudes far better. With
-backlash, Bouc-Wen ends at a higher J than without it although the model without backlash is a special case
-(gap -> 0): that is the single Nelder-Mead run stopping in a worse local minimum with one more unknown, not
-evidence against backlash; a multi-start or the step-by-step approach (fit without gap first, then add it) is
-the fix. No model captures two features visible in the figures: the strong asymmetry between the compression and
+sticking-slipping transition as a hysteretic state and carries over to the other amplitudes far better.
+Bouc-Wen with backlash is fitted in two stages (without the gap, then with it), so it can only match or beat
+Bouc-Wen alone; it ends only marginally lower on every run: the hysteretic state already reproduces most of
+what looked like a dead zone at the reversals, and the gap explains little more. (Fitted in one go from a
+guessed gap, it had stopped in a worse local minimum.) No model captures two features visible in the figures:
+the strong asymmetry between the compression and
 tension force levels (the models are symmetric apart from the spring offset) and the chatter at the force peaks.
 """
 
