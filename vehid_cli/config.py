@@ -56,6 +56,54 @@ class Vehicle(_Section):
     kR: NonNeg = Field(0.0, description="front anti-roll bar stiffness [N m/rad]")
     cf: NonNeg = Field(description="front suspension damping [N s/m]")
     cr: NonNeg = Field(description="rear suspension damping [N s/m]")
+    effects: dict[str, dict[str, Finite] | None] | None = Field(
+        None,
+        description="nonlinear effects beside the linear car: effect name -> its parameters "
+        "(vehid_cli/models/effects.py; missing parameters at their defaults); "
+        "needs simulation.integrator rk4 or newmark",
+    )
+
+    @model_validator(mode="after")
+    def _effects(self) -> Vehicle:
+        from .models.effects import LIBRARY, bound_violation
+
+        for name, params in (self.effects or {}).items():
+            key = f"vehicle.effects.{name}"
+            if name not in LIBRARY:
+                hint = _did_you_mean(name, LIBRARY)
+                known = "" if hint else f" (known: {', '.join(LIBRARY)})"
+                raise _KeyedError(key, f"unknown effect '{name}'{hint}{known}")
+            effect = LIBRARY[name]
+            for pname, value in (params or {}).items():
+                if pname not in effect.names():
+                    hint = _did_you_mean(pname, effect.names())
+                    if f"{pname}_f" in effect.names():
+                        hint = f"; it is per axle: give '{pname}_f' and '{pname}_r'"
+                    known = "" if hint else f" (known: {', '.join(effect.names())})"
+                    raise _KeyedError(f"{key}.{pname}", f"'{pname}' is not a parameter of {name}{hint}{known}")
+                why = bound_violation(name, pname, value)
+                if why is not None:
+                    raise _KeyedError(f"{key}.{pname}", why)
+            if name == "asymmetric_damping":
+                for axle, c in (("f", self.cf), ("r", self.cr)):
+                    dc = (params or {}).get(f"dc_{axle}", 0.0)
+                    if abs(dc) >= 2 * c and dc != 0.0:
+                        raise _KeyedError(
+                            f"{key}.dc_{axle}",
+                            f"|dc_{axle}| = {abs(dc):g} N s/m must stay below 2 c{axle} = {2 * c:g} N s/m, "
+                            "or the compression or rebound damping turns negative",
+                        )
+            if name == "backlash":
+                for axle, c in (("f", self.cf), ("r", self.cr)):
+                    if (params or {}).get(f"gap_{axle}", 0.0) > 0.0 and c <= 0.0:
+                        raise _KeyedError(f"{key}.gap_{axle}", f"backlash needs a damper: c{axle} is 0")
+        return self
+
+    def effect_values(self) -> dict[str, dict[str, float]]:
+        """The declared effects with every parameter resolved (defaults for those not given)."""
+        from .models.effects import LIBRARY
+
+        return {name: {**LIBRARY[name].defaults(), **(p or {})} for name, p in (self.effects or {}).items()}
 
     @model_validator(mode="after")
     def _geometry(self) -> Vehicle:
@@ -161,10 +209,14 @@ class Simulation(_Section):
 
     duration: Pos = Field(3.0, description="simulated time [s]")
     dt: Pos = Field(0.001, description="time step [s]")
-    integrator: Literal["exact", "newmark", "exact-reference"] = Field(
+    integrator: Literal["exact", "newmark", "exact-reference", "rk4"] = Field(
         "exact",
         description="exact: first-order-hold exact discretisation (compiled modal recursions); newmark: average "
-        "acceleration; exact-reference: the same as exact in plain NumPy, slower, for cross-checks",
+        "acceleration; exact-reference: the same as exact in plain NumPy, slower, for cross-checks; rk4: the "
+        "compiled fourth-order kernel (with vehicle.effects: rk4 or newmark, chosen explicitly)",
+    )
+    substeps: Annotated[int, Field(ge=1, le=1000)] | None = Field(
+        None, description="rk4/newmark with effects: integration steps per sample (the kernel runs at dt/substeps)"
     )
 
     @model_validator(mode="after")
@@ -228,6 +280,21 @@ class Config(_Section):
     identify: Identify = Identify()
 
     _source: str = PrivateAttr(default="<config>")
+
+    @model_validator(mode="after")
+    def _effects_need_time_stepping(self) -> Config:
+        sim = self.simulation
+        if self.vehicle.effects and sim.integrator not in ("rk4", "newmark"):
+            raise _KeyedError(
+                "simulation.integrator",
+                f"vehicle.effects ({', '.join(self.vehicle.effects)}) make the car nonlinear: the '{sim.integrator}' "
+                "integrator is for the linear car; set simulation.integrator to rk4 (order 4) or newmark (order 2)",
+            )
+        if sim.substeps not in (None, 1) and sim.integrator not in ("rk4", "newmark"):
+            raise _KeyedError(
+                "simulation.substeps", f"substeps are for the rk4 and newmark kernels, not '{sim.integrator}'"
+            )
+        return self
 
     @model_validator(mode="after")
     def _identify_against_vehicle(self) -> Config:

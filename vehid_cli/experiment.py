@@ -20,10 +20,12 @@ from numpy.typing import ArrayLike, NDArray
 from .config import Config
 from .data import read_measurement, time_grid
 from .errors import InputError
+from .models.effects import check_names
 from .models.fullcar import FullCarMatrices, assemble, parameter_batch
 from .noise import add_noise
 from .road import road_function
 from .sim.linear import Response, simulate
+from .sim.nonlinear import simulate_effects
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
 
@@ -65,16 +67,55 @@ class Experiment:
         return float(self.t[1] - self.t[0])
 
     def parameters(self, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:
-        """All 16 parameters for a batch: the configured car with `values` replacing some of them."""
-        return parameter_batch(self.config.vehicle, values)
+        """All 16 parameters for a batch: the configured car with `values` replacing some of them
+        (effect parameters, ``effect.name``, are ignored here: see ``effects``)."""
+        car, _ = split_values(values)
+        return parameter_batch(self.config.vehicle, car)
 
     def matrices(self, values: Mapping[str, ArrayLike] | None = None) -> FullCarMatrices:
         """M, C, K, B, G for a batch of cars."""
         return assemble(self.parameters(values))
 
+    def effects(self, values: Mapping[str, ArrayLike] | None = None) -> dict[str, dict[str, ArrayLike]]:
+        """The effects of a batch: the declared ones (vehicle.effects) with `values` named ``effect.param``
+        replacing some parameters; naming a parameter of an undeclared effect adds that effect (its other
+        parameters at their defaults)."""
+        _, extra = split_values(values)
+        out: dict[str, dict[str, ArrayLike]] = {k: dict(v) for k, v in self.config.vehicle.effect_values().items()}
+        for key, value in extra.items():
+            effect, _, name = key.partition(".")
+            out.setdefault(effect, {})[name] = value
+        check_names(out)
+        return out
+
     def simulate(self, values: Mapping[str, ArrayLike] | None = None) -> Response:
-        """Clean responses of a batch of cars (the configured car when `values` is None)."""
-        return simulate(self.matrices(values), self.road, self.dt, self.config.simulation.integrator)
+        """Clean responses of a batch of cars (the configured car when `values` is None).
+
+        `values` maps vehicle parameter names (``m``, ``a1``, ...) and effect parameters (``hysteresis.alpha_f``)
+        to scalars or arrays of one batch shape. Without effects and with a linear integrator (exact, newmark,
+        exact-reference) this is the linear path of ``sim.linear``; with effects, or integrator rk4, or
+        substeps > 1, the compiled kernel of ``sim.nonlinear`` at the configured integrator (never chosen
+        silently: effects with a linear-only integrator are an error).
+        """
+        sim = self.config.simulation
+        effects = self.effects(values)
+        substeps = sim.substeps or 1
+        if not effects and sim.integrator != "rk4" and substeps == 1:
+            return simulate(self.matrices(values), self.road, self.dt, sim.integrator)
+        if sim.integrator not in ("rk4", "newmark"):
+            raise ValueError(
+                f"effects {sorted(effects)} need simulation.integrator rk4 or newmark, not '{sim.integrator}'"
+            )
+        p = self.parameters(values)
+        return simulate_effects(assemble(p), p["cf"], p["cr"], effects, self.road, self.dt, sim.integrator, substeps)
+
+
+def split_values(values: Mapping[str, ArrayLike] | None) -> tuple[dict[str, ArrayLike], dict[str, ArrayLike]]:
+    """Vehicle parameters and effect parameters (dotted ``effect.param`` names) of a batch's values."""
+    car, effects = {}, {}
+    for key, value in (values or {}).items():
+        (effects if "." in key else car)[key] = value
+    return car, effects
 
 
 def build_experiment(config: Config, road_file: str | Path | None = None) -> Experiment:

@@ -238,7 +238,9 @@ def _integrate(
     """The one time loop: every car p of the batch, every step k, by RK4 (method 0) or Newmark (1).
 
     Matrices (P, ., .), params (P, n_par), q0 (P, n_q), z0 (P, n_z), road u (1 or P, n, n_u); outputs
-    (P, n, .) get q, qd, qdd, the strut forces and the internal states at every sample.
+    (P, n, .) get q, qd, qdd, the strut forces and the internal states at every sample. Where the road drives
+    struts (E != 0) the rates at a sample are the left limit (end of the step before); each step starts
+    from the right limit, re-evaluated when the road's slope changes.
     """
     P, n = out_q.shape[0], u.shape[1]
     nq, ns, nz, nu = q0.shape[1], D.shape[1], z0.shape[1], u.shape[2]
@@ -259,7 +261,43 @@ def _integrate(
         for c in range(nu):
             yd[c] = (u[r, 1, c] - u[r, 0, c]) / dt
         _rates(q, v, z, u[r, 0], yd, Minv[p], C[p], K[p], B[p], D[p], E[p], force, par, d, dd, f, zd, rhs, a)
+        road_drives_struts = False
+        for i in range(ns):
+            for c in range(nu):
+                if E[p, i, c] != 0.0:
+                    road_drives_struts = True
         for k in range(n):
+            if k > 1 and road_drives_struts:
+                # The road's slope jumps at samples and the struts see it (dd = D qd + E yd): the rates that
+                # start the step are the right limit, at the new slope (else the schemes drop to order 1).
+                changed = False
+                for c in range(nu):
+                    slope = (u[r, k, c] - u[r, k - 1, c]) / dt
+                    if slope != yd[c]:
+                        changed = True
+                        yd[c] = slope
+                if changed:
+                    _rates(
+                        q,
+                        v,
+                        z,
+                        u[r, k - 1],
+                        yd,
+                        Minv[p],
+                        C[p],
+                        K[p],
+                        B[p],
+                        D[p],
+                        E[p],
+                        force,
+                        par,
+                        d,
+                        dd,
+                        f,
+                        zd,
+                        rhs,
+                        a,
+                    )
             if k > 0:
                 if method == 0:
                     _rk4_step(
