@@ -431,6 +431,75 @@ def _report_dampers(files: list[Path], fmt: str, output: Path | None, plots: Pat
         out.print(f"wrote {len(written)} figure(s) to {plots}")
 
 
+@app.command()
+@_guarded
+def diagnose(
+    config: Annotated[Path, typer.Argument(help="Experiment config (YAML): the declared model.", show_default=False)],
+    data: Annotated[Path, typer.Option("--data", help="Measurement file to fit and diagnose.", show_default=False)],
+    validate: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--validate", help="A second run to judge the augmented model on (else held-out blocks)."),
+    ] = None,
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the SPEC section 5 JSON here.")] = None,  # noqa: UP045
+    set_: SetOption = None,
+) -> None:
+    """Close the loop: fit, analyse the residual, rank candidate missing effects, add the best, re-fit.
+
+    The objective is wls (J = noise-weighted residual power per sample, chi2 per sample); the noise is
+    estimated from the data unless --set noise.level=Np gives it; the integrator is rk4 unless the config
+    sets rk4 or newmark. A candidate is accepted when its likelihood-ratio test is significant (p below
+    1e-3 / number of candidates) and it lowers the validation J.
+    """
+    from rich.table import Table
+
+    from .diagnose import diagnose as run_diagnosis
+    from .results import to_json
+
+    cfg = load_config(config, ["identify.objective=wls", "noise.level=0", *(set_ or ())])
+    if isinstance(cfg, DamperConfig):
+        raise InputError(
+            "diagnose works on the full car for now; damper configs are not supported yet", source=str(config)
+        )
+    if json_out is not None:
+        check_writable(json_out, (".json",))
+    result = run_diagnosis(cfg, data, validate, log=lambda msg: err.print(msg, markup=False))
+    doc = result.to_json()
+    table = Table(title=f"candidate effects (round 1; alpha = {result.alpha:g}, Bonferroni)")
+    for col in ("effect", "k", "LR statistic", "p-value", "J with it", "BIC margin", "validation J", "accepted"):
+        table.add_column(col)
+    for r in result.rounds[0] if result.rounds else ():
+        table.add_row(
+            r.effect, str(r.k), f"{r.statistic:.4g}", f"{r.p_value:.3g}", f"{r.J:.4g}", f"{r.bic_margin:.4g}",
+            f"{r.validation_J:.4g}", "yes" if r.accepted else "no",
+        )  # fmt: skip
+    out.print(table)
+    ba = Table(title="before / after (J = wls chi2 per sample on the training data)")
+    ba.add_column("")
+    ba.add_column("before")
+    ba.add_column("after")
+
+    def fmt(v):
+        return "-" if v is None else f"{v:.4g}"
+
+    b, a = result.before, result.after
+    ba.add_row("effects", ", ".join(b.effects) or "(declared)", ", ".join(a.effects) or "(none added)")
+    ba.add_row("J", fmt(b.J), fmt(a.J))
+    ba.add_row("chi2 per sample (all data)", fmt(b.chi2_per_sample), fmt(a.chi2_per_sample))
+    ba.add_row("validation J", fmt(b.validation_J), fmt(a.validation_J))
+    ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
+    for j, name in enumerate(a.names):
+        before = f"{b.x[j]:.5g} ± {b.ci[j]:.2g}" if j < len(b.names) else "-"
+        ba.add_row(name, before, f"{a.x[j]:.5g} ± {a.ci[j]:.2g}")
+    out.print(ba)
+    out.print(f"selected: {', '.join(result.selected) or 'nothing missing'} ({result.wall_s:.1f} s)")
+    if json_out is not None:
+        from .data import atomic_path
+
+        with atomic_path(json_out) as tmp:
+            tmp.write_text(to_json(doc))
+        out.print(f"wrote {json_out}")
+
+
 def run() -> None:
     """Console-script entry point."""
     app()

@@ -9,6 +9,7 @@ simulation of the whole population.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from .crlb import CramerRao, cramer_rao
 from .data import read_measurement
 from .errors import InputError
 from .experiment import Experiment, build_experiment, run_streams
+from .models.effects import LIBRARY
 from .noise import add_noise, estimate_noise_sigma, noise_sigma, sigma_from_level
 from .objectives import Objective, objective_families
 from .optimizers.base import Problem
@@ -48,6 +50,58 @@ class Task:
     @property
     def dim(self) -> int:
         return len(self.names)
+
+    @property
+    def car_names(self) -> tuple[str, ...]:
+        """The unknowns that are vehicle parameters (not ``effect.param``)."""
+        return tuple(n for n in self.names if not is_effect_unknown(n))
+
+    def with_unknowns(
+        self,
+        extra: tuple[str, ...] | list[str],
+        limits: Mapping[str, tuple[float, float]] | None = None,
+        start: Mapping[str, float] | None = None,
+    ) -> Task:
+        """The same task with more unknowns: effect parameters ``effect.param`` (e.g. ``hysteresis.alpha_f``)
+        or further vehicle parameters (box: identify.bounds x configured value). Effect parameters' nominal
+        values are the config's declared effect values or the library defaults (``start`` overrides), their box
+        the effect's physical bounds (``limits`` narrows it).
+
+        The augmented task's truth covers the vehicle unknowns only, so it is None here (effect parameters
+        have no configured truth); callers compare ``car_names`` against the original task's truth.
+        """
+        names = list(self.names)
+        lower, upper, nominal = list(self.lower), list(self.upper), list(self.nominal)
+        for name in extra:
+            if name in names:
+                raise InputError(f"unknown '{name}' is listed twice", key="identify.unknowns")
+            values = self.config.vehicle.values()
+            if is_effect_unknown(name):
+                lo, hi = effect_box(name)
+                x0 = effect_nominal(self.config, name)
+            elif name in values:  # a vehicle parameter: the configured bounds factors
+                lo_f, hi_f = self.config.identify.bounds
+                lo, hi, x0 = lo_f * values[name], hi_f * values[name], values[name]
+            else:
+                raise InputError(
+                    f"'{name}' is neither a vehicle parameter nor an effect parameter (effect.param)",
+                    key="identify.unknowns",
+                )
+            if limits and name in limits:
+                lo, hi = max(lo, limits[name][0]), min(hi, limits[name][1])
+            x0 = (start or {}).get(name, x0)
+            names.append(name)
+            lower.append(lo)
+            upper.append(hi)
+            nominal.append(float(np.clip(x0, lo, hi)))
+        return dataclasses.replace(
+            self,
+            names=tuple(names),
+            lower=np.array(lower, dtype=float),
+            upper=np.array(upper, dtype=float),
+            nominal=np.array(nominal, dtype=float),
+            truth=None if len(names) > len(self.names) else self.truth,
+        )
 
     def reference(self, run: int) -> dict[str, NDArray]:
         """The responses run `run` identifies from: measured ones, or clean plus the run's own noise."""
@@ -97,6 +151,31 @@ class Task:
         if self.noise_free:  # the bound scales with sigma, and sigma is zero
             bound = dataclasses.replace(bound, re_sd_percent=np.zeros_like(bound.re_sd_percent), nre_rms_percent=0.0)
         return bound
+
+
+def is_effect_unknown(name: str) -> bool:
+    """``effect.param`` names an effect parameter of the library (``hysteresis.alpha_f``)."""
+    effect, dot, param = name.partition(".")
+    return bool(dot) and effect in LIBRARY and param in LIBRARY[effect].names()
+
+
+def effect_box(name: str) -> tuple[float, float]:
+    """Physical bounds of an effect unknown ``effect.param`` (an open lower bound nudged just inside)."""
+    effect, _, param = name.partition(".")
+    if not is_effect_unknown(name):
+        raise InputError(f"'{name}' is not an effect parameter (effect.param)", key="identify.unknowns")
+    p = LIBRARY[effect].param(param)
+    lo = p.lower + 1e-9 * (p.upper - p.lower) if p.open_lower else p.lower
+    return float(lo), float(p.upper)
+
+
+def effect_nominal(config: Config, name: str) -> float:
+    """Configured value of an effect unknown: the declared effect's value, else the library default."""
+    effect, _, param = name.partition(".")
+    declared = config.vehicle.effect_values().get(effect)
+    if declared is not None and param in declared:
+        return float(declared[param])
+    return float(LIBRARY[effect].defaults()[param])
 
 
 def build_task(config: Config, data_file: str | Path | None = None) -> Task:

@@ -1,0 +1,125 @@
+"""vehid diagnose (issue 6): residual whiteness, the attribution and the augmentation loop on the bump runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from vehid_cli.cli import app
+from vehid_cli.config import load_config
+from vehid_cli.diagnose import diagnose
+from vehid_cli.diagnose.residuals import autocorrelation, bin_residual, ljung_box
+from vehid_cli.identification import build_task
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"
+DATA = ROOT.parent / "shared" / "data" / "vehicle"
+OVERRIDES = ["identify.objective=wls", "noise.level=0", "identify.truth=config", "identify.algorithm.name=hybrid"]
+
+needs_data = pytest.mark.skipif(not (DATA / "bump_run_A.csv").exists(), reason="shared vehicle data not present")
+
+
+# ------------------------------------------------------------------------------------ residual statistics
+
+
+def test_ljung_box_accepts_white_noise():
+    rng = np.random.default_rng(1)
+    p = [ljung_box(rng.standard_normal(3000), lags=20).p_value for _ in range(40)]
+    assert np.mean(np.array(p) < 0.05) <= 0.2  # about 5 % rejections at the 5 % level
+    w = ljung_box(rng.standard_normal(3000), lags=20)
+    assert w.band == pytest.approx(1.96 / np.sqrt(3000), rel=1e-3)
+    assert w.outside < 0.25
+
+
+def test_ljung_box_and_acf_of_ar1():
+    rng = np.random.default_rng(2)
+    phi, n = 0.6, 20000
+    e = rng.standard_normal(n)
+    x = np.empty(n)
+    x[0] = e[0]
+    for t in range(1, n):
+        x[t] = phi * x[t - 1] + e[t]
+    acf = autocorrelation(x, 5)
+    np.testing.assert_allclose(acf[1:], phi ** np.arange(1, 6), atol=0.03)
+    w = ljung_box(x, lags=20)
+    assert w.p_value < 1e-10
+    assert w.outside > 0.2
+
+
+def test_binned_residual_shows_a_step():
+    rng = np.random.default_rng(3)
+    v = rng.standard_normal(5000)
+    r = 0.5 * np.sign(v) + rng.standard_normal(5000)
+    b = bin_residual(v, r, "velocity", bins=10)
+    assert b.mean[0] < -0.3 and b.mean[-1] > 0.3
+    assert np.nanmax(np.abs(b.z)) > 10
+
+
+# ------------------------------------------------------------------------------------ effect unknowns
+
+
+def test_task_with_effect_unknowns_simulates_the_effect():
+    cfg = load_config(BASE, [*OVERRIDES[:-1], "simulation.integrator=rk4", "noise.level=0"])
+    task = build_task(cfg)
+    aug = task.with_unknowns(["asymmetric_damping.dc_f", "cf"], limits={"asymmetric_damping.dc_f": (-5000, 5000)})
+    assert aug.names[-2:] == ("asymmetric_damping.dc_f", "cf")
+    assert aug.lower[-2] == -5000 and aug.upper[-2] == 5000
+    assert aug.nominal[-2] == 0.0 and aug.nominal[-1] == 2800
+    assert aug.truth is None
+    problem = aug.problem(task.reference(0))
+    x = np.vstack([aug.nominal, np.r_[aug.nominal[:-2], 2000.0, 2800.0]])
+    costs = problem.cost(x)
+    assert costs[0] == pytest.approx(0.0, abs=1e-12)  # noise-free, at the truth
+    assert costs[1] > 1.0
+    with pytest.raises(Exception, match="neither"):
+        task.with_unknowns(["nonsense.x"])
+
+
+# ------------------------------------------------------------------------------------ the loop
+
+
+@needs_data
+def test_linear_run_selects_nothing():
+    cfg = load_config(BASE, OVERRIDES)
+    d = diagnose(cfg, DATA / "bump_run_linear.csv", analyse_residuals=False)
+    assert d.selected == ()
+    assert d.before.chi2_per_sample < 1.05
+    assert all(not r.accepted for r in d.rounds[0])
+
+
+@needs_data
+def test_bump_run_A_acceptance(tmp_path):
+    """Issue 6, acceptance 1 (vehicle part)."""
+    out = tmp_path / "diag.json"
+    result = CliRunner().invoke(
+        app,
+        [
+            "diagnose", str(BASE), "--data", str(DATA / "bump_run_A.csv"), "--validate", str(DATA / "bump_run_B.csv"),
+            "--json", str(out), *[a for o in OVERRIDES for a in ("--set", o)],
+        ],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    doc = json.loads(out.read_text())
+    assert {"before", "after", "candidates", "selected"} <= set(doc)
+    for side in ("before", "after"):
+        assert {"estimates", "J", "chi2_per_sample", "validation_J", "nre_percent"} <= set(doc[side])
+    for c in doc["candidates"]:
+        assert {"effect", "statistic", "p_value", "J"} <= set(c)
+    stats = [c["statistic"] for c in doc["candidates"]]
+    assert stats == sorted(stats, reverse=True)
+    assert doc["selected"] == ["asymmetric_damping"]
+    before, after = doc["before"], doc["after"]
+    assert after["nre_percent"] < 1.0
+    assert after["nre_percent"] * 10 <= before["nre_percent"]
+    assert after["chi2_per_sample"] <= 1.1
+    assert after["validation_J"] < before["validation_J"]
+
+
+def test_diagnose_bad_input_exits_2(tmp_path):
+    result = CliRunner().invoke(app, ["diagnose", str(BASE), "--data", str(tmp_path / "missing.csv")])
+    assert result.exit_code == 2
+    assert "missing.csv" in result.output

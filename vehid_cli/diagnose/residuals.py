@@ -1,0 +1,171 @@
+"""Residual analysis of a fitted full-car model: is what is left noise, or missing physics?
+
+* power: chi² per sample, the noise-weighted residual power over the noise power the data implies
+  (the task's sigma: Eq. 15 from noise.level, or estimated from the data when noise.level is 0);
+* whiteness per channel: normalised autocorrelation up to a lag, the ±1.96/sqrt(n) band, and the
+  Ljung-Box portmanteau Q = n (n + 2) sum_k rho_k² / (n - k), chi²(lags) under white noise;
+* cross-correlation of each residual channel with each road velocity (the input), against the same band;
+* the fingerprint: each corner's residual binned against that corner's suspension velocity and deflection
+  (deflection d = G q_body - wheel, from the fitted model's states), where a missing strut effect shows
+  as a systematic shape (an odd step: friction; a kink at v = 0: asymmetric damping; d³: a progressive spring).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+BAND_Z = 1.959963984540054  # two-sided 95 %
+
+
+@dataclass(frozen=True)
+class Whiteness:
+    """Autocorrelation and Ljung-Box test of one residual sequence."""
+
+    acf: NDArray  # (lags + 1,) rho_0 = 1 .. rho_lags
+    band: float  # 1.96 / sqrt(n)
+    outside: float  # fraction of lags 1..L with |rho_k| above the band (about 5 % for white noise)
+    q: float  # Ljung-Box statistic
+    p_value: float  # under chi²(lags)
+    lags: int
+
+
+def autocorrelation(x: NDArray, lags: int) -> NDArray:
+    """Normalised (biased) autocorrelation rho_0..rho_lags of a 1-D sequence, mean removed."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    n = x.size
+    den = float(np.dot(x, x))
+    if den == 0.0:
+        return np.r_[1.0, np.zeros(lags)]
+    return np.array([1.0] + [float(np.dot(x[: n - k], x[k:])) / den for k in range(1, lags + 1)])
+
+
+def ljung_box(x: NDArray, lags: int = 20) -> Whiteness:
+    """Whiteness of x: its autocorrelation, the 95 % band and the Ljung-Box Q with its p-value."""
+    x = np.asarray(x, dtype=float).ravel()
+    n = x.size
+    lags = int(max(1, min(lags, n // 4)))
+    acf = autocorrelation(x, lags)
+    k = np.arange(1, lags + 1)
+    q = float(n * (n + 2) * np.sum(acf[1:] ** 2 / (n - k)))
+    band = BAND_Z / np.sqrt(n)
+    return Whiteness(
+        acf=acf,
+        band=float(band),
+        outside=float(np.mean(np.abs(acf[1:]) > band)),
+        q=q,
+        p_value=float(stats.chi2.sf(q, lags)),
+        lags=lags,
+    )
+
+
+def cross_correlation(x: NDArray, u: NDArray, lags: int) -> NDArray:
+    """Normalised cross-correlation r_xu(k) = sum x[t+k] u[t] / (|x| |u|), k = 0..lags (x after u)."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    u = np.asarray(u, dtype=float) - np.mean(u)
+    den = float(np.linalg.norm(x) * np.linalg.norm(u))
+    n = x.size
+    if den == 0.0:
+        return np.zeros(lags + 1)
+    return np.array([float(np.dot(x[k:], u[: n - k])) / den for k in range(lags + 1)])
+
+
+@dataclass(frozen=True)
+class Binned:
+    """Mean weighted residual of one corner in bins of one of its strut variables."""
+
+    variable: str  # "velocity" [m/s] or "deflection" [m]
+    centres: NDArray  # (bins,)
+    mean: NDArray  # (bins,) mean residual (units of noise sigma)
+    count: NDArray  # (bins,)
+
+    @property
+    def z(self) -> NDArray:
+        """Each bin's mean over its standard error under white unit noise (|z| >> 2: a systematic shape)."""
+        return self.mean * np.sqrt(np.maximum(self.count, 1))
+
+
+def bin_residual(variable: NDArray, residual: NDArray, name: str, bins: int = 12) -> Binned:
+    """Residual averaged in quantile bins of `variable` (equal counts: robust to long tails at rest)."""
+    edges = np.unique(np.quantile(variable, np.linspace(0, 1, bins + 1)))
+    idx = np.clip(np.searchsorted(edges, variable, side="right") - 1, 0, edges.size - 2)
+    nb = edges.size - 1
+    count = np.bincount(idx, minlength=nb).astype(float)
+    total = np.bincount(idx, weights=residual, minlength=nb)
+    centre = np.bincount(idx, weights=variable, minlength=nb)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return Binned(name, centre / count, total / count, count.astype(int))
+
+
+@dataclass(frozen=True)
+class ResidualAnalysis:
+    """Everything the residual of one fit says (channels: acc1..4 then disp1..4, as the objective orders them)."""
+
+    channels: tuple[str, ...]
+    residual: NDArray  # (n, channels) weighted residual (data - model) / sigma
+    chi2_per_sample: float
+    chi2_channel: NDArray  # (channels,)
+    whiteness: tuple[Whiteness, ...]  # per channel
+    road_xcorr_max: NDArray  # (channels, 4) largest |cross-correlation| with each road velocity over lags
+    band: float
+    fingerprint: tuple[tuple[Binned, Binned], ...]  # per corner: (velocity, deflection), acc residual of that corner
+
+    def summary(self) -> dict:
+        """Plain numbers for JSON."""
+        return {
+            "chi2_per_sample": self.chi2_per_sample,
+            "chi2_per_channel": dict(zip(self.channels, map(float, self.chi2_channel), strict=True)),
+            "ljung_box_p": dict(zip(self.channels, (w.p_value for w in self.whiteness), strict=True)),
+            "acf_outside_band": dict(zip(self.channels, (w.outside for w in self.whiteness), strict=True)),
+            "road_xcorr_max": float(np.max(self.road_xcorr_max)),
+            "band": self.band,
+            "fingerprint_max_z": [
+                {"velocity": float(np.nanmax(np.abs(v.z))), "deflection": float(np.nanmax(np.abs(d.z)))}
+                for v, d in self.fingerprint
+            ],
+        }
+
+
+def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 20, bins: int = 12):
+    """Residual analysis of the car `names` = x on the task's experiment against `reference`."""
+    exp = task.experiment
+    values = {n: np.asarray(v, dtype=float) for n, v in zip(names, x, strict=True)}
+    with np.errstate(all="ignore"):
+        resp = exp.simulate(values)
+    parts, channels = [], []
+    for family, ref in reference.items():
+        parts.append((ref - getattr(resp, family)) / task.sigma[family])
+        channels += [f"{family}{i + 1}" for i in range(ref.shape[1])]
+    residual = np.concatenate(parts, axis=1)
+    n = residual.shape[0]
+    white = tuple(ljung_box(residual[:, j], lags) for j in range(residual.shape[1]))
+    road_v = np.gradient(exp.road, exp.dt, axis=0)
+    xc = np.array(
+        [[np.max(np.abs(cross_correlation(residual[:, j], road_v[:, i], lags))) for i in range(4)]
+         for j in range(residual.shape[1])]
+    )  # fmt: skip
+    G = exp.matrices(values).G
+    q, qd = resp.q, resp.qd
+    defl = q[:, :3] @ G.T - q[:, 3:]
+    vel = qd[:, :3] @ G.T - qd[:, 3:]
+    col = channels.index("acc1") if "acc1" in channels else 0
+    fingerprint = tuple(
+        (
+            bin_residual(vel[:, i], residual[:, col + i], "velocity", bins),
+            bin_residual(defl[:, i], residual[:, col + i], "deflection", bins),
+        )
+        for i in range(4)
+    )
+    return ResidualAnalysis(
+        channels=tuple(channels),
+        residual=residual,
+        chi2_per_sample=float(np.mean(residual**2)),
+        chi2_channel=np.mean(residual**2, axis=0),
+        whiteness=white,
+        road_xcorr_max=xc,
+        band=float(BAND_Z / np.sqrt(n)),
+        fingerprint=fingerprint,
+    )
