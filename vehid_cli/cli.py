@@ -81,6 +81,17 @@ def _progress(verb: str):
     )  # fmt: skip
 
 
+def _results_target(config: Path, cfg, output: Path | None, json_out: Path | None) -> Path:
+    """The results file (default runs/<config>-<hash>.h5), checked writable with the --json file before any work."""
+    if output is None:
+        Path("runs").mkdir(exist_ok=True)
+        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+    target = check_writable(output, (".h5", ".hdf5"))
+    if json_out is not None:
+        check_writable(json_out, (".json",))
+    return target
+
+
 def _version(value: bool) -> None:
     if value:
         out.print(f"vehid {__version__}")
@@ -184,14 +195,9 @@ def _identify_damper(
     """`vehid identify` for a damper: a campaign on synthetic data, one fit (plus validation) on measured data."""
     from .damper_campaign import result_json, run_identification, write_result_h5
     from .damper_report import parameter_table
-    from .results import to_json
+    from .results import write_json
 
-    if output is None:
-        Path("runs").mkdir(exist_ok=True)
-        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
-    target = check_writable(output, (".h5", ".hdf5"))
-    if json_out is not None:
-        check_writable(json_out, (".json",))
+    target = _results_target(config, cfg, output, json_out)
     measured = data is not None or (cfg.data is not None and cfg.data.file is not None)
     total = 1 if measured else cfg.identify.runs
     with _progress("identify") as progress:
@@ -199,10 +205,7 @@ def _identify_damper(
         result = run_identification(cfg, data, on_run=lambda d, n: progress.update(bar, completed=d))
     write_result_h5(target, result)
     if json_out is not None:
-        from .data import atomic_path
-
-        with atomic_path(json_out) as tmp:
-            tmp.write_text(to_json(result_json(result)))
+        write_json(json_out, result_json(result))
     out.print(parameter_table(result, str(target)))
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
 
@@ -234,28 +237,20 @@ def identify(
 
     from .campaign import run_campaign_to_file
     from .report.tables import summary_table
-    from .results import campaign_json, to_json
+    from .results import campaign_json, write_json
 
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
     if isinstance(cfg, DamperConfig):
         _identify_damper(cfg, config, data, output, json_out)
         return
-    if output is None:
-        Path("runs").mkdir(exist_ok=True)
-        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
-    target = check_writable(output, (".h5", ".hdf5"))
-    if json_out is not None:
-        check_writable(json_out, (".json",))
+    target = _results_target(config, cfg, output, json_out)
     with _progress("identify") as progress:
         bar = progress.add_task(f"{cfg.identify.algorithm.name}/{cfg.identify.objective}", total=cfg.identify.runs)
         campaign = run_campaign_to_file(
             cfg, target, data, jobs=jobs, on_run=lambda d, n: progress.update(bar, completed=d)
         )
     if json_out is not None:
-        from .data import atomic_path
-
-        with atomic_path(json_out) as tmp:
-            tmp.write_text(to_json(campaign_json(campaign)))
+        write_json(json_out, campaign_json(campaign))
     out.print(summary_table(campaign))
     s = campaign.summary
     if s.model_inadequate:
@@ -453,7 +448,7 @@ def diagnose(
     from rich.table import Table
 
     from .diagnose import diagnose as run_diagnosis
-    from .results import to_json
+    from .results import write_json
 
     cfg = load_config(config, ["identify.objective=wls", "noise.level=0", *(set_ or ())])
     if isinstance(cfg, DamperConfig):
@@ -493,10 +488,7 @@ def diagnose(
     out.print(ba)
     out.print(f"selected: {', '.join(result.selected) or 'nothing missing'} ({result.wall_s:.1f} s)")
     if json_out is not None:
-        from .data import atomic_path
-
-        with atomic_path(json_out) as tmp:
-            tmp.write_text(to_json(doc))
+        write_json(json_out, doc)
         out.print(f"wrote {json_out}")
 
 

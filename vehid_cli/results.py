@@ -144,6 +144,12 @@ def to_json(doc) -> str:
     return json.dumps(clean(doc), indent=2, allow_nan=False)
 
 
+def write_json(path: str | Path, doc) -> None:
+    """`doc` as strict JSON (to_json), written atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(to_json(doc))
+
+
 def campaign_json(campaign) -> dict:
     """SPEC section 5 `identify` object (plus a few extra keys); strict JSON (no NaN or Infinity)."""
     s, b, names = campaign.summary, campaign.bound, list(campaign.names)
