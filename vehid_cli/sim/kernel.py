@@ -61,20 +61,26 @@ def cubic_spring(d, dd, z, params, f_out, zd_out):  # pragma: no cover - compile
         f_out[i] = k3 * d[i] * d[i] * d[i]
 
 
-@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
-def _rates(q, v, z, y, yd, Minv, C, K, B, D, E, force, par, d, dd, f, zd, rhs, a):  # pragma: no cover
-    """Acceleration a and internal rates zd at state (q, v, z) and road (y, yd); f gets the strut forces."""
-    nq, ns, nu = q.shape[0], d.shape[0], y.shape[0]
-    for i in range(ns):
+@numba.njit(cache=True)
+def _strut_motion(q, v, y, yd, D, E, d, dd):  # pragma: no cover - compiled
+    """Strut deflections and rates: d = D q + E y, dd = D v + E yd (written into d, dd)."""
+    for i in range(d.shape[0]):
         s, sd = 0.0, 0.0
-        for j in range(nq):
+        for j in range(q.shape[0]):
             s += D[i, j] * q[j]
             sd += D[i, j] * v[j]
-        for c in range(nu):
+        for c in range(y.shape[0]):
             s += E[i, c] * y[c]
             sd += E[i, c] * yd[c]
         d[i] = s
         dd[i] = sd
+
+
+@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
+def _rates(q, v, z, y, yd, Minv, C, K, B, D, E, force, par, d, dd, f, zd, rhs, a):  # pragma: no cover
+    """Acceleration a and internal rates zd at state (q, v, z) and road (y, yd); f gets the strut forces."""
+    nq, ns, nu = q.shape[0], d.shape[0], y.shape[0]
+    _strut_motion(q, v, y, yd, D, E, d, dd)
     force(d, dd, z, par, f, zd)
     for i in range(nq):
         r = 0.0
@@ -175,16 +181,7 @@ def _newmark_step(q, v, z, a, f, zd, y0, y1, dt, M, C, K, B, D, E, Khat_inv, for
         for i in range(nq):
             an[i] = a0 * (qn[i] - q[i]) - a2 * v[i] - a[i]
             vn[i] = v[i] + 0.5 * dt * (a[i] + an[i])
-        for i in range(ns):
-            s, sd = 0.0, 0.0
-            for j in range(nq):
-                s += D[i, j] * qn[j]
-                sd += D[i, j] * vn[j]
-            for c in range(nu):
-                s += E[i, c] * y1[c]
-                sd += E[i, c] * yd[c]
-            d[i] = s
-            dd[i] = sd
+        _strut_motion(qn, vn, y1, yd, D, E, d, dd)
         force(d, dd, zg, par, fn, zdn)
         err_f, size_f, err_z, size_z = 0.0, 0.0, 0.0, 0.0
         for i in range(ns):
