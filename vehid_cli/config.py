@@ -381,6 +381,12 @@ class DamperSection(_Section):
         default_factory=dict,
         description="values by name: the truth for synthetic data, the start for fits; the rest from defaults",
     )
+    effects: dict[str, dict[str, Finite]] = Field(
+        default_factory=dict,
+        description="library effects around the damper on the bench, e.g. {hysteresis: {alpha: 2e5}} (a truth "
+        "config for data with an effect the identification config does not declare); their parameters are "
+        "named <effect>.<param> in identify.unknowns",
+    )
 
 
 class BenchSection(_Section):
@@ -540,6 +546,7 @@ class DamperConfig(_Section):
             raise _KeyedError("damper.table", f"{d.model} takes {shape}, got {list(d.table)}")
         if d.model == "force_map" and min(d.table) < 2:
             raise _KeyedError("damper.table", f"a force map needs at least 2 x 2 nodes, got {list(d.table)}")
+        self._check_effects()
         names = self.parameter_names()
         for name in d.parameters:
             if name not in names:
@@ -593,11 +600,40 @@ class DamperConfig(_Section):
                 )
         return self
 
+    def _check_effects(self) -> None:
+        """Bench effects exist, their parameters exist and lie in their physical bounds."""
+        from .models.effects import BENCH_EFFECTS, LIBRARY, bound_violation
+
+        for name, params in self.damper.effects.items():
+            if name not in BENCH_EFFECTS:
+                raise _KeyedError(
+                    f"damper.effects.{name}",
+                    f"'{name}' is not an effect on the bench{_did_you_mean(name, BENCH_EFFECTS)} "
+                    f"(known: {', '.join(BENCH_EFFECTS)}; gas force and backlash are the model's k1, x0 and gap)",
+                )
+            known = tuple(p.name for p in LIBRARY[name].params)
+            for key, value in params.items():
+                if key not in known:
+                    raise _KeyedError(
+                        f"damper.effects.{name}.{key}",
+                        f"'{key}' is not a parameter of {name}{_did_you_mean(key, known)} (known: {', '.join(known)})",
+                    )
+                per_axle = next(p.per_axle for p in LIBRARY[name].params if p.name == key)
+                why = bound_violation(name, f"{key}_f" if per_axle else key, value)
+                if why:
+                    raise _KeyedError(f"damper.effects.{name}.{key}", why)
+
+    def effect_parameters(self) -> tuple[str, ...]:
+        """The declared bench effects' parameters, as identify.unknowns names them (<effect>.<param>)."""
+        from .models.effects import LIBRARY
+
+        return tuple(f"{e}.{p.name}" for e in self.damper.effects for p in LIBRARY[e].params)
+
     def parameter_names(self) -> tuple[str, ...]:
-        """Every parameter of the configured model, in the kernel's row order."""
+        """Every parameter of the configured model, in the kernel's row order, then the effects' parameters."""
         from .models.damper import MODELS
 
-        return MODELS[self.damper.model].layout(self.table_shape)
+        return MODELS[self.damper.model].layout(self.table_shape) + self.effect_parameters()
 
     @property
     def table_shape(self) -> tuple[int, ...]:
@@ -606,8 +642,14 @@ class DamperConfig(_Section):
     def values(self) -> dict[str, float]:
         """All parameter values: the configured ones over the neutral defaults (damper_fit.default_values)."""
         from .damper_fit import default_values
+        from .models.effects import LIBRARY
 
-        return {**default_values(self.damper.model, self.table_shape), **self.damper.parameters}
+        effects = {
+            f"{e}.{p.name}": float(given.get(p.name, p.default))
+            for e, given in self.damper.effects.items()
+            for p in LIBRARY[e].params
+        }
+        return {**default_values(self.damper.model, self.table_shape), **self.damper.parameters, **effects}
 
     def search_box(self) -> dict[str, tuple[float, float]]:
         """Search range of each unknown [SI]: 'limits' where given, else 'bounds' x configured value

@@ -49,7 +49,7 @@ def bench_history(cfg: DamperConfig, bench=None) -> BenchHistory:
 
 def configured_spec(cfg: DamperConfig) -> DamperSpec:
     """The configured damper: every parameter valued (configured over defaults)."""
-    return DamperSpec(cfg.damper.model, cfg.values(), cfg.table_shape)
+    return DamperSpec(cfg.damper.model, cfg.values(), cfg.table_shape, tuple(cfg.damper.effects))
 
 
 @dataclass(frozen=True)

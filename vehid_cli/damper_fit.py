@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bench import BenchHistory
-from .models.damper import DELAYS, FRONT, MODELS, DamperModel, simulate_damper
+from .models.damper import DELAYS, FRONT, MODELS, BenchRun, DamperModel, simulate_damper
 from .optimizers import Problem, get_optimizer
 
 PENALTY_FACTOR = 10.0  # an unstable candidate costs this many times the initial J (at least 10)
@@ -30,11 +30,14 @@ def cost_J(measured: NDArray, simulated: NDArray) -> NDArray:
 
 @dataclass(frozen=True)
 class DamperSpec:
-    """A damper model with every parameter valued: the row the kernel runs, by name."""
+    """A damper model with every parameter valued: the row the kernel runs, by name; plus library effects
+    around it on the bench (``effects``, their parameters valued as ``<effect>.<param>``, e.g.
+    ``hysteresis.alpha``; see models/effects.py ``bench_effects``)."""
 
     model: str
     values: Mapping[str, float]
     table_shape: tuple[int, ...] = ()
+    effects: tuple[str, ...] = ()
 
     @property
     def damper(self) -> DamperModel:
@@ -51,22 +54,83 @@ class DamperSpec:
         return np.array([float(self.values[n]) for n in self.names])
 
     def rows(self, unknowns: Sequence[str], X: NDArray) -> NDArray:
-        """Rows for a batch of candidates: the spec's values with `unknowns` replaced by the columns of X."""
+        """Rows for a batch of candidates: the spec's values with `unknowns` replaced by the columns of X
+        (effect parameters among the unknowns are skipped: they are not in the model's row)."""
         base = self.row()
         out = np.repeat(base[None, :], len(X), axis=0)
         index = {n: i for i, n in enumerate(self.names)}
         for j, name in enumerate(unknowns):
-            out[:, index[name]] = X[:, j]
+            if name in index:
+                out[:, index[name]] = X[:, j]
+        return out
+
+    def effect_values(self, unknowns: Sequence[str] = (), X: NDArray | None = None) -> dict[str, dict]:
+        """The effects' parameters (base names) for a batch: the spec's values, `unknowns` from X's columns."""
+        out: dict[str, dict] = {e: {} for e in self.effects}
+        for key, value in self.values.items():
+            effect, _, param = key.partition(".")
+            if effect in out:
+                out[effect][param] = value
+        for j, name in enumerate(unknowns):
+            effect, _, param = name.partition(".")
+            if effect in out:
+                out[effect][param] = X[:, j]
         return out
 
     def with_values(self, values: Mapping[str, float]) -> DamperSpec:
-        return DamperSpec(self.model, {**self.values, **values}, self.table_shape)
+        return DamperSpec(self.model, {**self.values, **values}, self.table_shape, self.effects)
+
+    def with_effects(self, effects: Sequence[str], values: Mapping[str, float]) -> DamperSpec:
+        """This damper with more bench effects (and their parameter values)."""
+        more = tuple(e for e in effects if e not in self.effects)
+        return DamperSpec(self.model, {**self.values, **values}, self.table_shape, self.effects + more)
+
+    def simulate_batch(
+        self, unknowns: Sequence[str], X: NDArray, history: BenchHistory, substeps: int = 1
+    ) -> BenchRun:
+        """Forces of a batch of candidates (`unknowns` = columns of X) on the history, effects included."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        rows = self.rows(unknowns, X)
+        h = history
+        if not self.effects:
+            return simulate_damper(self.damper, rows, h.t, h.x, h.v, h.u, substeps)
+        return _with_effects(self, rows, self.effect_values(unknowns, X), h, substeps)
 
     def simulate(self, history: BenchHistory, substeps: int = 1) -> NDArray:
         """Force (n,) of this damper on the history."""
-        return simulate_damper(
-            self.damper, self.row()[None, :], history.t, history.x, history.v, history.u, substeps
-        ).force[0]
+        return self.simulate_batch((), np.zeros((1, 0)), history, substeps).force[0]
+
+
+def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistory, substeps: int) -> BenchRun:
+    """The declared model's force without its gas part, then the bench effects around it (lag on the damper
+    force, parallel effects added, the gas force k1 (x_b - x0) on the piston's motion through the play)."""
+    from .models.damper import play
+    from .models.effects import bench_effect_rows, bench_effects, bench_lag_state
+    from .sim.kernel import integrate_bench
+
+    P, n = rows.shape[0], h.t.size
+    no_gas = rows.copy()
+    no_gas[:, 0] = 0.0
+    damper = simulate_damper(spec.damper, no_gas, h.t, h.x, h.v, h.u, substeps)
+    road = np.empty((P, n, 4))
+    road[:, :, 0], road[:, :, 1], road[:, :, 2] = h.x, h.v, damper.force
+    for r in range(P):
+        xb = h.x if rows[r, 2] <= 0 else play(np.ascontiguousarray(h.x), np.ascontiguousarray(h.v), rows[r, 2])[0]
+        road[r, :, 3] = rows[r, 0] * (xb - rows[r, 1])
+    eset = bench_effect_rows(effects, P)
+    dt = float(h.t[1] - h.t[0])
+    if substeps > 1:  # the effects' states at the model's step, inputs linear between samples
+        fine = np.linspace(h.t[0], h.t[-1], (n - 1) * substeps + 1)
+        road = np.stack([np.stack([np.interp(fine, h.t, road[r, :, c]) for c in range(4)], -1) for r in range(P)])
+    z0 = np.zeros((P, max(eset.n_z, 1)))
+    lag = bench_lag_state(eset)
+    if lag is not None:
+        z0[:, lag] = damper.force[:, 0]  # the lagged force starts settled
+    with np.errstate(all="ignore"):
+        force = integrate_bench(bench_effects, eset.rows, road, dt / substeps, z0)
+    force = force[:, ::substeps, 0]
+    stable = damper.stable & np.all(np.isfinite(force), axis=1)
+    return BenchRun(t=h.t, force=np.where(stable[:, None], force, np.nan), stable=stable)
 
 
 def default_values(model: str, table_shape: tuple[int, ...] = ()) -> dict[str, float]:
@@ -124,12 +188,11 @@ def fit(
     lower = np.array([bounds[n][0] for n in unknowns], dtype=float)
     upper = np.array([bounds[n][1] for n in unknowns], dtype=float)
     x0 = np.clip(np.array([spec.values[n] for n in unknowns], dtype=float), lower, upper)
-    model = spec.damper
 
     scale = np.sqrt(history.force.size * np.var(history.force))  # J = sum of squared residuals
 
     def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
-        run = simulate_damper(model, spec.rows(unknowns, X), history.t, history.x, history.v, history.u, substeps)
+        run = spec.simulate_batch(unknowns, X, history, substeps)
         residuals = (history.force[None, :] - run.force) / scale
         return np.sum(residuals**2, axis=1), residuals
 

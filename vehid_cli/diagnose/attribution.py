@@ -37,6 +37,7 @@ from ..optimizers.lsq import polish
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
 CANDIDATE_BUDGET = 120  # model evaluations of one candidate's short fit
+DISTINCT_VALIDATION = 0.1  # validation J this much lower tells the best candidate from a close runner-up
 
 
 @dataclass(frozen=True)
@@ -135,6 +136,11 @@ class Ranked:
         }
 
 
+def chi2_statistic(residual_count: int) -> Callable[[float, float], float]:
+    """LR for a known noise sigma: (chi²_before - chi²_with) x R, J being the chi² per sample."""
+    return lambda J0, J1: max(0.0, (J0 - J1) * residual_count)
+
+
 def rank_candidates(
     candidates: list[Candidate],
     base: Fit,
@@ -144,13 +150,19 @@ def rank_candidates(
     residual_count: int,
     alpha: float = ALPHA,
     budget: int = CANDIDATE_BUDGET,
+    statistic: Callable[[float, float], float] | None = None,
+    min_gain: float = 0.0,
+    claim: bool = True,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
     make_problem(names, candidate) gives the augmented problem (its unknowns: names, then the added ones)
-    and the start of the added unknowns; validation_J(names, x) the validation chi² per sample."""
+    and the start of the added unknowns; validation_J(names, x) the validation J. statistic(J_before, J_with)
+    is the LR (default: chi² with known noise over `residual_count` residuals); a candidate must also lower
+    the validation J by the fraction `min_gain`; with claim=False nothing is accepted (the data cannot tell)."""
     import time
 
+    statistic = statistic or chi2_statistic(residual_count)
     out = []
     level = alpha / max(len(candidates), 1)
     for cand in candidates:
@@ -161,11 +173,12 @@ def rank_candidates(
         x0 = np.concatenate([base.x, x_added])
         fit = lsq_fit(problem, x0, budget)
         J = min(fit.J, base.J)  # the nested model (effect off) is always available
-        lr = max(0.0, (base.J - J) * residual_count)
+        lr = statistic(base.J, J)
         k = len(added)
         p = float(stats.chi2.sf(lr, k))
         vJ = validation_J(names, fit.x) if fit.J < base.J else base_validation_J
-        accepted = bool(p < level and np.isfinite(vJ) and vJ < base_validation_J)
+        better = np.isfinite(vJ) and vJ < (1.0 - min_gain) * base_validation_J
+        accepted = bool(claim and p < level and better)
         out.append(
             Ranked(
                 effect=cand.effect, added=added, k=k, J=J, statistic=lr, p_value=p,
@@ -175,3 +188,19 @@ def rank_candidates(
         )  # fmt: skip
     out.sort(key=lambda r: -r.statistic)
     return out
+
+
+def undistinguished(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ranked | None:
+    """The runner-up the data cannot tell from `best`, if any: another significant candidate whose LR falls
+    short of the best's by less than the critical value of a chi²(k_best) test at the per-candidate level
+    (the non-nested comparison of two augmented models: the training data must prefer one significantly),
+    unless the validation data prefer the best clearly (its validation J DISTINCT_VALIDATION lower)."""
+    level = alpha / max(len(ranked), 1)
+    margin = float(stats.chi2.isf(level, best.k))
+    for r in ranked:
+        if r is best or r.p_value >= level:
+            continue
+        held_out_prefers = best.validation_J < (1.0 - DISTINCT_VALIDATION) * r.validation_J
+        if best.statistic - r.statistic < margin and not held_out_prefers:
+            return r
+    return None

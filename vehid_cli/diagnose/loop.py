@@ -11,6 +11,7 @@ J'J of the weighted residuals at the fit, scaled by the chi² per sample (the re
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,7 +23,19 @@ from ..experiment import run_streams
 from ..identification import Task, build_task
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
-from .attribution import ALPHA, CANDIDATE_BUDGET, Candidate, Fit, Ranked, candidate_specs, lsq_fit, rank_candidates
+from .attribution import (
+    ALPHA,
+    CANDIDATE_BUDGET,
+    Candidate,
+    Fit,
+    Ranked,
+    candidate_specs,
+    chi2_statistic,
+    lsq_fit,
+    rank_candidates,
+    undistinguished,
+)
+from .quality import Quality, assess_vehicle
 from .residuals import ResidualAnalysis, analyse
 
 MAX_ROUNDS = 3
@@ -43,33 +56,62 @@ def prepare_config(config: Config) -> Config:
 
 @dataclass(frozen=True)
 class ModelReport:
-    """One model's fit: estimates with 95 % intervals, J (= chi² per sample), validation J, NRE."""
+    """One model's fit: estimates with 95 % intervals, J, validation J, NRE."""
 
     effects: tuple[str, ...]
     names: tuple[str, ...]
     x: NDArray
     ci: NDArray  # (D,) half-width of the 95 % interval (NaN where the information is singular)
     J: float
-    chi2_per_sample: float
+    chi2_per_sample: float | None
     validation_J: float | None
     nre_percent: float | None
     analysis: ResidualAnalysis | None = None
+    validation_per_file: dict[str, float] | None = None
 
-    def to_json(self) -> dict:
-        return {
+    def to_json(self, validation_from_file: bool = True) -> dict:
+        out = {
             "effects": list(self.effects),
             "estimates": {n: float(v) for n, v in zip(self.names, self.x, strict=True)},
             "ci95": {n: [float(v - h), float(v + h)] for n, v, h in zip(self.names, self.x, self.ci, strict=True)},
             "J": self.J,
             "chi2_per_sample": self.chi2_per_sample,
-            "validation_J": self.validation_J,
+            "validation_J": self.validation_J if validation_from_file else None,
             "nre_percent": self.nre_percent,
             "residual": None if self.analysis is None else self.analysis.summary(),
         }
+        if not validation_from_file:
+            out["holdout_J"] = self.validation_J
+        if self.validation_per_file:
+            out["validation_J_per_file"] = dict(self.validation_per_file)
+        return out
+
+
+@dataclass(frozen=True)
+class Step:
+    """One effect the loop added: J on the training data and on the validation data, before and after."""
+
+    effect: str
+    J_before: float
+    J_after: float
+    validation_J_before: float
+    validation_J_after: float
+    validation_per_file_after: dict[str, float] | None = None
+
+    def to_json(self) -> dict:
+        out = {
+            "effect": self.effect, "J_before": self.J_before, "J_after": self.J_after,
+            "validation_J_before": self.validation_J_before, "validation_J_after": self.validation_J_after,
+        }  # fmt: skip
+        if self.validation_per_file_after:
+            out["validation_J_per_file_after"] = dict(self.validation_per_file_after)
+        return out
 
 
 @dataclass(frozen=True)
 class Diagnosis:
+    """The loop's outcome: the declared and the final model, every round's ranking, what was added."""
+
     before: ModelReport
     after: ModelReport
     rounds: tuple[tuple[Ranked, ...], ...]
@@ -79,15 +121,38 @@ class Diagnosis:
     sigma_source: str
     wall_s: float
     notes: tuple[str, ...] = field(default_factory=tuple)
+    steps: tuple[Step, ...] = ()
+    quality: Quality = field(default_factory=Quality)
+    system: str = "vehicle"
+    J_definition: str = "wls: noise-weighted residual power per sample (chi2 per sample) on the training data"
+    validation_from_file: bool = True
+
+    @property
+    def verdict(self) -> str:
+        """One line: what the loop concluded."""
+        if self.selected:
+            found = "missing physics found: " + ", ".join(self.selected)
+            ambiguous = [n for n in self.notes if n.startswith("cannot tell")]
+            return found + (f" (then stopped: {ambiguous[0]})" if ambiguous else "")
+        if not self.quality.ok:
+            return "inconclusive, no effect claimed: " + "; ".join(self.quality.reasons)
+        if any(n.startswith("cannot tell") for n in self.notes):
+            return "inconclusive, no effect claimed: " + next(n for n in self.notes if n.startswith("cannot tell"))
+        return "nothing missing: no candidate is significant and improves the validation fit"
 
     def to_json(self) -> dict:
+        vf = self.validation_from_file
         return {
-            "J_definition": "wls: noise-weighted residual power per sample (chi2 per sample) on the training data",
-            "before": self.before.to_json(),
-            "after": self.after.to_json(),
+            "system": self.system,
+            "J_definition": self.J_definition,
+            "before": self.before.to_json(vf),
+            "after": self.after.to_json(vf),
             "candidates": [r.to_json() for r in self.rounds[0]] if self.rounds else [],
             "rounds": [[r.to_json() for r in rnd] for rnd in self.rounds],
             "selected": list(self.selected),
+            "steps": [s.to_json() for s in self.steps],
+            "verdict": self.verdict,
+            "data_quality": self.quality.to_json(),
             "alpha": self.alpha,
             "validation": self.validation_source,
             "noise": self.sigma_source,
@@ -96,7 +161,100 @@ class Diagnosis:
         }
 
 
-def _masked(problem: Problem, keep: NDArray | None) -> Problem:
+@dataclass(frozen=True)
+class Subject:
+    """What the loop needs of the system under diagnosis (the car or a damper on a bench).
+
+    problem_for(names): the training problem over the unknowns `names` (declared first, then effect
+    parameters) and a start value for each; validation_J(names, x): J on the validation data, and per file;
+    statistic(current): the LR function (J_before, J_with) -> statistic for tests against the fit `current`.
+    """
+
+    specs: dict[str, Candidate]
+    declared: frozenset[str]
+    problem_for: Callable[[tuple[str, ...]], tuple[Problem, NDArray]]
+    validation_J: Callable[[tuple[str, ...], NDArray], tuple[float, dict[str, float] | None]]
+    residual_count: int
+    statistic: Callable[[Fit], Callable[[float, float], float]]
+    min_gain: float = 0.0
+
+
+@dataclass(frozen=True)
+class Loop:
+    """The augmentation loop's end state."""
+
+    fit: Fit
+    effects: tuple[str, ...]
+    rounds: tuple[tuple[Ranked, ...], ...]
+    steps: tuple[Step, ...]
+    notes: tuple[str, ...] = ()
+
+
+def augment(
+    subject: Subject,
+    fit: Fit,
+    *,
+    alpha: float,
+    max_rounds: int,
+    candidate_budget: int,
+    refit_budget: int,
+    claim: bool = True,
+    say: Callable[[str], None] = lambda _m: None,
+) -> Loop:
+    """Rank the candidates against `fit`, add the best accepted one, re-fit everything (its shape parameters
+    freed too), repeat until none is accepted or max_rounds; with claim=False only rank once."""
+    specs = subject.specs
+    effects: list[str] = []
+    rounds: list[tuple[Ranked, ...]] = []
+    steps: list[Step] = []
+    notes: list[str] = []
+    current = fit
+    current_vJ, _ = subject.validation_J(fit.names, fit.x)
+
+    def make_problem(names: tuple[str, ...], cand: Candidate):
+        new = tuple(n for n in cand.unknowns if n not in names)
+        problem, start = subject.problem_for(names + new)
+        return problem, start[len(names) :]
+
+    def vJ(names, x) -> float:
+        return subject.validation_J(names, x)[0]
+
+    for _ in range(max_rounds if claim else 1):
+        todo = [specs[e] for e in specs if e not in subject.declared and e not in effects]
+        if not todo:
+            break
+        ranked = rank_candidates(
+            todo, current, current_vJ, make_problem, vJ, subject.residual_count, alpha, candidate_budget,
+            statistic=subject.statistic(current), min_gain=subject.min_gain, claim=claim,
+        )  # fmt: skip
+        rounds.append(tuple(ranked))
+        say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
+        best = next((r for r in ranked if r.accepted), None)
+        if best is None:
+            break
+        rival = undistinguished(ranked, best, alpha)
+        if rival is not None:
+            notes.append(
+                f"cannot tell {best.effect} (LR {best.statistic:.3g}) from {rival.effect} (LR {rival.statistic:.3g}) "
+                "apart on these data: neither added"
+            )
+            say(notes[-1])
+            break
+        effects.append(best.effect)
+        names = best.fit.names + tuple(n for n in specs[best.effect].shape if n not in best.fit.names)
+        problem, start = subject.problem_for(names)
+        x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
+        refit = lsq_fit(problem, x0, refit_budget)
+        if refit.J > best.fit.J:  # keep the short fit if the re-fit found nothing better
+            refit = Fit(names, x0, best.fit.J, refit.evaluations)
+        new_vJ, per_file = subject.validation_J(refit.names, refit.x)
+        steps.append(Step(best.effect, current.J, refit.J, current_vJ, new_vJ, per_file))
+        current, current_vJ = refit, new_vJ
+        say(f"added {best.effect}: J = {current.J:.4g}, validation J = {current_vJ:.4g}")
+    return Loop(current, tuple(effects), tuple(rounds), tuple(steps), tuple(notes))
+
+
+def masked(problem: Problem, keep: NDArray | None) -> Problem:
     """The problem on the kept residuals only (cost: their chi² per sample); diverging candidates (NaN, inf)
     are the optimizer's to penalise, without floating-point warnings."""
 
@@ -109,8 +267,9 @@ def _masked(problem: Problem, keep: NDArray | None) -> Problem:
     return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names)
 
 
-def _fisher_ci(problem: Problem, x: NDArray, chi2: float) -> NDArray:
-    """95 % half-widths from (J'J)^-1 chi2 at x (forward differences, one batch)."""
+def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
+    """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
+    differences, one batch) and `scale` the variance of one residual entry."""
     width = problem.upper - problem.lower
     h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
     step = np.where(x + h <= problem.upper, h, -h)
@@ -118,7 +277,7 @@ def _fisher_ci(problem: Problem, x: NDArray, chi2: float) -> NDArray:
     _, R = problem.residuals(X)
     Jac = ((R[1:] - R[0][None, :]) / step[:, None]).T
     try:
-        cov = np.linalg.inv(Jac.T @ Jac) * max(chi2, 1e-12)
+        cov = np.linalg.inv(Jac.T @ Jac) * max(scale, 1e-300)
         return Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0))
     except np.linalg.LinAlgError:
         return np.full(x.size, np.nan)
@@ -158,7 +317,7 @@ def diagnose(
     R_train = int(R_total if keep is None else keep.sum())
 
     def problem_of(t: Task, reference, mask) -> Problem:
-        return _masked(t.problem(reference), mask)
+        return masked(t.problem(reference), mask)
 
     def augmented(t: Task, names: tuple[str, ...], extra_task: dict) -> Task:
         """`t` with the unknowns `names` (the task's own first), their ranges from the candidates' specs."""
@@ -173,10 +332,14 @@ def diagnose(
         ranges["limits"].update(c.shape_limits)
         ranges["start"].update(c.start)
 
-    def validation_J(names: tuple[str, ...], x: NDArray) -> float:
+    def validation_J(names: tuple[str, ...], x: NDArray) -> tuple[float, None]:
         vt = augmented(vtask, names, ranges)
         cost = problem_of(vt, vref, vkeep).cost(np.asarray(x, dtype=float)[None, :])[0]
-        return float(cost) if np.isfinite(cost) else float("inf")
+        return (float(cost) if np.isfinite(cost) else float("inf")), None
+
+    def problem_for(names: tuple[str, ...]) -> tuple[Problem, NDArray]:
+        t = augmented(task, names, ranges)
+        return problem_of(t, ref, keep), t.nominal
 
     # 1. the declared model, by the configured algorithm (the campaign's run 0 streams)
     ident = config.identify
@@ -185,59 +348,42 @@ def diagnose(
     x0 = task.nominal if ident.start == "nominal" else None
     res = opt.minimize(base_problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
     fit = lsq_fit(base_problem, res.x, refit_budget)  # polish to the likelihood's minimum
-    effects: list[str] = []
     say(f"declared model: J = {fit.J:.4g} ({res.evaluations + fit.evaluations} evaluations)")
 
     def report(f: Fit, effs) -> ModelReport:
         t = augmented(task, f.names, ranges)
-        p = problem_of(t, ref, keep)
-        ci = _fisher_ci(p, f.x, f.J)
+        ci = fisher_ci(problem_of(t, ref, keep), f.x, f.J)
         nre = None
         if task.truth is not None:
             idx = [f.names.index(n) for n in task.names]
             nre = float(np.linalg.norm(100.0 * (f.x[idx] - task.truth) / task.truth))
-        vJ = validation_J(f.names, f.x)
+        vJ, _ = validation_J(f.names, f.x)
         an = analyse(t, ref, f.names, f.x) if analyse_residuals else None
         chi2 = an.chi2_per_sample if an is not None else f.J
         return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an)
 
-    before = report(fit, effects)
-    rounds: list[tuple[Ranked, ...]] = []
-    current, current_vJ = fit, before.validation_J
-
-    def make_problem(names: tuple[str, ...], cand: Candidate):
-        new = tuple(n for n in cand.unknowns if n not in names)
-        t = augmented(task, names + new, ranges)
-        return problem_of(t, ref, keep), t.nominal[len(names) :]
-
-    for _ in range(max_rounds):
-        todo = [specs[e] for e in specs if e not in declared and e not in effects]
-        if not todo:
-            break
-        ranked = rank_candidates(
-            todo, current, current_vJ, make_problem, validation_J, R_train, alpha, candidate_budget
-        )
-        rounds.append(tuple(ranked))
-        say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
-        best = next((r for r in ranked if r.accepted), None)
-        if best is None:
-            break
-        effects.append(best.effect)
-        # re-fit everything, the selected effects' shape parameters freed too
-        names = best.fit.names + tuple(n for n in specs[best.effect].shape if n not in best.fit.names)
-        t = augmented(task, names, ranges)
-        x0 = np.concatenate([best.fit.x, t.nominal[len(best.fit.names) :]])
-        current = lsq_fit(problem_of(t, ref, keep), x0, refit_budget)
-        current_vJ = validation_J(current.names, current.x)
-        say(f"added {best.effect}: J = {current.J:.4g}, validation J = {current_vJ:.4g}")
-    after = report(current, effects) if effects else before
+    before = report(fit, ())
+    quality = assess_vehicle(task, ref, before)
+    subject = Subject(
+        specs=specs, declared=frozenset(declared), problem_for=problem_for, validation_J=validation_J,
+        residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
+    )  # fmt: skip
+    loop = augment(
+        subject, fit, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
+        refit_budget=refit_budget, claim=quality.ok, say=say,
+    )  # fmt: skip
+    after = report(loop.fit, loop.effects) if loop.effects else before
     return Diagnosis(
         before=before,
         after=after,
-        rounds=tuple(rounds),
-        selected=tuple(effects),
+        rounds=loop.rounds,
+        selected=loop.effects,
         alpha=alpha,
         validation_source=vsource,
         sigma_source=task.sigma_source,
         wall_s=time.perf_counter() - t_start,
+        steps=loop.steps,
+        quality=quality,
+        validation_from_file=validate_file is not None,
+        notes=loop.notes,
     )

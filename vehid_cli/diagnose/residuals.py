@@ -5,6 +5,8 @@
 * whiteness per channel: normalised autocorrelation up to a lag, the ±1.96/sqrt(n) band, and the
   Ljung-Box portmanteau Q = n (n + 2) sum_k rho_k² / (n - k), chi²(lags) under white noise;
 * cross-correlation of each residual channel with each road velocity (the input), against the same band;
+* the spectral residual: Welch power spectral density of each weighted residual channel, scaled so that
+  white noise of the implied sigma lies at 1 (a peak or a low-frequency hump is structure the model misses);
 * the fingerprint: each corner's residual binned against that corner's suspension velocity and deflection
   (deflection d = G q_body - wheel, from the fitted model's states), where a missing strut effect shows
   as a systematic shape (an odd step: friction; a kink at v = 0: asymmetric damping; d³: a progressive spring).
@@ -77,7 +79,7 @@ def cross_correlation(x: NDArray, u: NDArray, lags: int) -> NDArray:
 class Binned:
     """Mean weighted residual of one corner in bins of one of its strut variables."""
 
-    variable: str  # "velocity" [m/s] or "deflection" [m]
+    variable: str  # "velocity" [m/s], "deflection" or "displacement" [m]
     centres: NDArray  # (bins,)
     mean: NDArray  # (bins,) mean residual (units of noise sigma)
     count: NDArray  # (bins,)
@@ -112,6 +114,8 @@ class ResidualAnalysis:
     road_xcorr_max: NDArray  # (channels, 4) largest |cross-correlation| with each road velocity over lags
     band: float
     fingerprint: tuple[tuple[Binned, Binned], ...]  # per corner: (velocity, deflection), acc residual of that corner
+    freq: NDArray | None = None  # (nf,) [Hz]
+    psd: NDArray | None = None  # (channels, nf) residual PSD over the white level of the implied noise
 
     def summary(self) -> dict:
         """Plain numbers for JSON."""
@@ -122,11 +126,22 @@ class ResidualAnalysis:
             "acf_outside_band": dict(zip(self.channels, (w.outside for w in self.whiteness), strict=True)),
             "road_xcorr_max": float(np.max(self.road_xcorr_max)),
             "band": self.band,
+            "spectrum_peak": None if self.psd is None else float(np.max(self.psd)),
+            "spectrum_peak_hz": None if self.psd is None else float(self.freq[np.argmax(np.max(self.psd, axis=0))]),
             "fingerprint_max_z": [
                 {"velocity": float(np.nanmax(np.abs(v.z))), "deflection": float(np.nanmax(np.abs(d.z)))}
                 for v, d in self.fingerprint
             ],
         }
+
+
+def spectrum(residual: NDArray, dt: float) -> tuple[NDArray, NDArray]:
+    """Welch PSD of each column of a weighted residual (n, channels), over the white level 2 dt of unit noise."""
+    from scipy.signal import welch
+
+    n = residual.shape[0]
+    f, p = welch(residual, fs=1.0 / dt, nperseg=min(256, n), axis=0)
+    return f, (p / (2.0 * dt)).T
 
 
 def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 20, bins: int = 12):
@@ -168,4 +183,32 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
         road_xcorr_max=xc,
         band=float(BAND_Z / np.sqrt(n)),
         fingerprint=fingerprint,
+        freq=(spec := spectrum(residual, exp.dt))[0],
+        psd=spec[1],
+    )
+
+
+def analyse_bench(history, model_force: NDArray, sigma: float, lags: int = 20, bins: int = 12) -> ResidualAnalysis:
+    """Residual analysis of a damper on a bench: (measured - model) / sigma, its whiteness, its correlation
+    with the velocity input, its spectrum and its fingerprint against the stroke velocity and displacement."""
+    residual = ((np.asarray(history.force) - np.asarray(model_force)) / sigma)[:, None]
+    n = residual.shape[0]
+    xc = np.array([[np.max(np.abs(cross_correlation(residual[:, 0], history.v, lags)))]])
+    f, psd = spectrum(residual, history.dt)
+    return ResidualAnalysis(
+        channels=("force",),
+        residual=residual,
+        chi2_per_sample=float(np.mean(residual**2)),
+        chi2_channel=np.mean(residual**2, axis=0),
+        whiteness=(ljung_box(residual[:, 0], lags),),
+        road_xcorr_max=xc,
+        band=float(BAND_Z / np.sqrt(n)),
+        fingerprint=(
+            (
+                bin_residual(np.asarray(history.v), residual[:, 0], "velocity", bins),
+                bin_residual(np.asarray(history.x), residual[:, 0], "displacement", bins),
+            ),
+        ),
+        freq=f,
+        psd=psd,
     )

@@ -334,3 +334,71 @@ def bound_violation(effect: str, name: str, value: float) -> str | None:
         return None
     lo = "(" if p.open_lower else "["
     return f"{effect}.{name} = {value:g} {p.unit} is outside its physical range {lo}{p.lower:g}, {p.upper:g}]"
+
+
+# ------------------------------------------------------------------------------------------ the test bench
+
+BENCH_EFFECTS = ("asymmetric_damping", "coulomb_friction", "progressive_spring", "hysteresis", "damper_lag")
+"""Library effects that act on a damper on a test bench through ``bench_effects`` (the damper's own gas
+force and backlash are its model's front end: k1, x0 and gap in models/damper.py)."""
+
+
+@numba.njit(cache=True, error_model="numpy")
+def bench_effects(d, dd, z, p, f_out, zd_out):  # pragma: no cover - compiled
+    """The library's strut effects around a damper on a test bench (corner-1 slots of a params row).
+
+    Channels d = [x, v, F_damper, F_gas]: the prescribed stroke x [m] and velocity v [m/s] (rebound
+    positive), the declared damper model's force without its gas part [N], and its gas force [N].
+    The damper force goes through ``damper_lag`` (dF/dt = (F_damper - F) / T) and the parallel effects
+    add, with the formulas of ``strut_effects``: f_out[0] = F_gas + lag(F_damper) + effects.
+    """
+    x, v, damper = d[0], d[1], d[2]
+    f = d[3]
+    if p[_AS_ON] != 0.0:
+        f += 0.5 * p[_AS_DC] * math.tanh(v / p[_AS_VE]) * v
+    if p[_CF_ON] != 0.0:
+        f += p[_CF_FC] * math.tanh(v / p[_CF_VE])
+    if p[_PS_ON] != 0.0:
+        f += p[_PS_K3] * x * x * x
+    if p[_HY_ON] != 0.0:
+        j = int(p[_HY_Z])
+        zz = z[j]
+        f += p[_HY_AL] * zz
+        zd_out[j] = p[_HY_A] * v - p[_HY_BE] * v * zz * zz - p[_HY_GA] * abs(v) * zz * abs(zz)
+    if p[_DL_ON] != 0.0:
+        j = int(p[_DL_Z])
+        T = p[_DL_T]
+        if T > 0.0:
+            zd_out[j] = (damper - z[j]) / T
+            damper = z[j]
+        else:
+            zd_out[j] = 0.0
+    f_out[0] = f + damper
+    for i in range(1, f_out.shape[0]):
+        f_out[i] = 0.0
+
+
+def bench_effect_rows(effects: Mapping[str, Mapping[str, ArrayLike]], P: int) -> EffectSet:
+    """Params rows of ``bench_effects`` for P candidates; effect parameters by their base names
+    (``alpha``, not ``alpha_f``): one damper, so the per-axle pair carries the same value."""
+    unknown = [e for e in effects if e not in BENCH_EFFECTS]
+    if unknown:
+        raise KeyError(f"not an effect on the test bench: {unknown} (bench effects: {', '.join(BENCH_EFFECTS)})")
+    per_axle = {}
+    for name, given in effects.items():
+        e = LIBRARY[name]
+        values: dict[str, ArrayLike] = {}
+        for key, value in given.items():
+            p = e.param(key if key in e.names() else f"{key}_f")
+            if p.per_axle:
+                values[f"{p.name}_f"] = values[f"{p.name}_r"] = value
+            else:
+                values[p.name] = value
+        per_axle[name] = values
+    return effect_rows(per_axle, 0.0, 0.0, (P,))
+
+
+def bench_lag_state(eset: EffectSet) -> int | None:
+    """Index of the damper-lag state in a bench effect set's states (None without the lag)."""
+    row = eset.rows[0]
+    return int(row[SLOTS["damper_lag:z"]]) if row[SLOTS["damper_lag:on"]] != 0.0 else None

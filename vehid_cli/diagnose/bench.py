@@ -1,0 +1,248 @@
+"""Close the loop on a damper test bench: fit the declared damper model to a measured force, rank the
+library's effects as candidates, add the best accepted one, re-fit, repeat (the same loop as the car's).
+
+* J is Fleps-Dezasse Eq. 7 (SPEC section 4): mean squared force error over the variance of the measured force,
+  on the training run; the validation J is the mean of Eq. 7 over the held-out runs (``--validate``, else the
+  config's ``data.validate``), else over held-out blocks of the training run.
+* The noise sigma of the force is not known on a bench: the test is the likelihood ratio with the noise
+  variance profiled out, LR = n_eff ln(J_before / J_with), over n_eff = n (1 - rho) / (1 + rho) effective
+  samples, rho the lag-1 autocorrelation of the current model's residual. Model error on a bench is smooth,
+  not white; counting every sample as independent would make every candidate significant (Bartlett's
+  correction for an AR(1) residual). Confidence intervals are inflated by the same factor.
+* A candidate must also lower the validation J by MIN_GAIN: on real data any flexible term lowers it a
+  little, and a 2 % gain is the least worth a new parameter in a damper model.
+
+Candidates (canonical names, SPEC section 5): ``hysteresis``, ``asymmetric_damping``, ``damper_lag`` and
+``coulomb_friction`` from the effect library (models/effects.py ``bench_effects``), ``gas_spring`` as the
+damper's own gas force k1 (x - x0) and ``backlash`` as its exact play of width ``gap`` (models/damper.py).
+An effect the declared model already has (friction in Bingham or Bouc-Wen, hysteresis in Bouc-Wen, a gas
+force or a gap among the unknowns) is not a candidate. Search ranges scale with the data: the force, stroke
+and velocity standard deviations F, X, V.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..bench import BenchHistory
+from ..config import DamperConfig
+from ..damper_campaign import configured_spec, load_measured
+from ..damper_fit import PENALTY_FACTOR, DamperSpec
+from ..experiment import run_streams
+from ..models.effects import LIBRARY
+from ..noise import estimate_noise_sigma
+from ..optimizers import get_optimizer
+from ..optimizers.base import Problem
+from .attribution import ALPHA, Candidate, Fit, lsq_fit
+from .loop import BLOCK, HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, augment, fisher_ci
+from .quality import assess_bench
+from .residuals import analyse_bench, autocorrelation
+
+MAX_ROUNDS = 4
+MIN_GAIN = 0.02
+CANDIDATE_BUDGET = 200
+REFIT_BUDGET = 800
+FRICTIONLESS = ("viscous", "gas_spring")  # models without a friction term of their own
+
+
+def bench_candidates(spec: DamperSpec, history: BenchHistory, declared_unknowns) -> dict[str, Candidate]:
+    """The candidate form of each effect the declared damper lacks, its ranges scaled to the data."""
+    F = float(np.std(history.force))
+    X = max(float(np.std(history.x)), 1e-6)
+    V = max(float(np.std(history.v)), 1e-6)
+    zsat = 0.2 * X  # Bouc-Wen z saturates at sqrt(1 / (beta + gamma)): a fifth of the stroke to start
+    bg = 0.5 / zsat**2
+    dt = float(history.dt)
+    out = [
+        Candidate(
+            "hysteresis", ("hysteresis.alpha",), {"hysteresis.alpha": (0.0, 20.0 * F / zsat)},
+            {"hysteresis.alpha": 0.0, "hysteresis.beta": bg, "hysteresis.gamma": bg},
+            shape=("hysteresis.beta", "hysteresis.gamma"),
+            shape_limits={"hysteresis.beta": (bg / 100, 100 * bg), "hysteresis.gamma": (bg / 100, 100 * bg)},
+        ),
+        Candidate(
+            "asymmetric_damping", ("asymmetric_damping.dc",), {"asymmetric_damping.dc": (-10 * F / V, 10 * F / V)},
+            {"asymmetric_damping.dc": 0.0, "asymmetric_damping.v_eps": 0.2 * V},
+            shape=("asymmetric_damping.v_eps",), shape_limits={"asymmetric_damping.v_eps": (0.005 * V, 2 * V)},
+        ),
+        Candidate("damper_lag", ("damper_lag.T",), {"damper_lag.T": (1e-4, 0.2)}, {"damper_lag.T": max(dt, 1e-3)}),
+        Candidate("gas_spring", ("k1", "x0"), {"k1": (0.0, 20 * F / X), "x0": (-1.0, 1.0)},
+                  {"k1": 0.1 * F / X, "x0": float(np.mean(history.x))}),
+        Candidate("backlash", ("gap",), {"gap": (0.0, 0.5 * X)}, {"gap": 0.01 * X}),
+        Candidate(
+            "coulomb_friction", ("coulomb_friction.Fc",), {"coulomb_friction.Fc": (0.0, 3 * F)},
+            {"coulomb_friction.Fc": 0.0, "coulomb_friction.v_eps": 0.1 * V},
+            shape=("coulomb_friction.v_eps",), shape_limits={"coulomb_friction.v_eps": (0.005 * V, 2 * V)},
+        ),
+    ]  # fmt: skip
+    declared = set(spec.effects)
+    if "k1" in declared_unknowns or spec.values.get("k1", 0.0) != 0.0:
+        declared.add("gas_spring")
+    if "gap" in declared_unknowns or spec.values.get("gap", 0.0) != 0.0:
+        declared.add("backlash")
+    if spec.model in ("bouc_wen", "generalized_bouc_wen"):
+        declared.add("hysteresis")
+    if spec.model not in FRICTIONLESS:
+        declared.add("coulomb_friction")
+    if spec.model == "force_map":  # a table over velocity holds any compression/rebound difference
+        declared.add("asymmetric_damping")
+    return {c.effect: c for c in out if c.effect not in declared}
+
+
+def _effects_of(names) -> tuple[str, ...]:
+    return tuple(dict.fromkeys(n.partition(".")[0] for n in names if "." in n))
+
+
+def diagnose_bench(
+    config: DamperConfig,
+    data_file: str | Path | None = None,
+    validate_files: tuple[str | Path, ...] | None = None,
+    *,
+    alpha: float = ALPHA,
+    max_rounds: int = MAX_ROUNDS,
+    candidate_budget: int = CANDIDATE_BUDGET,
+    refit_budget: int = REFIT_BUDGET,
+    log=None,
+) -> Diagnosis:
+    """Close the loop for the configured damper on the measured run `data_file` (see the module doc)."""
+    from ..errors import InputError
+
+    t_start = time.perf_counter()
+    say = log or (lambda _msg: None)
+    data_file = data_file if data_file is not None else (config.data.file if config.data is not None else None)
+    if data_file is None:
+        raise InputError("diagnose needs measured data: give --data FILE or data.file", source=config.source)
+    train = load_measured(config, data_file)
+    if validate_files is None:
+        validate_files = tuple(config.data.validate_files) if config.data is not None else ()
+    held_out = {Path(str(p)).stem: load_measured(config, p) for p in validate_files}
+    substeps = config.bench.substeps
+    spec = configured_spec(config)
+    declared_names = tuple(config.identify.unknowns)
+    box = dict(config.search_box())
+    specs = bench_candidates(spec, train, declared_names)
+    limits, starts = dict(box), {}
+    for c in specs.values():
+        limits.update(c.limits)
+        limits.update(c.shape_limits)
+        starts.update(c.start)
+
+    n = train.t.size
+    if held_out:
+        keep = None
+        vsource = "held-out runs: " + ", ".join(str(p) for p in validate_files)
+    else:
+        keep = (np.arange(n) // BLOCK) % HOLDOUT_EVERY != HOLDOUT_EVERY - 1
+        vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {BLOCK} samples)"
+
+    def spec_for(names) -> DamperSpec:
+        effects = _effects_of(names)
+        values = {f"{e}.{p.name}": p.default for e in effects for p in LIBRARY[e].params}
+        values.update({k: v for k, v in starts.items() if k.partition(".")[0] in effects})
+        return spec.with_effects(effects, {**values, **{k: v for k, v in spec.values.items() if k in values}})
+
+    def problem_on(names: tuple[str, ...], history: BenchHistory, mask) -> Problem:
+        s = spec_for(names)
+        force = history.force if mask is None else history.force[mask]
+        scale = np.sqrt(force.size * np.var(force))  # sum of squared residuals = Eq. 7's J
+
+        def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
+            with np.errstate(all="ignore"):
+                sim = s.simulate_batch(names, X, history, substeps).force
+                r = (history.force[None, :] - sim) / scale
+                r = r if mask is None else r[:, mask]
+                return np.sum(r**2, axis=1), r
+
+        lower = np.array([limits[n][0] for n in names], dtype=float)
+        upper = np.array([limits[n][1] for n in names], dtype=float)
+        return Problem(lower, upper, lambda X: cost_and_residuals(X)[0], cost_and_residuals, 1.0, names)
+
+    def problem_for(names: tuple[str, ...]) -> tuple[Problem, NDArray]:
+        s = spec_for(names)
+        start = np.array([starts.get(n, s.values.get(n, 0.0)) if n not in declared_names else s.values[n]
+                          for n in names], dtype=float)  # fmt: skip
+        p = problem_on(names, train, keep)
+        start = np.clip(start, p.lower, p.upper)
+        return _with_penalty(p, start), start
+
+    def validation_J(names: tuple[str, ...], x: NDArray) -> tuple[float, dict[str, float] | None]:
+        X = np.asarray(x, dtype=float)[None, :]
+        if not held_out:
+            c = problem_on(names, train, ~keep).cost(X)[0]
+            return (float(c) if np.isfinite(c) else float("inf")), None
+        per = {k: float(problem_on(names, h, None).cost(X)[0]) for k, h in held_out.items()}
+        per = {k: (v if np.isfinite(v) else float("inf")) for k, v in per.items()}
+        return float(np.mean(list(per.values()))), per
+
+    def residual_rho(f: Fit) -> float:
+        _, r = problem_for(f.names)[0].residuals(np.asarray(f.x, dtype=float)[None, :])
+        return float(np.clip(autocorrelation(r[0], 1)[1], 0.0, 0.99)) if np.all(np.isfinite(r)) else 0.0
+
+    R_train = int(n if keep is None else keep.sum())
+
+    def n_eff(f: Fit) -> float:
+        rho = residual_rho(f)
+        return R_train * (1.0 - rho) / (1.0 + rho)
+
+    def statistic(current: Fit):
+        ne = n_eff(current)
+        return lambda J0, J1: float(ne * np.log(J0 / J1)) if 0 < J1 < J0 else 0.0
+
+    # 1. the declared model: the configured algorithm from the configured values, then a least-squares polish
+    ident = config.identify
+    problem, x0 = problem_for(declared_names)
+    budget = ident.budget or ident.algorithm.population * ident.algorithm.iterations
+    opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, max(1, budget // ident.algorithm.population))
+    res = opt.minimize(problem, run_streams(ident.seed, 0).optimizer, budget=budget, x0=x0)
+    fit = lsq_fit(problem, res.x, refit_budget)
+    say(f"declared {spec.model}: J = {fit.J:.4g} ({res.evaluations + fit.evaluations} evaluations)")
+    sigma = float(estimate_noise_sigma(train.force[:, None])[0])
+    sigma = max(sigma, 1e-9 * float(np.std(train.force)))
+
+    def report(f: Fit, effects) -> ModelReport:
+        s = spec_for(f.names)
+        force = s.simulate_batch(f.names, np.asarray(f.x)[None, :], train, substeps).force[0]
+        scale_var = f.J / R_train * R_train / max(n_eff(f), 1.0)  # residual-entry variance, AR(1)-inflated
+        ci = fisher_ci(problem_for(f.names)[0], f.x, scale_var)
+        vJ, per = validation_J(f.names, f.x)
+        an = analyse_bench(train, force, sigma)
+        return ModelReport(tuple(effects), f.names, f.x, ci, f.J, an.chi2_per_sample, vJ, None, an, per)
+
+    before = report(fit, ())
+    quality = assess_bench(train, sigma, declared_names, before)
+    subject = Subject(
+        specs=specs, declared=frozenset(), problem_for=problem_for, validation_J=validation_J,
+        residual_count=R_train, statistic=statistic, min_gain=MIN_GAIN,
+    )  # fmt: skip
+    loop = augment(
+        subject, fit, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
+        refit_budget=refit_budget, claim=quality.ok, say=say,
+    )  # fmt: skip
+    after = report(loop.fit, loop.effects) if loop.effects else before
+    return Diagnosis(
+        before=before,
+        after=after,
+        rounds=loop.rounds,
+        selected=loop.effects,
+        alpha=alpha,
+        validation_source=vsource,
+        sigma_source=f"force noise sigma {sigma:.4g} N estimated from the training run (third differences)",
+        wall_s=time.perf_counter() - t_start,
+        steps=loop.steps,
+        notes=loop.notes,
+        quality=quality,
+        system="damper",
+        J_definition="Fleps-Dezasse Eq. 7: mean squared force error over the variance of the measured force",
+        validation_from_file=bool(held_out),
+    )
+
+
+def _with_penalty(problem: Problem, start: NDArray) -> Problem:
+    """The problem with a finite penalty for unstable candidates: PENALTY_FACTOR x its J at the start."""
+    J0 = float(problem.cost(start[None, :])[0])
+    penalty = PENALTY_FACTOR * max(J0 if np.isfinite(J0) else 1.0, 1.0)
+    return Problem(problem.lower, problem.upper, problem.cost, problem.residuals, penalty, problem.names)

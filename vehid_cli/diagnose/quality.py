@@ -1,0 +1,97 @@
+"""Can the data tell effects apart at all? Checks made before any effect is claimed (issue 6, item 5).
+
+A diagnosis on data that is too short, too noisy or not excited enough must say so rather than name an
+effect. Three checks, each with its threshold stated here:
+
+* length: at least MIN_SAMPLES samples per channel (and, on a bench, MIN_REVERSALS velocity reversals:
+  two full strokes), else the residual statistics have too few degrees of freedom to mean anything;
+* noise: the noise the data implies (its sigma, given or estimated) at most MAX_NOISE_RATIO of the
+  signal's standard deviation, else the residual is mostly noise and a missing effect is buried in it;
+* excitation: the Fisher information of the declared unknowns is not singular (every 95 % interval
+  finite), else the data cannot even pin down the declared model and an effect's parameters would
+  trade off against its parameters;
+* telling effects apart (in the loop, attribution.distinct): the best candidate must beat every other
+  significant one by the critical value of its own test, else the data prefers neither and none is added.
+
+When any check fails the loop still ranks the candidates (for the record) but accepts none.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+MIN_SAMPLES = 500
+MIN_REVERSALS = 4
+MAX_NOISE_RATIO = 0.5
+
+
+@dataclass(frozen=True)
+class Quality:
+    """Why the data cannot support a claim (empty: it can)."""
+
+    reasons: tuple[str, ...] = ()
+    samples: int = 0
+    noise_ratio: float | None = None  # median over channels of sigma / std(signal)
+    worst_relative_ci: float | None = None  # largest 95 % half-width / |estimate| among declared unknowns
+
+    @property
+    def ok(self) -> bool:
+        return not self.reasons
+
+    def to_json(self) -> dict:
+        return {
+            "ok": self.ok,
+            "reasons": list(self.reasons),
+            "samples": self.samples,
+            "noise_ratio": self.noise_ratio,
+            "worst_relative_ci95": self.worst_relative_ci,
+        }
+
+
+def _checks(samples: int, noise_ratio: float, names, x: NDArray, ci: NDArray, extra: list[str]) -> Quality:
+    reasons = list(extra)
+    if samples < MIN_SAMPLES:
+        reasons.insert(0, f"too short: {samples} samples per channel, at least {MIN_SAMPLES} needed")
+    if not noise_ratio <= MAX_NOISE_RATIO:
+        reasons.append(
+            f"too noisy: the noise is {100 * noise_ratio:.0f} % of the signal (at most {100 * MAX_NOISE_RATIO:.0f} %)"
+        )
+    x, ci = np.asarray(x, dtype=float), np.asarray(ci, dtype=float)
+    rel = np.where(np.abs(x) > 0, ci / np.maximum(np.abs(x), 1e-300), np.inf)
+    rel = np.where(np.isfinite(rel), rel, np.inf)
+    loose = [n for n, r in zip(names, rel, strict=True) if not np.isfinite(r)]
+    if loose:
+        reasons.append(
+            f"not excited enough to determine the declared model: {', '.join(loose)} undetermined "
+            "(singular Fisher information)"
+        )
+    worst = float(np.max(rel)) if rel.size and np.all(np.isfinite(rel)) else None
+    return Quality(tuple(reasons), int(samples), float(noise_ratio), worst)
+
+
+def assess_vehicle(task, reference: dict[str, NDArray], before) -> Quality:
+    """The checks for the full car: samples of the run, sigma over each channel's std, the declared fit's CIs."""
+    ratios = np.concatenate(
+        [
+            np.asarray(task.sigma[f], dtype=float) / np.maximum(np.std(ref, axis=0), 1e-300)
+            for f, ref in reference.items()
+        ]
+    )
+    return _checks(int(task.experiment.t.size), float(np.median(ratios)), task.names, before.x[: len(task.names)],
+                   before.ci[: len(task.names)], [])  # fmt: skip
+
+
+def assess_bench(history, sigma: float, names, before) -> Quality:
+    """The checks for a damper on a bench: samples and strokes, force noise over force std, the declared CIs."""
+    v = np.asarray(history.v, dtype=float)
+    moving = v[np.abs(v) > 1e-3 * max(np.max(np.abs(v)), 1e-300)]
+    reversals = int(np.count_nonzero(np.diff(np.sign(moving)) != 0))
+    extra = []
+    if reversals < MIN_REVERSALS:
+        extra.append(f"too few strokes: {reversals} velocity reversals, at least {MIN_REVERSALS} needed")
+    ratio = float(sigma / max(float(np.std(history.force)), 1e-300))
+    n = len(names)
+    return _checks(int(history.t.size), ratio, names, before.x[:n], before.ci[:n], extra)
