@@ -123,3 +123,30 @@ def test_diagnose_bad_input_exits_2(tmp_path):
     result = CliRunner().invoke(app, ["diagnose", str(BASE), "--data", str(tmp_path / "missing.csv")])
     assert result.exit_code == 2
     assert "missing.csv" in result.output
+
+
+# ------------------------------------------------------------------------------------ bad data (item 5)
+
+ASYM = ROOT / "configs" / "effects" / "asymmetric_damping.yaml"
+
+
+@pytest.mark.parametrize(
+    ("case", "overrides", "reason"),
+    [
+        ("short", ["simulation.duration=0.3"], "too short"),
+        ("noisy", ["noise.level=0.8"], "too noisy"),
+        ("unexcited", ["road.bump.heights=[0.05,0.05,0.05,0.05]"], "roll is not excited"),
+    ],
+)
+def test_bad_vehicle_data_claims_no_effect(tmp_path, case, overrides, reason):
+    """Data with asymmetric damping in it, but too short, too noisy or without roll: no claim, and why."""
+    data = tmp_path / f"{case}.csv"
+    sets = [a for o in overrides for a in ("--set", o)]
+    assert CliRunner().invoke(app, ["simulate", str(ASYM), "-o", str(data), *sets]).exit_code == 0
+    cfg = load_config(BASE, [*OVERRIDES, "identify.truth=none", "identify.budget=1000"])
+    d = diagnose(cfg, data, candidate_budget=40, refit_budget=200, analyse_residuals=False)
+    assert d.selected == ()
+    assert not d.quality.ok
+    assert any(reason in r for r in d.quality.reasons), d.quality.reasons
+    assert d.verdict.startswith("inconclusive")
+    assert len(d.rounds) == 1 and not any(r.accepted for r in d.rounds[0])

@@ -38,7 +38,7 @@ from ..noise import estimate_noise_sigma
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
 from .attribution import ALPHA, Candidate, Fit, lsq_fit
-from .loop import BLOCK, HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, augment, fisher_ci
+from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, augment, block_size, fisher_ci, holdout_blocks
 from .quality import assess_bench
 from .residuals import analyse_bench, autocorrelation
 
@@ -136,8 +136,8 @@ def diagnose_bench(
         keep = None
         vsource = "held-out runs: " + ", ".join(str(p) for p in validate_files)
     else:
-        keep = (np.arange(n) // BLOCK) % HOLDOUT_EVERY != HOLDOUT_EVERY - 1
-        vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {BLOCK} samples)"
+        keep = ~holdout_blocks(n)
+        vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {block_size(n)} samples)"
 
     def spec_for(names) -> DamperSpec:
         effects = _effects_of(names)

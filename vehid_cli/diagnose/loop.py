@@ -254,6 +254,16 @@ def augment(
     return Loop(current, tuple(effects), tuple(rounds), tuple(steps), tuple(notes))
 
 
+def block_size(n: int) -> int:
+    """Samples per hold-out block: BLOCK, smaller on short data so that every run has held-out blocks."""
+    return max(1, min(BLOCK, n // (2 * HOLDOUT_EVERY)))
+
+
+def holdout_blocks(n: int) -> NDArray:
+    """(n,) True on the held-out samples: every HOLDOUT_EVERY-th block of block_size(n)."""
+    return (np.arange(n) // block_size(n)) % HOLDOUT_EVERY == HOLDOUT_EVERY - 1
+
+
 def masked(problem: Problem, keep: NDArray | None) -> Problem:
     """The problem on the kept residuals only (cost: their chi² per sample); diverging candidates (NaN, inf)
     are the optimizer's to penalise, without floating-point warnings."""
@@ -310,10 +320,10 @@ def diagnose(
     else:
         vtask, vref = task, ref
         n = task.experiment.t.size
-        held = (np.arange(n) // BLOCK) % HOLDOUT_EVERY == HOLDOUT_EVERY - 1
+        held = holdout_blocks(n)
         per_sample = np.tile(np.repeat(held, 4), len(task.families))  # residual layout: family, time, channel
         keep, vkeep = ~per_sample, per_sample
-        vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {BLOCK} samples)"
+        vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {block_size(n)} samples)"
     R_train = int(R_total if keep is None else keep.sum())
 
     def problem_of(t: Task, reference, mask) -> Problem:

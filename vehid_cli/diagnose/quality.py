@@ -7,8 +7,11 @@ effect. Three checks, each with its threshold stated here:
   two full strokes), else the residual statistics have too few degrees of freedom to mean anything;
 * noise: the noise the data implies (its sigma, given or estimated) at most MAX_NOISE_RATIO of the
   signal's standard deviation, else the residual is mostly noise and a missing effect is buried in it;
-* excitation: the Fisher information of the declared unknowns is not singular (every 95 % interval
-  finite), else the data cannot even pin down the declared model and an effect's parameters would
+* excitation: on the car, the road moves the wheels at all, and differently left and right (the
+  left-minus-right road of an axle at least MIN_ROLL_RATIO of left-plus-right): equal bumps left and right
+  leave roll unexcited, and a missing strut effect then hides in the declared parameters;
+  on a bench, MIN_REVERSALS strokes; and the Fisher information of the declared unknowns is not singular
+  (every 95 % interval finite), else the data cannot even pin down the declared model and an effect's parameters would
   trade off against its parameters;
 * telling effects apart (in the loop, attribution.distinct): the best candidate must beat every other
   significant one by the critical value of its own test, else the data prefers neither and none is added.
@@ -26,6 +29,7 @@ from numpy.typing import NDArray
 MIN_SAMPLES = 500
 MIN_REVERSALS = 4
 MAX_NOISE_RATIO = 0.5
+MIN_ROLL_RATIO = 0.01
 
 
 @dataclass(frozen=True)
@@ -80,8 +84,19 @@ def assess_vehicle(task, reference: dict[str, NDArray], before) -> Quality:
             for f, ref in reference.items()
         ]
     )
+    y = np.asarray(task.experiment.road, dtype=float)  # corners 1, 2 front; 4, 3 rear; 1 and 4 on side b1
+    pairs = ((0, 1), (3, 2))
+    roll = max(np.linalg.norm(y[:, a] - y[:, b]) / max(np.linalg.norm(y[:, a] + y[:, b]), 1e-300) for a, b in pairs)
+    extra = []
+    if not np.any(y):
+        extra.append("not excited: the road input is zero")
+    elif roll < MIN_ROLL_RATIO:
+        extra.append(
+            f"not excited enough: the road is the same left and right (difference {100 * roll:.2g} % of the sum), "
+            "so roll is not excited"
+        )
     return _checks(int(task.experiment.t.size), float(np.median(ratios)), task.names, before.x[: len(task.names)],
-                   before.ci[: len(task.names)], [])  # fmt: skip
+                   before.ci[: len(task.names)], extra)  # fmt: skip
 
 
 def assess_bench(history, sigma: float, names, before) -> Quality:

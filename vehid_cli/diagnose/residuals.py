@@ -116,6 +116,7 @@ class ResidualAnalysis:
     fingerprint: tuple[tuple[Binned, Binned], ...]  # per corner: (velocity, deflection), acc residual of that corner
     freq: NDArray | None = None  # (nf,) [Hz]
     psd: NDArray | None = None  # (channels, nf) residual PSD over the white level of the implied noise
+    dt: float | None = None  # sampling step [s]
 
     def summary(self) -> dict:
         """Plain numbers for JSON."""
@@ -185,6 +186,7 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
         fingerprint=fingerprint,
         freq=(spec := spectrum(residual, exp.dt))[0],
         psd=spec[1],
+        dt=float(exp.dt),
     )
 
 
@@ -211,4 +213,5 @@ def analyse_bench(history, model_force: NDArray, sigma: float, lags: int = 20, b
         ),
         freq=f,
         psd=psd,
+        dt=float(history.dt),
     )

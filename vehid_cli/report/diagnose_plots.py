@@ -1,0 +1,88 @@
+"""Figures of a diagnosis (``vehid diagnose --plots DIR``): the residual before and after the loop, its
+fingerprint binned against the strut (or stroke) velocity and deflection, and its spectrum. Residuals are
+in units of the noise sigma the data implies, so white noise sits at ±1 and its spectrum at 1."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..data import atomic_path  # noqa: E402
+
+
+def _save(fig, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path
+
+
+def _label(report, name: str) -> str:
+    return f"{name}: {', '.join(report.effects) or 'declared model'} (J = {report.J:.3g})"
+
+
+def plot_diagnosis(diagnosis, directory: str | Path, stem: str = "diagnose") -> list[Path]:
+    """Write <stem>-residual.png, <stem>-fingerprint.png and <stem>-spectrum.png; return their paths."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    before, after = diagnosis.before.analysis, diagnosis.after.analysis
+    if before is None:
+        return []
+    changed = diagnosis.after is not diagnosis.before
+    sides = [("before", diagnosis.before, before, "0.55")] + (
+        [("after", diagnosis.after, after, "C3")] if changed else []
+    )
+    # the channel that the declared model misses most
+    ch = int(np.argmax(before.chi2_channel))
+    name = before.channels[ch]
+    paths = []
+
+    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    t = np.arange(before.residual.shape[0]) * (before.dt or 1.0)
+    for side, report, an, colour in sides:
+        ax.plot(t, an.residual[:, ch], lw=0.6, color=colour, label=_label(report, side))
+    ax.axhspan(-1, 1, color="C0", alpha=0.12, label="±1 sigma (the noise)")
+    ax.set_xlabel("t [s]" if before.dt else "sample")
+    ax.set_ylabel(f"residual {name} [sigma]")
+    ax.set_title(f"residual of {name}, before and after the loop")
+    ax.legend(fontsize=8, loc="upper right")
+    paths.append(_save(fig, directory / f"{stem}-residual.png"))
+
+    corners = before.fingerprint
+    fig, axes = plt.subplots(len(corners), 2, figsize=(10, 2.6 * len(corners) + 0.6), squeeze=False,
+                             constrained_layout=True)  # fmt: skip
+    for i in range(len(corners)):
+        for j in range(2):
+            ax = axes[i, j]
+            for side, _report, an, colour in sides:
+                b = an.fingerprint[i][j]
+                err = 2.0 / np.sqrt(np.maximum(b.count, 1))
+                scale = 1e3 if b.variable != "velocity" else 1.0
+                ax.errorbar(scale * b.centres, b.mean, yerr=err, color=colour, marker="o", ms=3, lw=1,
+                            capsize=2, label=side)  # fmt: skip
+            ax.axhline(0.0, color="k", lw=0.5)
+            unit = "m/s" if corners[i][j].variable == "velocity" else "mm"
+            where = f"corner {i + 1} " if len(corners) > 1 else ""
+            ax.set_xlabel(f"{where}{corners[i][j].variable} [{unit}]")
+            ax.set_ylabel("mean residual [sigma]")
+            if i == 0 and j == 0:
+                ax.legend(fontsize=8)
+    fig.suptitle("fingerprint: residual binned against the strut's motion (±2 standard errors)")
+    paths.append(_save(fig, directory / f"{stem}-fingerprint.png"))
+
+    if before.psd is not None:
+        fig, ax = plt.subplots(figsize=(8, 3.6), constrained_layout=True)
+        for side, report, an, colour in sides:
+            ax.semilogy(an.freq[1:], an.psd[ch, 1:], color=colour, label=_label(report, side))
+        ax.axhline(1.0, color="C0", ls="--", lw=1, label="white noise of the implied sigma")
+        ax.set_xlabel("frequency [Hz]")
+        ax.set_ylabel(f"PSD of residual {name} / white level")
+        ax.set_title("spectral residual")
+        ax.legend(fontsize=8)
+        paths.append(_save(fig, directory / f"{stem}-spectrum.png"))
+    return paths
