@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-all lint bench bench-sweep paper clean
+.PHONY: demo test test-all lint bench bench-sweep paper close-the-loop clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -56,6 +56,10 @@ paper: $(STAMP)
 	$(BIN)/vehid sweep configs/gokdag2015/base.yaml -o $(SEED_SWEEP) --runs 100 \
 	    --set identify.objective=wls --set identify.algorithm.name=hybrid --vary sensors=acc,disp --vary identify.seed=7,99
 	$(BIN)/python docs/results/make_gokdag2015.py $(PAPER_SWEEP) $(CRLB_SWEEP) $(SEED_SWEEP) docs/results/gokdag2015.md
+
+## close-the-loop: vehid diagnose on the bump runs and the two real dampers -> docs/results/close-the-loop.md
+close-the-loop: $(STAMP)
+	$(BIN)/python docs/results/make_close_the_loop.py docs/results/close-the-loop.md
 
 clean:
 	rm -rf $(VENV) runs/demo .pytest_cache

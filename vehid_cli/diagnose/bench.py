@@ -22,6 +22,7 @@ and velocity standard deviations F, X, V.
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -134,7 +135,7 @@ def diagnose_bench(
     n = train.t.size
     if held_out:
         keep = None
-        vsource = "held-out runs: " + ", ".join(str(p) for p in validate_files)
+        vsource = "held-out runs: " + ", ".join(os.path.normpath(str(p)) for p in validate_files)
     else:
         keep = ~holdout_blocks(n)
         vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {block_size(n)} samples)"

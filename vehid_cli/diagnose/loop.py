@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from ..config import Config, config_from_dict
 from ..experiment import run_streams
@@ -208,6 +209,7 @@ def augment(
     rounds: list[tuple[Ranked, ...]] = []
     steps: list[Step] = []
     notes: list[str] = []
+    dropped: set[str] = set()
     current = fit
     current_vJ, _ = subject.validation_J(fit.names, fit.x)
 
@@ -220,7 +222,7 @@ def augment(
         return subject.validation_J(names, x)[0]
 
     for _ in range(max_rounds if claim else 1):
-        todo = [specs[e] for e in specs if e not in subject.declared and e not in effects]
+        todo = [specs[e] for e in specs if e not in subject.declared and e not in effects and e not in dropped]
         if not todo:
             break
         ranked = rank_candidates(
@@ -247,6 +249,31 @@ def augment(
         refit = lsq_fit(problem, x0, refit_budget)
         if refit.J > best.fit.J:  # keep the short fit if the re-fit found nothing better
             refit = Fit(names, x0, best.fit.J, refit.evaluations)
+        # backward check: with everything re-fitted, is the effect still needed? (a short fit without it)
+        added = [n for n in names if n not in current.names]
+        own = [n for n in added if "." in n] or added  # its own parameters, not the car's it also freed
+        reduced = tuple(n for n in names if n not in own)
+        problem_r, _ = subject.problem_for(reduced)
+        without = lsq_fit(problem_r, refit.x[[names.index(n) for n in reduced]], candidate_budget)
+        J_without = min(without.J, current.J)
+        p_keep = float(stats.chi2.sf(subject.statistic(refit)(J_without, refit.J), len(own)))
+        if p_keep >= alpha / len(todo):
+            effects.pop()
+            dropped.add(best.effect)
+            notes.append(
+                f"{best.effect} dropped after the re-fit: without it J = {J_without:.4g} against {refit.J:.4g} "
+                f"(p = {p_keep:.2g}); its gain was the other parameters converging"
+            )
+            say(notes[-1])
+            if without.J < current.J:
+                current = without
+                current_vJ, _ = subject.validation_J(current.names, current.x)
+            continue
+        for n in own:  # an estimate on its search bound: say so (the effect may stand for something else)
+            j = names.index(n)
+            lo, hi = problem.lower[j], problem.upper[j]
+            if min(refit.x[j] - lo, hi - refit.x[j]) <= 1e-6 * (hi - lo):
+                notes.append(f"{n} = {refit.x[j]:.4g} sits on its search bound [{lo:.4g}, {hi:.4g}]")
         new_vJ, per_file = subject.validation_J(refit.names, refit.x)
         steps.append(Step(best.effect, current.J, refit.J, current_vJ, new_vJ, per_file))
         current, current_vJ = refit, new_vJ
