@@ -39,7 +39,7 @@ from ..noise import estimate_noise_sigma
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
 from .attribution import ALPHA, Candidate, Fit, lsq_fit
-from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, augment, block_size, fisher_ci, holdout_blocks
+from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, fisher_ci, holdout_blocks
 from .quality import assess_bench
 from .residuals import analyse_bench, autocorrelation
 
@@ -219,27 +219,13 @@ def diagnose_bench(
         specs=specs, declared=frozenset(), problem_for=problem_for, validation_J=validation_J,
         residual_count=R_train, statistic=statistic, min_gain=MIN_GAIN,
     )  # fmt: skip
-    loop = augment(
-        subject, fit, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, claim=quality.ok, say=say,
-    )  # fmt: skip
-    after = report(loop.fit, loop.effects) if loop.effects else before
-    return Diagnosis(
-        before=before,
-        after=after,
-        rounds=loop.rounds,
-        selected=loop.effects,
-        alpha=alpha,
-        validation_source=vsource,
+    return close(
+        subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
+        refit_budget=refit_budget, say=say, t_start=t_start, validation_source=vsource,
         sigma_source=f"force noise sigma {sigma:.4g} N estimated from the training run (third differences)",
-        wall_s=time.perf_counter() - t_start,
-        steps=loop.steps,
-        notes=loop.notes,
-        quality=quality,
-        system="damper",
+        system="damper", validation_from_file=bool(held_out),
         J_definition="Fleps-Dezasse Eq. 7: mean squared force error over the variance of the measured force",
-        validation_from_file=bool(held_out),
-    )
+    )  # fmt: skip
 
 
 def _with_penalty(problem: Problem, start: NDArray) -> Problem:

@@ -405,22 +405,43 @@ def diagnose(
         specs=specs, declared=frozenset(declared), problem_for=problem_for, validation_J=validation_J,
         residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
     )  # fmt: skip
+    return close(
+        subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
+        refit_budget=refit_budget, say=say, t_start=t_start, validation_source=vsource,
+        sigma_source=task.sigma_source, validation_from_file=validate_file is not None,
+    )  # fmt: skip
+
+
+def close(
+    subject: Subject,
+    fit: Fit,
+    before: ModelReport,
+    report: Callable[[Fit, tuple[str, ...]], ModelReport],
+    quality: Quality,
+    *,
+    alpha: float,
+    max_rounds: int,
+    candidate_budget: int,
+    refit_budget: int,
+    say: Callable[[str], None],
+    t_start: float,
+    **fields,
+) -> Diagnosis:
+    """Run the loop from the declared fit (no claims when the data fail `quality`) and report the outcome;
+    `fields` are the Diagnosis's descriptive fields (validation and noise sources, system, J definition)."""
     loop = augment(
         subject, fit, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
         refit_budget=refit_budget, claim=quality.ok, say=say,
     )  # fmt: skip
-    after = report(loop.fit, loop.effects) if loop.effects else before
     return Diagnosis(
         before=before,
-        after=after,
+        after=report(loop.fit, loop.effects) if loop.effects else before,
         rounds=loop.rounds,
         selected=loop.effects,
         alpha=alpha,
-        validation_source=vsource,
-        sigma_source=task.sigma_source,
         wall_s=time.perf_counter() - t_start,
         steps=loop.steps,
         quality=quality,
-        validation_from_file=validate_file is not None,
         notes=loop.notes,
+        **fields,
     )
