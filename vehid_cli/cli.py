@@ -430,34 +430,49 @@ def _report_dampers(files: list[Path], fmt: str, output: Path | None, plots: Pat
 @_guarded
 def diagnose(
     config: Annotated[Path, typer.Argument(help="Experiment config (YAML): the declared model.", show_default=False)],
-    data: Annotated[Path, typer.Option("--data", help="Measurement file to fit and diagnose.", show_default=False)],
-    validate: Annotated[
+    data: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("--validate", help="A second run to judge the augmented model on (else held-out blocks)."),
+        typer.Option("--data", help="Measurement file to fit and diagnose (a damper config may name it in data.file)."),
+    ] = None,
+    validate: Annotated[
+        Optional[list[Path]],  # noqa: UP045
+        typer.Option("--validate", help="A run to judge the augmented model on (repeatable; else held-out data)."),
     ] = None,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the SPEC section 5 JSON here.")] = None,  # noqa: UP045
+    plots: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--plots", help="Write figures here: residual before/after, fingerprint, spectrum."),
+    ] = None,
     set_: SetOption = None,
 ) -> None:
     """Close the loop: fit, analyse the residual, rank candidate missing effects, add the best, re-fit.
 
-    The objective is wls (J = noise-weighted residual power per sample, chi2 per sample); the noise is
-    estimated from the data unless --set noise.level=Np gives it; the integrator is rk4 unless the config
-    sets rk4 or newmark. A candidate is accepted when its likelihood-ratio test is significant (p below
-    1e-3 / number of candidates) and it lowers the validation J.
+    Full car: J is wls (chi2 per sample); the noise is estimated from the data unless --set noise.level=Np
+    gives it; the integrator is rk4 unless the config sets newmark. Damper on a bench: J is Eq. 7; the
+    validation runs are --validate, else the config's data.validate. A candidate is accepted when its
+    likelihood-ratio test is significant (p below 1e-3 / number of candidates), it lowers the validation J,
+    and the data tell it from the runner-up; data too short, too noisy or unexcited get no claim.
     """
     from rich.table import Table
 
     from .diagnose import diagnose as run_diagnosis
+    from .diagnose.bench import diagnose_bench
     from .results import write_json
 
-    cfg = load_config(config, ["identify.objective=wls", "noise.level=0", *(set_ or ())])
-    if isinstance(cfg, DamperConfig):
-        raise InputError(
-            "diagnose works on the full car for now; damper configs are not supported yet", source=str(config)
-        )
+    cfg = load_config(config, set_ or ())
     if json_out is not None:
         check_writable(json_out, (".json",))
-    result = run_diagnosis(cfg, data, validate, log=lambda msg: err.print(msg, markup=False))
+    say = lambda msg: err.print(msg, markup=False)  # noqa: E731
+    if isinstance(cfg, DamperConfig):
+        vfiles = None if not validate else tuple(validate)
+        result = diagnose_bench(cfg, data, vfiles, log=say)
+    else:
+        if data is None:
+            raise InputError("diagnose needs --data FILE (the measured run to fit)", source=str(config))
+        if validate and len(validate) > 1:
+            raise InputError("the full car takes one --validate run", source=str(config))
+        cfg = load_config(config, ["identify.objective=wls", "noise.level=0", *(set_ or ())])
+        result = run_diagnosis(cfg, data, validate[0] if validate else None, log=say)
     doc = result.to_json()
     table = Table(title=f"candidate effects (round 1; alpha = {result.alpha:g}, Bonferroni)")
     for col in ("effect", "k", "LR statistic", "p-value", "J with it", "BIC margin", "validation J", "accepted"):
@@ -468,7 +483,7 @@ def diagnose(
             f"{r.validation_J:.4g}", "yes" if r.accepted else "no",
         )  # fmt: skip
     out.print(table)
-    ba = Table(title="before / after (J = wls chi2 per sample on the training data)")
+    ba = Table(title=f"before / after (J: {result.J_definition})")
     ba.add_column("")
     ba.add_column("before")
     ba.add_column("after")
@@ -479,17 +494,37 @@ def diagnose(
     b, a = result.before, result.after
     ba.add_row("effects", ", ".join(b.effects) or "(declared)", ", ".join(a.effects) or "(none added)")
     ba.add_row("J", fmt(b.J), fmt(a.J))
-    ba.add_row("chi2 per sample (all data)", fmt(b.chi2_per_sample), fmt(a.chi2_per_sample))
-    ba.add_row("validation J", fmt(b.validation_J), fmt(a.validation_J))
+    ba.add_row("residual / noise power", fmt(b.chi2_per_sample), fmt(a.chi2_per_sample))
+    ba.add_row(
+        "validation J" if result.validation_from_file else "held-out J", fmt(b.validation_J), fmt(a.validation_J)
+    )
     ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
     for j, name in enumerate(a.names):
         before = f"{b.x[j]:.5g} ± {b.ci[j]:.2g}" if j < len(b.names) else "-"
         ba.add_row(name, before, f"{a.x[j]:.5g} ± {a.ci[j]:.2g}")
     out.print(ba)
-    out.print(f"selected: {', '.join(result.selected) or 'nothing missing'} ({result.wall_s:.1f} s)")
+    for step in result.steps:
+        out.print(
+            f"added {step.effect}: J {step.J_before:.4g} -> {step.J_after:.4g}, "
+            f"validation J {step.validation_J_before:.4g} -> {step.validation_J_after:.4g}"
+        )
+    out.print(f"verdict: {result.verdict} ({result.wall_s:.1f} s)")
+    if plots is not None:
+        for path in plot_diagnosis_files(result, plots, (data or config).stem):
+            out.print(f"wrote {path}")
     if json_out is not None:
         write_json(json_out, doc)
         out.print(f"wrote {json_out}")
+
+
+def plot_diagnosis_files(result, directory: Path, stem: str) -> list[Path]:
+    """The diagnosis figures, with a clear error if the directory cannot be written."""
+    from .report.diagnose_plots import plot_diagnosis
+
+    try:
+        return plot_diagnosis(result, directory, stem)
+    except OSError as exc:
+        raise InputError(f"cannot write figures: {exc.strerror}", source=str(directory)) from None
 
 
 def run() -> None:
