@@ -266,3 +266,31 @@ def test_bad_effects_input_exits_2_naming_the_key(overrides, key, words, tmp_pat
     assert res.returncode == 2, res.stderr
     assert f"'{key}'" in res.stderr and words in res.stderr and "Traceback" not in res.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_effect_parameters_can_be_unknowns():
+    """identify.unknowns may name a declared effect's parameters: the task simulates them, the truth is zero-cost."""
+    from vehid_cli.identification import build_task
+
+    hyst = ROOT / "configs" / "effects" / "hysteresis.yaml"
+    cfg = load_config(hyst, ["identify.unknowns=[m,hysteresis.alpha_f]", "noise.level=0", "identify.objective=wls"])
+    task = build_task(cfg)
+    assert task.names == ("m", "hysteresis.alpha_f")
+    assert task.nominal[1] == 30000.0 and task.lower[1] == 0.7 * 30000.0
+    costs = task.problem(task.reference(0)).cost(np.array([task.nominal, [1300.0, 0.8 * 30000.0]]))
+    assert costs[0] == pytest.approx(0.0, abs=1e-12) and costs[1] > 1e-6
+
+
+@pytest.mark.parametrize(
+    ("unknowns", "message"),
+    [("[m,hysteresis.alfa_f]", "did you mean 'hysteresis.alpha_f'"), ("[m,hysteresis.alpha_f]", "identify.limits")],
+)
+def test_bad_effect_unknowns_are_named(unknowns, message):
+    from vehid_cli.errors import InputError
+
+    base = ROOT / "configs" / "effects" / "hysteresis.yaml"
+    sets = [f"identify.unknowns={unknowns}"]
+    if message == "identify.limits":
+        sets.append("vehicle.effects.hysteresis.alpha_f=0")
+    with pytest.raises(InputError, match=message.replace("(", r"\(")):
+        load_config(base, sets)

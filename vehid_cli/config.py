@@ -296,14 +296,25 @@ class Config(_Section):
             )
         return self
 
+    def parameter_values(self) -> dict[str, float]:
+        """Every identifiable value: the car's parameters and the declared effects' (<effect>.<param>)."""
+        effects = {f"{e}.{k}": float(v) for e, ps in self.vehicle.effect_values().items() for k, v in ps.items()}
+        return {**self.vehicle.values(), **effects}
+
     @model_validator(mode="after")
     def _identify_against_vehicle(self) -> Config:
-        ident, values = self.identify, self.vehicle.values()
+        ident, values = self.identify, self.parameter_values()
         seen = set()
         for name in ident.unknowns:
             if name not in values:
-                hint = _did_you_mean(name, VEHICLE_PARAMETERS)
-                raise _KeyedError("identify.unknowns", f"'{name}' is not a vehicle parameter{hint}")
+                hint = _did_you_mean(name, tuple(values))
+                what = "a vehicle parameter or a parameter of a declared effect (vehicle.effects)"
+                raise _KeyedError("identify.unknowns", f"'{name}' is not {what}{hint}")
+            if "." in name and values[name] == 0 and name not in ident.limits:
+                raise _KeyedError(
+                    f"identify.limits.{name}",
+                    f"'{name}' is 0 in the config, so 'bounds' (factors) give no range: set identify.limits.{name}",
+                )
             if name in seen:
                 raise _KeyedError("identify.unknowns", f"'{name}' is listed twice")
             seen.add(name)
@@ -340,15 +351,16 @@ class Config(_Section):
                     f"the search range [{lo:g}, {hi:g}] m of '{name}' leaves the "
                     f"{'wheelbase' if name[0] == 'a' else 'track'} ({span:g} m); keep it inside (0, {span:g})",
                 )
-            if lo <= 0 and name not in ("kR", "cf", "cr"):
+            if lo <= 0 and "." not in name and name not in ("kR", "cf", "cr"):
                 raise _KeyedError(f"identify.limits.{name}", f"'{name}' must stay positive; got lower limit {lo:g}")
         return self
 
     def search_box(self) -> dict[str, tuple[float, float]]:
         """Search range of each unknown [SI units]: 'limits' where given, else 'bounds' x configured value."""
-        values, ident = self.vehicle.values(), self.identify
+        values, ident = self.parameter_values(), self.identify
         lo_f, hi_f = ident.bounds
-        return {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
+        box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
+        return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
 
     @property
     def source(self) -> str:
