@@ -161,26 +161,34 @@ def test_identify_bad_input_exits_2(tmp_path, args, fragment):
 
 
 def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path):
-    """Acceptance: kill -9 a running `vehid identify`, run it again, get the uninterrupted campaign's content."""
+    """Acceptance: kill -9 a running `vehid identify` (2 worker processes), run it again, get the uninterrupted
+    campaign's content. The killed campaign's pool workers exit by themselves (SIGTERM, SIGINT: test_reliability)."""
     import os
     import signal
     import time
+
+    from tests.test_reliability import children, running
 
     sets = [x for s in SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"] for x in ("--set", s)]
     whole = vehid("identify", BASE_CONFIG, *sets, "--jobs", 1, "-o", tmp_path / "whole.h5")
     assert whole.returncode == 0, whole.stderr
     target = tmp_path / "killed.h5"
-    cmd = [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), *sets, "--jobs", "1", "-o", str(target)]
+    cmd = [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), *sets, "--jobs", "2", "-o", str(target)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     partial = tmp_path / "killed.h5.partial"
     deadline = time.time() + 60
     while time.time() < deadline and len(list(partial.glob("run-*.npz"))) < 3:
         time.sleep(0.01)
+    workers = children(proc.pid)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     finished_before = len(list(partial.glob("run-*.npz")))
     assert 3 <= finished_before < 12 and not target.exists()
-    resumed = vehid("identify", BASE_CONFIG, *sets, "--jobs", 2, "-o", target)
+    deadline = time.time() + 10
+    while time.time() < deadline and any(running(w) for w in workers):
+        time.sleep(0.05)
+    assert workers and not any(running(w) for w in workers), "pool workers outlived their killed campaign"
+    resumed = vehid("identify", BASE_CONFIG, *sets, "--jobs", 1, "-o", target)
     assert resumed.returncode == 0, resumed.stderr
     assert_same_content(tmp_path / "whole.h5", target)
     assert not partial.exists()

@@ -131,7 +131,7 @@ def test_mutated_road_files_exit_0_or_2(tmp_path_factory, header, n, dt, jitter,
     lines = [header]
     for k in range(n):
         t = k * dt + (jitter * rng.standard_normal() if k else 0.0)
-        cells = [repr(t)] + [repr(scale * v) for v in rng.random(header.count(",") or 4)]
+        cells = [repr(float(t))] + [repr(float(scale * v)) for v in rng.random(header.count(",") or 4)]
         if poison and k == poison_at:
             cells[min(1, len(cells) - 1)] = poison
         lines.append(",".join(cells))
@@ -170,3 +170,65 @@ def test_mutated_identify_sections_exit_0_or_2(tmp_path_factory, path, action, v
     code, text = run("identify", cfg, "-o", out, "--json", js, "--jobs", 1)
     assert_clean_failure(code, text, d, [out, js])
     assert not (d / "c.h5.partial").exists()
+
+
+# ------------------------------------------------------------------------------------------ damper bench files
+
+DAMPER_CONFIG = {
+    "system": "damper",
+    "damper": {"model": "viscous", "parameters": {"k1": 1000.0, "x0": -0.15, "c0": 2000.0}},
+    "data": {"columns": {"time": "t_s", "displacement": "pos_mm", "force": "force_N"}, "units": {"displacement": "mm"}},
+    "identify": {"unknowns": ["c0"], "bounds": [0.1, 10.0], "budget": 6, "seed": 1},
+}
+BENCH_HEADERS = [
+    "t_s,pos_mm,force_N",
+    "t_s,pos_mm,force_N,vel",
+    "t_s,pos,force_N",
+    "pos_mm,force_N",
+    "t_s;pos_mm;force_N",
+]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    header=st.sampled_from(BENCH_HEADERS),
+    n=st.integers(min_value=0, max_value=120),
+    dt=st.sampled_from([1e-2, 1e-2, 2e-3, 0.0, -1e-2]),
+    jitter=st.sampled_from([0.0, 0.0, 1e-9, 4e-3]),
+    poison=st.sampled_from(["", "", "", "nan", "inf", "x", "1e400"]),
+    poison_at=st.integers(min_value=0, max_value=119),
+    force_scale=st.sampled_from([0.0, 1.0, 1e12]),
+    data=st.fixed_dictionaries(
+        {},
+        optional={
+            "sample_rate": st.sampled_from([100.0, 1000.0, -5.0, 0.0]),
+            "window": st.sampled_from([[0.0, 0.5], [0.2, 0.1], [5.0, 6.0]]),
+            "decimate": st.sampled_from([1, 3, 0, 1000]),
+            "units": st.sampled_from([{"displacement": "mm"}, {"displacement": "furlong"}, {"force": "kN"}]),
+        },
+    ),
+)
+def test_mutated_bench_files_exit_0_or_2(tmp_path_factory, header, n, dt, jitter, poison, poison_at, force_scale, data):
+    """Damper bench CSVs (the measured-data path of `vehid identify` for a damper): short, non-uniform, unsorted,
+    poisoned, constant or huge files with odd rates, windows and units exit 0 or 2, never a traceback."""
+    d = tmp_path_factory.mktemp("bench")
+    rng = np.random.default_rng(n)
+    lines = [header]
+    for k in range(n):
+        t = k * dt + (jitter * rng.standard_normal() if k else 0.0)
+        x = 10.0 * np.sin(2 * np.pi * t)
+        force = force_scale * (500.0 * np.cos(2 * np.pi * t) + rng.standard_normal())
+        cells = [repr(float(t)), repr(float(x)), repr(float(force))]  # plain numbers (NumPy 2's repr is np.float64(..))
+        cells += [repr(float(x))] * (header.count(",") + 1 - 3)
+        if poison and k == poison_at:
+            cells[1] = poison
+        lines.append((";" if ";" in header else ",").join(cells[: header.count(",") + header.count(";") + 1]))
+    bench = d / "bench.csv"
+    bench.write_text("\n".join(lines) + "\n")
+    raw = yaml.safe_load(yaml.safe_dump(DAMPER_CONFIG))
+    raw["data"].update(data)
+    cfg = d / "damper.yaml"
+    cfg.write_text(yaml.safe_dump(raw))
+    out, js = d / "fit.h5", d / "fit.json"
+    code, text = run("identify", cfg, "--data", bench, "-o", out, "--json", js)
+    assert_clean_failure(code, text, d, [out, js])

@@ -1,32 +1,39 @@
 """Statistical campaigns: N identification runs of one task, in parallel, resumable, bit-reproducible.
 
 Run i identifies from its own noise realisation with its own optimizer stream (`experiment.run_streams`),
-so its result depends only on the config, the seed and i: never on `--jobs` or on which runs were done
-before an interruption. Each finished run is saved (atomically) to a checkpoint directory beside the
-output before the campaign goes on, and a restarted campaign picks those runs up.
+so its result depends only on the config, the seed and i: never on `--jobs`, on the executor (a local
+process pool or a Dask cluster, `executor.py`) or on which runs were done before an interruption. Each
+finished run is saved (atomically, fsynced) to a checkpoint directory beside the output before the campaign
+goes on, and a restarted campaign picks those runs up; a damaged record is discarded (with a warning) and its
+run redone, never trusted. The campaign file is written atomically, under a lock (`locking.py`) that keeps
+two processes from running the same campaign into the same file.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
-import os
 import time
-from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .config import Config, config_from_dict
+from .config import Config
 from .crlb import CramerRao
 from .data import atomic_path
 from .errors import InputError
+from .executor import Executor, LocalExecutor
 from .experiment import run_streams
 from .identification import Task, build_task
 from .optimizers import get_optimizer
+from .optimizers.base import Problem
+
+Log = Callable[[str], None]
+PENALTY = Problem.__dataclass_fields__["penalty"].default  # the cost of a NaN/Inf evaluation (optimizers/base.py)
 
 
 @dataclass(frozen=True)
@@ -43,6 +50,12 @@ class RunRecord:
     history_cost: NDArray  # best cost so far
     truth_cost: float = float("nan")  # cost of the true parameters on this run's data (NaN: truth unknown)
     chi2: float = float("nan")  # noise-weighted residual power per sample at the estimate (~1 for an adequate model)
+
+    @property
+    def at_penalty(self) -> bool:
+        """The run found no parameter set the model simulates usefully: its best cost is the penalty (or worse),
+        so its estimate is meaningless."""
+        return bool(self.cost >= PENALTY)
 
     @property
     def converged(self) -> bool | None:
@@ -90,6 +103,7 @@ class Summary:
     penalised: int
     wall_s: float
     converged: int | None = None  # runs whose cost is no higher than the truth's (None: truth unknown)
+    at_penalty: int = 0  # runs that found no usable parameter set (best cost = the penalty): meaningless estimates
     chi2_median: float = float("nan")  # median over runs of the residual power over the noise power
     residual_samples: int = 0  # R, the number of weighted residuals behind chi2
 
@@ -154,6 +168,7 @@ def summarise(
         penalised=int(sum(r.penalised for r in records)),
         wall_s=wall_s,
         converged=None if truth is None else int(sum(bool(r.converged) for r in records)),
+        at_penalty=int(sum(r.at_penalty for r in records)),
         chi2_median=float(np.median([r.chi2 for r in records])),
         residual_samples=residual_samples,
     )
@@ -175,6 +190,7 @@ class Campaign:
     records: tuple[RunRecord, ...]
     bound: CramerRao
     summary: Summary
+    data_sha256: str | None = None  # SHA-256 of the data file's bytes (None: simulated data)
 
 
 # ------------------------------------------------------------------------------------------ running
@@ -189,10 +205,13 @@ def identify_run(task: Task, index: int) -> RunRecord:
     algorithm = ident.algorithm
     optimizer = get_optimizer(algorithm.name, algorithm.population, algorithm.iterations)
     x0 = task.nominal if ident.start == "nominal" else None
-    result = optimizer.minimize(problem, run_streams(ident.seed, index).optimizer, budget=ident.budget, x0=x0)
-    # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits.
-    _, residuals = problem.residuals(result.x[None, :])
-    chi2 = float(np.mean(residuals**2))
+    # Parameter sets that make the model blow up overflow on their way to a NaN/Inf cost: the optimizer gives
+    # them the finite penalty and counts them (`penalised`), so NumPy's floating-point warnings are noise here.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        result = optimizer.minimize(problem, run_streams(ident.seed, index).optimizer, budget=ident.budget, x0=x0)
+        # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits.
+        _, residuals = problem.residuals(result.x[None, :])
+        chi2 = float(np.mean(residuals**2))
     return RunRecord(
         index=index,
         estimate=result.x,
@@ -207,20 +226,9 @@ def identify_run(task: Task, index: int) -> RunRecord:
     )
 
 
-_WORKER_TASK: Task | None = None
-
-
-def _init_worker(raw_config: dict, source: str, data_file: str | None) -> None:
-    global _WORKER_TASK
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1)  # one BLAS thread per worker process: see vehid_cli/__init__.py
-    _WORKER_TASK = build_task(config_from_dict(raw_config, source), data_file)
-
-
-def _worker_run(index: int) -> RunRecord:
-    assert _WORKER_TASK is not None
-    return identify_run(_WORKER_TASK, index)
+def data_digest(data_file: str | Path | None) -> str | None:
+    """SHA-256 of a data file's bytes (None without one)."""
+    return None if data_file is None else hashlib.sha256(Path(data_file).read_bytes()).hexdigest()
 
 
 def campaign_key(config: Config, data_file: str | None) -> str:
@@ -238,14 +246,24 @@ def campaign_key(config: Config, data_file: str | None) -> str:
 class Checkpoint:
     """Per-run records of an unfinished campaign, in a directory beside its output file."""
 
-    def __init__(self, directory: Path, key: str):
+    def __init__(self, directory: Path, key: str, log: Log | None = None):
         self.directory = directory
         self.key = key
+        self.log = log
+
+    def _warn(self, message: str) -> None:
+        if self.log is not None:
+            self.log(f"warning: {message}")
 
     def open(self) -> dict[int, RunRecord]:
         """Read back the runs the directory holds (refusing another campaign's runs). A checkpoint without
-        runs (a campaign that failed before finishing one) holds nothing to protect and is started afresh."""
+        runs (a campaign that failed before finishing one) holds nothing to protect and is started afresh.
+        Unfinished writes (temporary files a kill left) are removed; a record that does not read back whole
+        (truncated, CRC error, wrong run) is discarded with a warning and its run is redone."""
         stamp = self.directory / "campaign.json"
+        if self.directory.is_dir():
+            for tmp in self.directory.glob(".*.tmp"):
+                tmp.unlink()
         if self.directory.exists() and not any(self.directory.glob("run-*.npz")):
             self.remove()
         if self.directory.exists():
@@ -256,7 +274,7 @@ class Checkpoint:
                     "checkpoint directory has no readable campaign.json; remove it to start afresh",
                     source=str(self.directory),
                 ) from None
-            if meta.get("key") != self.key:
+            if not isinstance(meta, dict) or meta.get("key") != self.key:
                 raise InputError(
                     "checkpoint belongs to a different config or data file; remove it or choose another -o",
                     source=str(self.directory),
@@ -265,7 +283,11 @@ class Checkpoint:
         for path in sorted(self.directory.glob("run-*.npz")):
             try:
                 record = RunRecord.load(path)
-            except Exception:  # noqa: BLE001 - a damaged record is redone, never trusted
+                if path.name != f"run-{record.index:05d}.npz":
+                    raise ValueError(f"it holds run {record.index}")
+            except Exception as exc:  # noqa: BLE001 - a damaged record is redone, never trusted
+                self._warn(f"{path}: damaged checkpoint record ({exc.__class__.__name__}: {exc}); discarded, "
+                           "the run is redone")  # fmt: skip
                 path.unlink()
                 continue
             done[record.index] = record
@@ -291,16 +313,22 @@ def run_campaign(
     data_file: str | Path | None = None,
     *,
     jobs: int | None = None,
+    executor: Executor | None = None,
     checkpoint_dir: Path | None = None,
     on_run: Callable[[int, int], None] | None = None,
+    log: Log | None = None,
 ) -> Campaign:
-    """Run every run of the configured campaign (resuming from `checkpoint_dir` if it holds some)."""
+    """Run every run of the configured campaign (resuming from `checkpoint_dir` if it holds some).
+
+    The runs execute on `executor` (default: a `LocalExecutor(jobs)` for this campaign alone); each finished
+    run is checkpointed before the next result is taken. `on_run(done, total)` reports progress; `log` receives
+    warnings (damaged checkpoint records)."""
     data_file = None if data_file is None else str(data_file)
     task = build_task(config, data_file)
     n_runs = config.identify.runs
     start = time.perf_counter()
     bound = task.bound()
-    checkpoint = Checkpoint(checkpoint_dir, campaign_key(config, data_file)) if checkpoint_dir else None
+    checkpoint = Checkpoint(checkpoint_dir, campaign_key(config, data_file), log) if checkpoint_dir else None
     done = checkpoint.open() if checkpoint else {}
     done = {i: r for i, r in done.items() if i < n_runs}
     todo = [i for i in range(n_runs) if i not in done]
@@ -314,26 +342,13 @@ def run_campaign(
         if on_run:
             on_run(len(done), n_runs)
 
-    jobs = max(1, min(jobs or os.cpu_count() or 1, len(todo) or 1))
-    if jobs == 1:
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(1):  # the same BLAS threading as the workers of a parallel campaign
-            for index in todo:
-                finished(identify_run(task, index))
-    else:
-        raw = config.model_dump(mode="json", exclude_none=True)
-        with ProcessPoolExecutor(jobs, initializer=_init_worker, initargs=(raw, config.source, data_file)) as pool:
-            pending = {pool.submit(_worker_run, i) for i in todo}
-            try:
-                while pending:
-                    complete, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for future in complete:
-                        finished(future.result())
-            except BaseException:
-                for future in pending:
-                    future.cancel()
-                raise
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(LocalExecutor(jobs))
+        results = executor.map_unordered(identify_run, task, todo)
+        stack.callback(results.close)
+        for record in results:
+            finished(record)
     records = tuple(done[i] for i in range(n_runs))
     summary = summarise(
         task.names, task.truth, list(records), bound, time.perf_counter() - start, task.residual_samples
@@ -359,19 +374,41 @@ def checkpoint_dir_for(output: Path) -> Path:
     return output.with_name(output.name + ".partial")
 
 
+def remove_stale_temporaries(output: Path) -> None:
+    """Delete unfinished atomic writes of `output` (`.NAME.*.tmp`, left by a killed process). Call only while
+    holding `output`'s lock: then no other process is writing it."""
+    for tmp in output.parent.glob(f".{output.name}.*.tmp"):
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
 def run_campaign_to_file(
     config: Config,
     output: Path,
     data_file: str | Path | None = None,
     *,
     jobs: int | None = None,
+    executor: Executor | None = None,
     on_run: Callable[[int, int], None] | None = None,
+    log: Log | None = None,
+    attrs: Mapping[str, str] | None = None,
+    lock: bool = True,
 ) -> Campaign:
-    """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint."""
+    """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint.
+
+    With `lock` (the default) the output's lock is held throughout: `locking.Busy` (an InputError) if another
+    process holds it. Pass `lock=False` only when the caller holds it. `attrs` are extra root attributes of the
+    file (a sweep records its varied keys)."""
+    from .locking import exclusive
     from .results import write_campaign_h5
 
-    partial = checkpoint_dir_for(Path(output))
-    campaign = run_campaign(config, data_file, jobs=jobs, checkpoint_dir=partial, on_run=on_run)
-    write_campaign_h5(output, campaign)
-    Checkpoint(partial, "").remove()
+    output = Path(output)
+    with exclusive(output) if lock else contextlib.nullcontext():
+        remove_stale_temporaries(output)
+        partial = checkpoint_dir_for(output)
+        campaign = run_campaign(
+            config, data_file, jobs=jobs, executor=executor, checkpoint_dir=partial, on_run=on_run, log=log
+        )
+        write_campaign_h5(output, campaign, attrs=attrs)
+        Checkpoint(partial, "").remove()
     return campaign

@@ -92,6 +92,99 @@ def _results_target(config: Path, cfg, output: Path | None, json_out: Path | Non
     return target
 
 
+ExecutorOption = Annotated[
+    str,
+    typer.Option(
+        "--executor", help="Where the runs execute: local (this machine; --jobs processes) or dask (a cluster)."
+    ),
+]
+SchedulerOption = Annotated[
+    Optional[str],  # noqa: UP045 - typer needs Optional here
+    typer.Option("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (with --executor dask)."),
+]
+
+
+def _warn(message: str) -> None:
+    err.print(message, markup=False)
+
+
+class _Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM, raised in the main thread so that a campaign stops cleanly."""
+
+    def __init__(self, signum: int):
+        import signal
+
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _interruptible(resume_hint):
+    """A context for identify and sweep: SIGINT (Ctrl-C) and SIGTERM (kill, a job scheduler's stop) stop the
+    command cleanly: workers stopped, unfinished writes removed, finished runs kept in the checkpoint. It says
+    what `resume_hint()` returns, then ends the process by the same signal, as shells and job schedulers expect
+    (a killed job: status 128 + signal). SIGKILL cannot be caught; the checkpoint covers it too."""
+    import contextlib
+    import signal
+    import threading
+
+    @contextlib.contextmanager
+    def context():
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+
+        def handler(signum, frame):
+            raise _Interrupted(signum)
+
+        inherited = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+        # a signal the process was started ignoring (SIGINT of a background job) stays ignored
+        previous = {s: signal.signal(s, handler) for s, h in inherited.items() if h is not signal.SIG_IGN}
+        try:
+            yield
+        except _Interrupted as exc:
+            for s, h in previous.items():
+                signal.signal(s, h)
+            _warn(f"interrupted by {signal.Signals(exc.signum).name}: {resume_hint()}")
+            sys.stdout.flush()
+            sys.stderr.flush()
+            signal.signal(exc.signum, signal.SIG_DFL)
+            os.kill(os.getpid(), exc.signum)
+            raise
+        finally:
+            for s, h in previous.items():
+                signal.signal(s, h)
+
+    return context()
+
+
+def _saved_runs(output: Path) -> str:
+    """What an interrupted campaign bound for `output` keeps, for the message after an interruption."""
+    from .campaign import checkpoint_dir_for
+
+    partial = checkpoint_dir_for(output)
+    n = len(list(partial.glob("run-*.npz"))) if partial.is_dir() else 0
+    if n == 0:
+        return "no run had finished; nothing was written"
+    return f"{n} finished run(s) saved in {partial}; run the same command again to resume"
+
+
+def _penalty_note(s) -> str | None:
+    """A note when evaluations made the model unstable (NaN/Inf) and got the penalty cost, else None."""
+    total = int(s.evaluations.sum())
+    if not s.penalised:
+        return None
+    note = (
+        f"{s.penalised} of {total} evaluations ({100 * s.penalised / max(total, 1):.2g} %) made the model unstable or "
+        "non-finite and got the finite penalty cost (counted in 'penalised'; the runs went on)"
+    )
+    if s.at_penalty:
+        note += (
+            f"; [bold]{s.at_penalty} of {len(s.evaluations)} run(s) found no usable parameter set[/] (best cost = the "
+            "penalty): their estimates are meaningless and bias the mean; narrow identify.bounds or identify.limits"
+        )
+    return note
+
+
 def _version(value: bool) -> None:
     if value:
         out.print(f"vehid {__version__}")
@@ -227,27 +320,38 @@ def identify(
     ] = None,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="Also write the SPEC JSON summary here.")] = None,  # noqa: UP045
     set_: SetOption = None,
+    executor: ExecutorOption = "local",
+    scheduler: SchedulerOption = None,
 ) -> None:
     """Run a statistical identification campaign: one HDF5 file, and the RE/NRE summary table.
 
     Each run identifies from its own noise realisation with its own optimizer stream, so results are
-    identical for any --jobs. Finished runs are kept in <output>.partial/ until the campaign completes:
-    rerun the same command to resume an interrupted campaign.
+    identical for any --jobs and executor (--executor dask --scheduler tcp://HOST:PORT runs them on a Dask
+    cluster). Finished runs are kept in <output>.partial/ until the campaign completes: rerun the same
+    command to resume an interrupted campaign (Ctrl-C, SIGTERM, a killed job).
     """
 
     from .campaign import run_campaign_to_file
+    from .executor import check_executor_options, make_executor
     from .report.tables import summary_table
     from .results import campaign_json, write_json
 
+    check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
     if isinstance(cfg, DamperConfig):
+        if executor != "local" or scheduler is not None:
+            raise InputError("--executor and --scheduler are for vehicle campaigns; damper identification runs here")
         _identify_damper(cfg, config, data, output, json_out)
         return
     target = _results_target(config, cfg, output, json_out)
-    with _progress("identify") as progress:
+    with (
+        _interruptible(lambda: _saved_runs(target)),
+        make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
+        _progress("identify") as progress,
+    ):
         bar = progress.add_task(f"{cfg.identify.algorithm.name}/{cfg.identify.objective}", total=cfg.identify.runs)
         campaign = run_campaign_to_file(
-            cfg, target, data, jobs=jobs, on_run=lambda d, n: progress.update(bar, completed=d)
+            cfg, target, data, executor=pool, on_run=lambda d, n: progress.update(bar, completed=d), log=_warn
         )
     if json_out is not None:
         write_json(json_out, campaign_json(campaign))
@@ -263,6 +367,9 @@ def identify(
     unidentifiable = campaign.bound.unidentifiable()
     if unidentifiable:
         out.print(f"[yellow]warning:[/] the sensors cannot identify {', '.join(unidentifiable)} (Fisher information)")
+    penalised = _penalty_note(s)
+    if penalised:
+        out.print(f"[yellow]note:[/] {penalised}")
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
 
 
@@ -280,41 +387,77 @@ def sweep(
     seed: Annotated[Optional[int], typer.Option("--seed", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
     jobs: Annotated[Optional[int], typer.Option("--jobs", help="Worker processes (default: all cores).")] = None,  # noqa: UP045
     set_: SetOption = None,
+    executor: ExecutorOption = "local",
+    scheduler: SchedulerOption = None,
 ) -> None:
     """Run the Cartesian product of campaigns, one HDF5 file each, plus index.csv.
 
     Campaigns whose file already holds the same resolved config are skipped, so a sweep can be rerun
-    to finish what an interrupted one left; --shard K/N splits the work among independent processes.
+    to finish what an interrupted one left; --shard K/N splits the work among independent processes, and
+    any number of sweeps or shards may share the output directory (each campaign runs under a lock).
+    --executor dask --scheduler tcp://HOST:PORT runs every campaign's runs on a Dask cluster.
     """
+    import json
+
     from .campaign import run_campaign_to_file
+    from .executor import check_executor_options, make_executor
     from .sweep import parse_shard, parse_vary, plan_sweep, run_sweep, write_index
 
+    check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     overrides = _campaign_overrides(set_, runs, seed, jobs)
     k, n = parse_shard(shard)
     variations = parse_vary(vary)
     out_dir = output if output is not None else Path("runs") / f"sweep-{Path(config).stem}"
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("sweep output must be a directory", source=str(out_dir))
-    out_dir.mkdir(parents=True, exist_ok=True)
     planned = plan_sweep(config, overrides, variations, out_dir)
-    write_index(out_dir, planned)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_index(out_dir, planned, log=_warn)
     mine = [p for p in planned if p.index % n == k - 1]
-    with _progress("sweep") as progress:
+    varied = json.dumps([v.key for v in variations])
+    current: list[Path] = []
+
+    def resume_hint() -> str:
+        from .campaign import checkpoint_dir_for
+
+        unfinished = [p for p in current[-1:] if checkpoint_dir_for(p).is_dir()]
+        where = f"{_saved_runs(unfinished[0]).split(';')[0]}; " if unfinished else ""
+        return f"{where}finished campaigns are in {out_dir}; run the same sweep again to resume"
+
+    with (
+        _interruptible(resume_hint),
+        make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
+        _progress("sweep") as progress,
+    ):
         bar = progress.add_task(f"shard {k}/{n}", total=len(mine))
 
         def run_one(p) -> None:
             progress.update(bar, description=p.path.stem)
-            s = run_campaign_to_file(p.config, p.path, jobs=jobs).summary
+            current.append(p.path)
+            attrs = {"sweep_vary": varied, "sweep_overrides": " ".join(p.overrides)}
+            s = run_campaign_to_file(p.config, p.path, executor=pool, log=_warn, attrs=attrs, lock=False).summary
             nre = "–" if s.nre_percent is None else f"{s.nre_percent:.3f} %"
-            out.print(f"{p.path.name}: NRE of mean {nre}, {s.wall_s:.1f} s")
+            pen = f", {s.penalised} evaluations penalised" if s.penalised else ""
+            pen += f" ({s.at_penalty} run(s) found no usable parameter set)" if s.at_penalty else ""
+            out.print(f"{p.path.name}: NRE of mean {nre}{pen}, {s.wall_s:.1f} s")
             progress.advance(bar)
 
         def skipped(p) -> None:
             out.print(f"{p.path.name}: up to date, skipped")
             progress.advance(bar)
 
-        ran = run_sweep(planned, (k, n), run_one, skipped)
-    out.print(f"sweep {out_dir}: {len(ran)} campaign(s) run, {len(mine) - len(ran)} up to date (shard {k}/{n})")
+        done = run_sweep(planned, (k, n), run_one, skipped, log=_warn)
+    out.print(
+        f"sweep {out_dir}: {len(done.ran)} campaign(s) run, {len(done.skipped)} up to date (shard {k}/{n})"
+        + (f", {len(done.conflicts)} not overwritten" if done.conflicts else "")
+    )
+    if done.conflicts:
+        raise InputError(
+            f"{len(done.conflicts)} campaign file(s) were written meanwhile by another sweep with a different config "
+            f"and were not overwritten ({', '.join(p.path.name for p in done.conflicts)}); give different sweeps "
+            "different output directories",
+            source=str(out_dir),
+        )
 
 
 @app.command()
@@ -333,9 +476,21 @@ def report(
         Optional[Path],  # noqa: UP045
         typer.Option("--published", help="YAML of published values to set beside ours (md, latex)."),
     ] = None,
+    allow_mixed: Annotated[
+        bool,
+        typer.Option(
+            "--allow-mixed", help="Report campaigns of different experiments, data or code versions together."
+        ),
+    ] = False,
 ) -> None:
-    """Summary tables (and figures) of campaign files: algorithms side by side, with the Cramér–Rao bound."""
-    from .report import FORMATS, collect, load_published, render
+    """Summary tables (and figures) of campaign files: algorithms side by side, with the Cramér–Rao bound.
+
+    A directory contributes every campaign file in it, so the shards of a sweep make one report. Campaigns
+    of different experiments (config keys other than the method keys and a sweep's varied keys), data files
+    or code versions are refused unless --allow-mixed is given.
+    """
+    from .report import FORMATS, collect, load_published, render, sweep_notes
+    from .report.compare import check_comparable
     from .report.tables import summary_table
 
     if fmt not in FORMATS:
@@ -349,6 +504,10 @@ def report(
         _report_dampers(damper_files, fmt, output, plots)
         return
     campaigns, files = collect(paths)
+    for note in sweep_notes(paths):
+        _warn(f"warning: {note}")
+    for note in check_comparable(files, allow_mixed):
+        _warn(f"note (--allow-mixed): {note}")
     if fmt == "table":
         text = _tables(output, [summary_table(c) for c in campaigns])
     else:

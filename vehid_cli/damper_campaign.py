@@ -109,6 +109,9 @@ def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, see
             h5.create_dataset(name, data=values).attrs["unit"] = unit
 
 
+MIN_RUN_S = 0.1  # [s] shortest bench run: damper_fit.realtime_check resamples it at steps up to 50 ms
+
+
 def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
     """A measured bench run with the config's columns, units, window and decimation (SI units)."""
     data = cfg.data
@@ -129,6 +132,12 @@ def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
         )  # fmt: skip
     if history.t.size < 3:
         raise InputError(f"only {history.t.size} samples left after window and decimation", source=str(path))
+    if history.t[-1] - history.t[0] < MIN_RUN_S:
+        raise InputError(
+            f"the run lasts {history.t[-1] - history.t[0]:.3g} s after window and decimation; a bench run must last at "
+            f"least {MIN_RUN_S:g} s (the real-time check of the fitted model steps it at up to 50 ms)",
+            source=str(path),
+        )
     if np.var(history.force) == 0:
         raise InputError(f"column '{columns['force']}' is constant: J is undefined", source=str(path))
     return history

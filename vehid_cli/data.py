@@ -192,20 +192,44 @@ def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
     return path
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _fsync(path: Path, directory: bool = False) -> None:
+    """Flush a file's (or a directory entry's) data to the disk."""
+    fd = os.open(path, os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0))
+    try:
+        os.fsync(fd)
+    except OSError:  # some file systems cannot fsync a directory: the rename is then as durable as they allow
+        if not directory:
+            raise
+    finally:
+        os.close(fd)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside `path`; on success rename it into place, on failure remove it."""
+    """Yield a temporary path beside `path`; on success rename it into place, on failure remove it.
+
+    The temporary file is flushed to the disk before the rename and the directory after it, so after a crash
+    (or a power cut) `path` holds either its old content or the whole new one, never a part of it."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
     os.close(fd)
     tmp_path = Path(tmp)
     try:
+        os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private; results get the usual permissions
         yield tmp_path
+        _fsync(tmp_path)
         os.replace(tmp_path, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         raise
+    _fsync(tmp_path.parent, directory=True)
 
 
 def write_measurement_csv(

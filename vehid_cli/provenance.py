@@ -11,7 +11,7 @@ from pathlib import Path
 
 from . import __version__
 
-TRACKED_PACKAGES = ("numpy", "scipy", "h5py", "pydantic")
+TRACKED_PACKAGES = ("numpy", "scipy", "numba", "h5py", "pydantic")  # numpy, scipy and numba set the numbers
 
 
 @lru_cache(maxsize=1)

@@ -1,7 +1,16 @@
-"""HDF5 result files: layout, atomic writes, provenance."""
+"""HDF5 result files: layout, atomic writes, provenance, integrity.
+
+A campaign file begins with a 512-byte HDF5 user block (which HDF5 skips) that holds the SHA-256 of every byte
+after it. Every read checks it before HDF5 parses anything, so a file damaged after it was written (truncated,
+partly copied, a disk error, an edit) is reported naming the file, never used, and never handed to the HDF5
+library, whose reactions to damaged metadata range over a dozen exception types. The file stays ordinary HDF5
+for every other tool.
+"""
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Mapping
 from pathlib import Path
 
 import h5py
@@ -53,74 +62,139 @@ def _padded(rows: list[np.ndarray], fill: float) -> np.ndarray:
     return out
 
 
-def write_campaign_h5(path: str | Path, campaign) -> None:
+SEED_SCHEME = (
+    "numpy PCG64 streams of run i (0-based): (noise, optimizer) = SeedSequence(seed).spawn(2)[1].spawn(i + 1)[i]"
+    ".spawn(2); the experiment's own stream (random road) is SeedSequence(seed).spawn(2)[0]"
+)
+
+
+USERBLOCK = 512  # bytes at the start of a campaign file that HDF5 skips: our checksum lives there
+STAMP = b"vehid sha256 "  # then 64 hex digits of SHA-256(file[USERBLOCK:]) and a newline
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def stamp_checksum(path: str | Path) -> str:
+    """Write the SHA-256 of everything after the user block into the user block; return it."""
+    with open(path, "r+b") as fh:
+        fh.seek(USERBLOCK)
+        digest = hashlib.sha256(fh.read()).hexdigest()
+        fh.seek(0)
+        fh.write(STAMP + digest.encode() + b"\n")
+    return digest
+
+
+def check_integrity(path: str | Path) -> str | None:
+    """InputError naming the file if it carries a vehid checksum its bytes no longer match (or a damaged one);
+    the checksum when it matches; None for an HDF5 file without one (written before checksums, or by another
+    tool: HDF5 then reports what it finds)."""
+    from .errors import InputError
+
+    source = str(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(USERBLOCK)
+            body = hashlib.sha256(fh.read()).hexdigest()
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror})", source=source) from None
+    if head.startswith(HDF5_SIGNATURE):
+        return None
+    if not head.startswith(STAMP):
+        raise InputError(
+            "not a readable results file: neither a vehid checksum nor an HDF5 signature at its start (damaged, "
+            "truncated to nothing, or another kind of file)",
+            source=source,
+        )
+    stored = head[len(STAMP) : len(STAMP) + 64].decode("ascii", "replace")
+    if len(head) < USERBLOCK or stored != body:
+        raise InputError(
+            "damaged results file: its bytes do not match the SHA-256 checksum it was written with (truncated, "
+            "partly copied, a disk error or an edit); rerun the campaign that wrote it",
+            source=source,
+        )
+    return stored
+
+
+def write_campaign_h5(path: str | Path, campaign, attrs: Mapping[str, str] | None = None) -> None:
     """One campaign in one file, written atomically. Layout (README, "Campaign files"):
 
-    attrs: kind, config_yaml, config_sha256, seed, runs, objective, algorithm, data_file, sigma_source, provenance
+    attrs: kind, config_yaml, config_sha256, seed, runs, objective, algorithm, data_file, data_sha256,
+    sigma_source, provenance, `attrs` (e.g. a sweep's varied keys); the user block holds the file's checksum
     /parameters (D,) names; /truth (D,) (NaN when unknown; attr known); /nominal, /bounds (D, 2)
     /runs/{estimate (N, D), cost, evaluations, penalised, wall_s (N,), history_evals, history_cost (N, H)}
     /summary/{mean, sd, re_percent, per_run_nre_percent, ...} with scalar figures as attributes
     /crlb/{re_sd_percent (D,), fisher (D, D), identifiable (D,)} with nre_rms_percent, condition attributes
     /noise_sigma/<family> (4,) noise standard deviation per channel used by wls and the bound
     """
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w", userblock_size=USERBLOCK) as h5:
+            _write_campaign(h5, campaign, attrs)
+        stamp_checksum(tmp)
+
+
+def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) -> None:
     cfg, s, b = campaign.config, campaign.summary, campaign.bound
     D = len(campaign.names)
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
-        h5.attrs["kind"] = CAMPAIGN_KIND
-        h5.attrs["config_yaml"] = cfg.to_yaml()
-        h5.attrs["config_sha256"] = cfg.digest()
-        h5.attrs["seed"] = cfg.identify.seed
-        h5.attrs["runs"] = len(campaign.records)
-        h5.attrs["objective"] = cfg.identify.objective
-        h5.attrs["algorithm"] = cfg.identify.algorithm.name
-        h5.attrs["sensors"] = cfg.sensors
-        h5.attrs["noise_level"] = cfg.noise.level
-        h5.attrs["data_file"] = campaign.data_file or ""
-        h5.attrs["sigma_source"] = campaign.sigma_source
-        for key, value in provenance().items():
-            h5.attrs[key] = value
-        h5.create_dataset("parameters", data=np.array(campaign.names, dtype=h5py.string_dtype()))
-        truth = h5.create_dataset("truth", data=campaign.truth if campaign.truth is not None else np.full(D, np.nan))
-        truth.attrs["known"] = campaign.truth is not None
-        h5.create_dataset("nominal", data=campaign.nominal)
-        h5.create_dataset("bounds", data=np.column_stack([campaign.lower, campaign.upper]))
-        runs = h5.create_group("runs")
-        recs = campaign.records
-        runs.create_dataset("estimate", data=np.array([r.estimate for r in recs]))
-        runs.create_dataset("cost", data=np.array([r.cost for r in recs]))
-        runs.create_dataset("evaluations", data=np.array([r.evaluations for r in recs]))
-        runs.create_dataset("penalised", data=np.array([r.penalised for r in recs]))
-        runs.create_dataset("wall_s", data=np.array([r.wall_s for r in recs]))
-        runs.create_dataset("truth_cost", data=np.array([r.truth_cost for r in recs]))
-        runs.create_dataset("chi2", data=np.array([r.chi2 for r in recs]))
-        runs.create_dataset("history_evals", data=_padded([r.history_evals for r in recs], -1).astype(np.int64))
-        runs.create_dataset("history_cost", data=_padded([r.history_cost for r in recs], np.nan))
-        sg = h5.create_group("summary")
-        sg.create_dataset("mean", data=s.mean)
-        sg.create_dataset("sd", data=s.sd)
-        if s.re_percent is not None:
-            sg.create_dataset("re_percent", data=s.re_percent)
-            sg.create_dataset("per_run_nre_percent", data=s.per_run_nre_percent)
-            sg.attrs["nre_percent"] = s.nre_percent
-            sg.attrs["per_run_nre_median"] = s.per_run_nre_median
-            sg.attrs["per_run_nre_rms"] = s.per_run_nre_rms
-        if s.nre_over_crlb is not None:
-            sg.attrs["nre_over_crlb"] = s.nre_over_crlb
-        if s.converged is not None:
-            sg.attrs["converged_runs"] = s.converged
-        sg.attrs["chi2_median"] = s.chi2_median
-        sg.attrs["residual_samples"] = s.residual_samples
-        sg.attrs["wall_s"] = s.wall_s
-        sg.attrs["penalised"] = s.penalised
-        cg = h5.create_group("crlb")
-        cg.create_dataset("re_sd_percent", data=b.re_sd_percent)
-        cg.create_dataset("fisher", data=b.fisher)
-        cg.create_dataset("identifiable", data=b.identifiable)
-        cg.attrs["nre_rms_percent"] = b.nre_rms_percent
-        cg.attrs["condition"] = b.condition
-        ng = h5.create_group("noise_sigma")
-        for family, sigma in campaign.sigma.items():
-            ng.create_dataset(family, data=sigma)
+    h5.attrs["kind"] = CAMPAIGN_KIND
+    h5.attrs["config_yaml"] = cfg.to_yaml()
+    h5.attrs["config_sha256"] = cfg.digest()
+    h5.attrs["seed"] = cfg.identify.seed
+    h5.attrs["seed_scheme"] = SEED_SCHEME
+    h5.attrs["runs"] = len(campaign.records)
+    h5.attrs["objective"] = cfg.identify.objective
+    h5.attrs["algorithm"] = cfg.identify.algorithm.name
+    h5.attrs["sensors"] = cfg.sensors
+    h5.attrs["noise_level"] = cfg.noise.level
+    h5.attrs["data_file"] = campaign.data_file or ""
+    h5.attrs["data_sha256"] = campaign.data_sha256 or ""
+    h5.attrs["sigma_source"] = campaign.sigma_source
+    for key, value in provenance().items():
+        h5.attrs[key] = value
+    for key, value in (attrs or {}).items():
+        h5.attrs[key] = value
+    h5.create_dataset("parameters", data=np.array(campaign.names, dtype=h5py.string_dtype()))
+    truth = h5.create_dataset("truth", data=campaign.truth if campaign.truth is not None else np.full(D, np.nan))
+    truth.attrs["known"] = campaign.truth is not None
+    h5.create_dataset("nominal", data=campaign.nominal)
+    h5.create_dataset("bounds", data=np.column_stack([campaign.lower, campaign.upper]))
+    runs = h5.create_group("runs")
+    recs = campaign.records
+    runs.create_dataset("estimate", data=np.array([r.estimate for r in recs]))
+    runs.create_dataset("cost", data=np.array([r.cost for r in recs]))
+    runs.create_dataset("evaluations", data=np.array([r.evaluations for r in recs]))
+    runs.create_dataset("penalised", data=np.array([r.penalised for r in recs]))
+    runs.create_dataset("wall_s", data=np.array([r.wall_s for r in recs]))
+    runs.create_dataset("truth_cost", data=np.array([r.truth_cost for r in recs]))
+    runs.create_dataset("chi2", data=np.array([r.chi2 for r in recs]))
+    runs.create_dataset("history_evals", data=_padded([r.history_evals for r in recs], -1).astype(np.int64))
+    runs.create_dataset("history_cost", data=_padded([r.history_cost for r in recs], np.nan))
+    sg = h5.create_group("summary")
+    sg.create_dataset("mean", data=s.mean)
+    sg.create_dataset("sd", data=s.sd)
+    if s.re_percent is not None:
+        sg.create_dataset("re_percent", data=s.re_percent)
+        sg.create_dataset("per_run_nre_percent", data=s.per_run_nre_percent)
+        sg.attrs["nre_percent"] = s.nre_percent
+        sg.attrs["per_run_nre_median"] = s.per_run_nre_median
+        sg.attrs["per_run_nre_rms"] = s.per_run_nre_rms
+    if s.nre_over_crlb is not None:
+        sg.attrs["nre_over_crlb"] = s.nre_over_crlb
+    if s.converged is not None:
+        sg.attrs["converged_runs"] = s.converged
+    sg.attrs["chi2_median"] = s.chi2_median
+    sg.attrs["residual_samples"] = s.residual_samples
+    sg.attrs["wall_s"] = s.wall_s
+    sg.attrs["penalised"] = s.penalised
+    cg = h5.create_group("crlb")
+    cg.create_dataset("re_sd_percent", data=b.re_sd_percent)
+    cg.create_dataset("fisher", data=b.fisher)
+    cg.create_dataset("identifiable", data=b.identifiable)
+    cg.attrs["nre_rms_percent"] = b.nre_rms_percent
+    cg.attrs["condition"] = b.condition
+    ng = h5.create_group("noise_sigma")
+    for family, sigma in campaign.sigma.items():
+        ng.create_dataset(family, data=sigma)
 
 
 def finite_or_none(value) -> float | None:
@@ -178,6 +252,7 @@ def campaign_json(campaign) -> dict:
         "nre_over_crlb": s.nre_over_crlb,
         "evaluations": evals,
         "penalised_evaluations": s.penalised,
+        "runs_at_penalty": s.at_penalty,
         "converged_runs": s.converged,
         "chi2_per_sample": s.chi2_median,
         "model_inadequate": s.model_inadequate,
@@ -193,11 +268,12 @@ def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
 
     source = str(path)
     try:
+        check_integrity(path)
         h5 = h5py.File(path, "r")
     except FileNotFoundError:
         raise InputError(f"{what} not found", source=source) from None
     except OSError as exc:
-        raise InputError(f"not a readable HDF5 file ({exc})", source=source) from None
+        raise InputError(f"not a readable HDF5 file: truncated, damaged or not HDF5 ({exc})", source=source) from None
     if h5.attrs.get("kind") != kind:
         found = h5.attrs.get("kind")
         h5.close()
@@ -261,6 +337,20 @@ def read_campaign_h5(path: str | Path):
                 config=config, data_file=h5.attrs["data_file"] or None, names=names, truth=truth,
                 nominal=h5["nominal"][()], lower=bounds[:, 0], upper=bounds[:, 1], sigma=sigma,
                 sigma_source=str(h5.attrs["sigma_source"]), records=records, bound=bound, summary=summary,
+                data_sha256=str(h5.attrs.get("data_sha256", "")) or None,
             )  # fmt: skip
-        except (KeyError, ValueError, TypeError) as exc:
+        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:  # h5py's reactions to damage
+            raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None
+
+
+def campaign_file_digest(path: str | Path) -> str:
+    """The config digest of a whole, undamaged campaign file (InputError for a damaged or foreign one): what a
+    sweep compares before it skips a campaign as up to date."""
+    from .errors import InputError
+
+    source = str(path)
+    with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
+        try:
+            return str(h5.attrs["config_sha256"])
+        except (KeyError, OSError, RuntimeError) as exc:
             raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None

@@ -2,11 +2,19 @@
 
 A sweep is planned deterministically from the base config and the `--vary` lists, so every shard of a
 job array plans the same campaigns and runs its share (`--shard K/N`: campaigns K-1, K-1+N, ...). A
-campaign whose file already holds results of the same resolved config is skipped.
+campaign whose file already holds results of the same resolved config (checksum verified) is skipped; a
+damaged file is reported and its campaign run again.
+
+Any number of sweeps and shards may share an output directory. Each campaign is run under its file's lock
+(`locking.py`): a campaign another process is running is left for later, then waited for, and skipped if
+that process finished it. A file another process rewrote with a different config while this sweep ran is
+never overwritten (that would lose its results). `index.csv` is merged, under its own lock, with the
+campaigns every sweep into the directory planned.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import itertools
@@ -15,11 +23,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
-
 from .config import Config, load_config
 from .data import atomic_path
 from .errors import InputError
+from .locking import Busy, exclusive
 
 
 @dataclass(frozen=True)
@@ -104,24 +111,71 @@ def plan_sweep(config_path: str | Path, base_overrides: Sequence[str], variation
 
 def stored_digest(path: Path) -> str | None:
     """The config digest a finished campaign file records, or None if there is no readable one."""
+    from .results import campaign_file_digest
+
     try:
-        with h5py.File(path, "r") as h5:
-            return str(h5.attrs.get("config_sha256"))
-    except (OSError, KeyError):
+        return campaign_file_digest(path)
+    except InputError:
         return None
 
 
-def write_index(out_dir: Path, planned: Sequence[PlannedCampaign]) -> Path:
-    """index.csv: one row per planned campaign (file, overrides, config digest). Same for every shard."""
-    buf = io.StringIO()
-    writer = csv.writer(buf)
-    writer.writerow(["index", "file", "overrides", "config_sha256"])
-    for p in planned:
-        writer.writerow([p.index, p.path.name, " ".join(p.overrides), p.config.digest()])
+def file_state(path: Path) -> tuple[str | None, str | None]:
+    """(config digest, None) of a whole campaign file; (None, None) without a file; (None, reason) for a
+    damaged one."""
+    from .results import campaign_file_digest
+
+    if not path.exists():
+        return None, None
+    try:
+        return campaign_file_digest(path), None
+    except InputError as exc:
+        return None, exc.detail
+
+
+INDEX_COLUMNS = ["index", "file", "overrides", "config_sha256"]
+
+
+def read_index(path: Path) -> list[dict[str, str]]:
+    """The rows of an index.csv (InputError naming the file if it is not one)."""
+    try:
+        rows = list(csv.DictReader(io.StringIO(path.read_text())))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read the sweep index ({exc})", source=str(path)) from None
+    if rows and not set(INDEX_COLUMNS) <= set(rows[0]):
+        raise InputError(f"not a sweep index: expected the columns {', '.join(INDEX_COLUMNS)}", source=str(path))
+    return rows
+
+
+def write_index(out_dir: Path, planned: Sequence[PlannedCampaign], log: Callable[[str], None] | None = None) -> Path:
+    """index.csv: one row per planned campaign (file, overrides, config digest), merged under a lock with the
+    rows other sweeps into the same directory wrote (a planned file replaces its earlier row)."""
     path = out_dir / "index.csv"
-    with atomic_path(path) as tmp:
-        tmp.write_text(buf.getvalue())
+    with exclusive(path, wait=True):
+        rows: dict[str, list[str]] = {}
+        if path.exists():
+            try:
+                rows = {r["file"]: [r[c] for c in INDEX_COLUMNS] for r in read_index(path)}
+            except InputError as exc:
+                if log:
+                    log(f"warning: {exc}; rewritten")
+        for p in planned:
+            rows[p.path.name] = [str(p.index), p.path.name, " ".join(p.overrides), p.config.digest()]
+        buf = io.StringIO()
+        writer = csv.writer(buf)
+        writer.writerow(INDEX_COLUMNS)
+        writer.writerows(rows.values())
+        with atomic_path(path) as tmp:
+            tmp.write_text(buf.getvalue())
     return path
+
+
+@dataclass(frozen=True)
+class SweepOutcome:
+    """What one process did of its share of a sweep."""
+
+    ran: tuple[PlannedCampaign, ...]  # campaigns this process ran
+    skipped: tuple[PlannedCampaign, ...]  # up to date (before, or finished meanwhile by another process)
+    conflicts: tuple[PlannedCampaign, ...]  # rewritten meanwhile by another process with another config
 
 
 def run_sweep(
@@ -129,17 +183,54 @@ def run_sweep(
     shard: tuple[int, int],
     run_one: Callable[[PlannedCampaign], None],
     on_skip: Callable[[PlannedCampaign], None] | None = None,
-) -> list[PlannedCampaign]:
-    """Run this shard's campaigns that have no up-to-date file; return those that ran."""
+    log: Callable[[str], None] | None = None,
+) -> SweepOutcome:
+    """Run this shard's campaigns that have no up-to-date file, each under its file's lock (`run_one` must
+    not take the lock again). Campaigns another process holds are done last, after waiting for it."""
     k, n = shard
-    ran = []
-    for p in planned:
-        if p.index % n != k - 1:
-            continue
-        if p.path.exists() and stored_digest(p.path) == p.config.digest():
-            if on_skip:
-                on_skip(p)
-            continue
-        run_one(p)
-        ran.append(p)
-    return ran
+    mine = [p for p in planned if p.index % n == k - 1]
+    at_start = {p.path: file_state(p.path)[0] for p in mine}
+    ran, skipped, conflicts, busy = [], [], [], []
+
+    def up_to_date(p: PlannedCampaign) -> bool:
+        if file_state(p.path)[0] != p.config.digest():
+            return False
+        skipped.append(p)
+        if on_skip:
+            on_skip(p)
+        return True
+
+    def attempt(p: PlannedCampaign, wait: bool) -> bool:
+        """Run (or skip) one campaign; False if another process holds it and `wait` is not set."""
+        if up_to_date(p):
+            return True
+        with contextlib.ExitStack() as stack:
+            try:
+                stack.enter_context(exclusive(p.path))
+            except Busy:
+                if not wait:
+                    return False
+                if log:
+                    log(f"{p.path.name}: another process is running it; waiting for it")
+                stack.enter_context(exclusive(p.path, wait=True))
+            if up_to_date(p):  # finished by the process that held it
+                return True
+            digest, damage = file_state(p.path)  # what the file holds now that nobody else writes it
+            if digest is not None and digest != at_start[p.path]:
+                conflicts.append(p)
+                if log:
+                    log(f"error: {p.path}: another sweep wrote it with a different config while this one ran; "
+                        "not overwritten (give different sweeps different output directories)")  # fmt: skip
+                return True
+            if damage and log:
+                log(f"warning: {p.path}: {damage}; running the campaign again")
+            run_one(p)
+            ran.append(p)
+        return True
+
+    for p in mine:
+        if not attempt(p, wait=False):
+            busy.append(p)
+    for p in busy:
+        attempt(p, wait=True)
+    return SweepOutcome(tuple(ran), tuple(skipped), tuple(conflicts))

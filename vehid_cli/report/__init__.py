@@ -14,17 +14,25 @@ FORMATS = ("table", "md", "csv", "latex", "json")
 
 
 def is_campaign_file(path: Path) -> bool:
+    """A vehid campaign file? False for other HDF5 files; InputError for a file HDF5 cannot open (truncated or
+    damaged): a report never drops a campaign silently."""
     import h5py
 
+    from ..results import check_integrity
+
     try:
+        check_integrity(path)
         with h5py.File(path, "r") as h5:
             return h5.attrs.get("kind") == CAMPAIGN_KIND
-    except OSError:
-        return False
+    except (OSError, RuntimeError) as exc:
+        raise InputError(
+            f"not a readable HDF5 file: truncated, damaged or not HDF5 ({exc})", source=str(path)
+        ) from None
 
 
 def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
-    """Read campaign files; a directory contributes the campaign files in it (other .h5 files are skipped)."""
+    """Read campaign files; a directory contributes the campaign files in it (other .h5 files are skipped),
+    so the shards of a sweep written into one directory, or several directories, make one report."""
     files: list[Path] = []
     for path in paths:
         if path.is_dir():
@@ -37,6 +45,30 @@ def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
     if not files:
         raise InputError("no campaign files given")
     return [read_campaign_h5(f) for f in files], [str(f) for f in files]
+
+
+def sweep_notes(paths: list[Path]) -> list[str]:
+    """Warnings about unfinished sweeps in the directories among `paths`: campaigns index.csv lists that have
+    no file yet (a shard not run, still running or failed), and checkpoints of interrupted campaigns."""
+    from ..sweep import read_index
+
+    notes = []
+    for path in paths:
+        if not path.is_dir():
+            continue
+        index = path / "index.csv"
+        if index.is_file():
+            missing = [r["file"] for r in read_index(index) if not (path / r["file"]).exists()]
+            if missing:
+                shown = ", ".join(missing[:5]) + (", ..." if len(missing) > 5 else "")
+                notes.append(
+                    f"{index} lists {len(missing)} campaign(s) with no file yet ({shown}): a shard not run, still "
+                    "running or failed; the report shows the finished ones"
+                )
+        for partial in sorted(path.glob("*.partial")):
+            runs = len(list(partial.glob("run-*.npz")))
+            notes.append(f"{partial}: an interrupted campaign ({runs} finished run(s)); rerun its command to finish it")
+    return notes
 
 
 def load_published(path: Path) -> dict:
@@ -52,6 +84,24 @@ def load_published(path: Path) -> dict:
     return doc
 
 
+def file_provenance(path: str) -> dict:
+    """The provenance attributes a campaign file records (config hash, seed, code versions, host, time)."""
+    from ..results import check_integrity, open_results
+
+    keys = (
+        "config_sha256", "seed", "data_file", "data_sha256", "vehid_version", "git_commit", "host", "python",
+        "created_utc", "numpy_version", "scipy_version", "numba_version", "h5py_version", "pydantic_version",
+        "sweep_vary",
+    )  # fmt: skip
+    with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
+        out = {"file_sha256": check_integrity(path)}
+        for k in keys:
+            if k in h5.attrs:
+                v = h5.attrs[k]
+                out[k] = v.item() if hasattr(v, "item") else str(v)
+        return out
+
+
 def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dict | None = None) -> str:
     """The report as text in format `fmt` (all but 'table', which is printed with rich)."""
     from . import tables
@@ -61,7 +111,9 @@ def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dic
     if fmt == "latex":
         return tables.latex(campaigns, published)
     if fmt == "json":
-        docs = [dict(campaign_json(c), file=f) for c, f in zip(campaigns, files, strict=True)]
+        docs = [
+            dict(campaign_json(c), file=f, provenance=file_provenance(f)) for c, f in zip(campaigns, files, strict=True)
+        ]
         return to_json(docs)
     if fmt == "csv":
         buf = io.StringIO()

@@ -1,0 +1,323 @@
+"""Nothing lost, nothing silently wrong (issue 7): signals, damaged files, locks, concurrent sweeps, penalties."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import warnings
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from tests.conftest import BASE_CONFIG, ROOT
+from tests.test_campaign import SMALL, assert_same_content, small_config
+from vehid_cli.campaign import run_campaign, run_campaign_to_file
+from vehid_cli.cli import app
+from vehid_cli.errors import InputError
+from vehid_cli.locking import Busy, exclusive, lock_path
+from vehid_cli.results import check_integrity, read_campaign_h5, write_campaign_h5
+
+LONG = SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"]
+
+
+def vehid(*args, **kwargs):
+    return subprocess.run(
+        [sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT, **kwargs
+    )
+
+
+def sets(items):
+    return [x for s in items for x in ("--set", s)]
+
+
+def invoke(*args):
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    return result.exit_code, (result.stdout or "") + (result.stderr or "")
+
+
+def children(pid: int) -> list[int]:
+    out = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as fh:
+            out += [int(c) for c in fh.read().split()]
+    return out
+
+
+def running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    path = tmp_path_factory.mktemp("whole") / "whole.h5"
+    res = vehid("identify", BASE_CONFIG, *sets(LONG), "--jobs", 1, "-o", path)
+    assert res.returncode == 0, res.stderr
+    return path
+
+
+# ------------------------------------------------------------------------------------------ signals
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=lambda s: s.name)
+def test_signalled_campaign_stops_cleanly_and_resumes_to_the_same_file(tmp_path, uninterrupted, sig):
+    """SIGTERM (kill, a job scheduler) and SIGINT (Ctrl-C, to the whole process group) stop a 2-process campaign at
+    once, leave the finished runs and no temporary file, and end the process by that signal; the pool's workers
+    go too. The rerun resumes and writes the uninterrupted campaign's file. (SIGKILL: tests/test_campaign.py.)"""
+    target = tmp_path / "c.h5"
+    partial = tmp_path / "c.h5.partial"
+    cmd = [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), *sets(LONG), "--jobs", "2", "-o", target]
+    proc = subprocess.Popen(
+        list(map(str, cmd)), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(partial.glob("run-*.npz"))) < 3:
+        time.sleep(0.01)
+    workers = children(proc.pid)
+    if sig == signal.SIGINT:
+        os.killpg(proc.pid, sig)  # what Ctrl-C in a terminal does
+    else:
+        os.kill(proc.pid, sig)
+    _, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == -sig, stderr  # ended by the signal, as shells and job schedulers expect
+    assert "Traceback" not in stderr
+    assert f"interrupted by {sig.name}" in stderr and "run the same command again to resume" in stderr
+    finished = len(list(partial.glob("run-*.npz")))
+    assert 3 <= finished < 12 and not target.exists()
+    assert not list(tmp_path.glob(".c.h5.*.tmp")) and not list(partial.glob(".*.tmp"))
+    deadline = time.time() + 10
+    while time.time() < deadline and any(running(w) for w in workers):
+        time.sleep(0.05)
+    assert not any(running(w) for w in workers), "pool workers outlived their campaign"
+    resumed = vehid("identify", BASE_CONFIG, *sets(LONG), "--jobs", 2, "-o", target)
+    assert resumed.returncode == 0, resumed.stderr
+    assert_same_content(uninterrupted, target)
+    assert not partial.exists() and not lock_path(target).exists()
+
+
+# ------------------------------------------------------------------------------------------ damaged files
+
+
+def test_damaged_checkpoint_records_are_redone_with_a_warning(tmp_path):
+    cfg = small_config("identify.runs=5")
+    write_campaign_h5(tmp_path / "whole.h5", run_campaign(cfg, jobs=1))
+
+    def stop_after_four(done, total):
+        if done == 4:
+            raise KeyboardInterrupt
+
+    partial = tmp_path / "c.h5.partial"
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(cfg, jobs=1, checkpoint_dir=partial, on_run=stop_after_four)
+    record = partial / "run-00001.npz"
+    record.write_bytes(record.read_bytes()[: record.stat().st_size // 2])  # truncated (a full disk, a crash)
+    flipped = bytearray((partial / "run-00002.npz").read_bytes())
+    flipped[len(flipped) // 3] ^= 0xFF  # one bit pattern changed: the zip CRC catches it
+    (partial / "run-00002.npz").write_bytes(bytes(flipped))
+    shutil.copy(partial / "run-00000.npz", partial / "run-00003.npz")  # a record under another run's name
+    (partial / ".run-00004.npz.x1y2.tmp").write_bytes(b"half a write")  # left by a kill during a save
+    messages = []
+    resumed = run_campaign(cfg, jobs=1, checkpoint_dir=partial, log=messages.append)
+    damaged = sorted(m.split(":")[1].strip() for m in messages)
+    assert damaged == [str(partial / f"run-0000{i}.npz") for i in (1, 2, 3)], messages
+    assert all("damaged checkpoint record" in m and "redone" in m for m in messages)
+    assert not list(partial.glob(".*.tmp"))
+    write_campaign_h5(tmp_path / "c.h5", resumed)
+    assert_same_content(tmp_path / "whole.h5", tmp_path / "c.h5")
+
+
+@pytest.fixture(scope="module")
+def one_campaign(tmp_path_factory):
+    path = tmp_path_factory.mktemp("one") / "c.h5"
+    write_campaign_h5(path, run_campaign(small_config("identify.runs=2"), jobs=1))
+    return path
+
+
+def flip_byte_in(path: Path, dataset: str) -> None:
+    with h5py.File(path, "r") as h5:
+        offset = h5[dataset].id.get_offset()
+    with open(path, "r+b") as fh:
+        fh.seek(offset + 5)
+        byte = fh.read(1)
+        fh.seek(offset + 5)
+        fh.write(bytes([byte[0] ^ 0x10]))
+
+
+@pytest.mark.parametrize("damage", ["truncated", "flipped", "emptied"])
+def test_damaged_campaign_file_is_refused_naming_it(tmp_path, one_campaign, damage):
+    bad = tmp_path / "sweep" / "bad.h5"
+    bad.parent.mkdir()
+    shutil.copy(one_campaign, tmp_path / "sweep" / "good.h5")
+    if damage == "truncated":
+        bad.write_bytes(one_campaign.read_bytes()[: one_campaign.stat().st_size * 2 // 3])
+    elif damage == "flipped":
+        shutil.copy(one_campaign, bad)
+        flip_byte_in(bad, "runs/estimate")  # HDF5 would read it: only the checksum tells
+    else:
+        bad.write_bytes(b"")
+    with pytest.raises(InputError, match="bad.h5"):
+        read_campaign_h5(bad)
+    for target in (bad, bad.parent):  # a damaged file in a directory is an error too, never silently left out
+        code, text = invoke("report", target)
+        assert code == 2 and "bad.h5" in text and "Traceback" not in text, text
+        assert ("neither a vehid checksum nor an HDF5 signature" if damage == "emptied" else "checksum") in text
+
+
+def test_sweep_reruns_a_damaged_campaign_file_with_a_warning(tmp_path):
+    args = ["sweep", BASE_CONFIG, "--vary", "noise.level=0.1,0.2", *sets(SMALL), "--runs", 2, "--jobs", 1]
+    args += ["-o", tmp_path]
+    code, text = invoke(*args)
+    assert code == 0, text
+    victim = tmp_path / "level-0.2.h5"
+    good = read_campaign_h5(victim).summary.mean
+    flip_byte_in(victim, "runs/cost")
+    code, text = invoke(*args)
+    assert code == 0, text
+    assert "level-0.2.h5: damaged results file" in text and "running the campaign again" in text
+    assert "1 campaign(s) run, 1 up to date" in text
+    np.testing.assert_array_equal(read_campaign_h5(victim).summary.mean, good)
+
+
+def test_files_record_their_provenance(one_campaign):
+    with h5py.File(one_campaign) as h5:
+        attrs = dict(h5.attrs)
+    recorded = (
+        "config_yaml", "config_sha256", "seed", "seed_scheme", "vehid_version", "git_commit", "host", "created_utc",
+        "numpy_version", "scipy_version", "numba_version", "data_sha256",
+    )  # fmt: skip
+    for key in recorded:
+        assert key in attrs, key
+    assert attrs["seed"] == 2015 and attrs["data_sha256"] == "" and len(attrs["config_sha256"]) == 64
+    head = one_campaign.read_bytes()[:512]  # the HDF5 user block: the checksum of the rest of the file
+    assert head.startswith(b"vehid sha256 ") and check_integrity(one_campaign) == head[13:77].decode()
+
+
+# ------------------------------------------------------------------------------------------ locks
+
+
+def test_lock_is_exclusive_removed_after_use_and_survives_a_waiter(tmp_path):
+    target = tmp_path / "c.h5"
+    order = []
+    with exclusive(target):
+        assert lock_path(target).exists()
+        with pytest.raises(Busy, match="another vehid process"):
+            with exclusive(target):
+                pass
+
+        def waiter():
+            with exclusive(target, wait=True):
+                order.append("waiter")
+
+        thread = threading.Thread(target=waiter)
+        thread.start()
+        time.sleep(0.2)
+        order.append("holder")
+    thread.join(10)
+    assert order == ["holder", "waiter"]
+    assert not lock_path(target).exists()
+
+
+def test_identify_into_a_file_another_process_writes_exits_2(tmp_path):
+    target = tmp_path / "c.h5"
+    with exclusive(target):
+        code, text = invoke("identify", BASE_CONFIG, *sets(SMALL), "--runs", 1, "--jobs", 1, "-o", target)
+    assert code == 2 and "another vehid process is writing this file" in text and str(target) in text, text
+    assert not target.exists()
+    with pytest.raises(Busy):
+        with exclusive(target):
+            run_campaign_to_file(small_config("identify.runs=1"), target, jobs=1)
+
+
+def test_concurrent_identical_sweeps_share_the_work_and_lose_nothing(tmp_path):
+    """Two `vehid sweep` processes with the same plan in one directory: every campaign is run exactly once (the
+    second process skips or waits for what the first holds), every file is whole, the index complete."""
+    args = ["sweep", BASE_CONFIG, "--vary", "identify.algorithm.name=de,cpso", "--vary", "noise.level=0.1,0.2",
+            *sets(SMALL), "--runs", 3, "--jobs", 1, "-o", tmp_path]  # fmt: skip
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "vehid_cli", *map(str, args)],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        for _ in range(2)
+    ]
+    outputs = [p.communicate(timeout=300) for p in procs]
+    assert all(p.returncode == 0 for p in procs), outputs
+    ran = sum(int(o.split("campaign(s) run")[0].rsplit(" ", 2)[-2]) for o, _ in outputs)
+    assert ran == 4, outputs
+    files = sorted(tmp_path.glob("*.h5"))
+    assert len(files) == 4
+    for f in files:
+        read_campaign_h5(f)  # whole, checksum verified
+    assert (tmp_path / "index.csv").read_text().count("\n") == 5
+    assert not list(tmp_path.glob(".*"))  # no lock or temporary file left
+
+
+def test_sweeps_with_different_plans_merge_their_index(tmp_path):
+    base = ["sweep", BASE_CONFIG, *sets(SMALL), "--runs", 1, "--jobs", 1, "-o", tmp_path]
+    assert invoke(*base, "--vary", "noise.level=0.1,0.2")[0] == 0
+    assert invoke(*base, "--vary", "identify.algorithm.name=de,cpso")[0] == 0
+    index = (tmp_path / "index.csv").read_text()
+    assert all(name in index for name in ("level-0.1.h5", "level-0.2.h5", "name-de.h5", "name-cpso.h5"))
+
+
+def test_a_file_rewritten_by_another_sweep_with_another_config_is_not_overwritten(tmp_path):
+    """While this sweep runs its first campaign, another process writes the second campaign's file with another
+    config: this sweep leaves that file alone and says so (exit 2), rather than lose its results."""
+    from vehid_cli.sweep import parse_vary, plan_sweep, run_sweep
+
+    planned = plan_sweep(BASE_CONFIG, SMALL + ["identify.runs=1"], parse_vary(["noise.level=0.1,0.2"]), tmp_path)
+    intruder = run_campaign(small_config("identify.runs=1", "noise.level=0.2", "identify.seed=5"), jobs=1)
+
+    def run_one(p):
+        write_campaign_h5(p.path, run_campaign(p.config, jobs=1))
+        if p.index == 0:
+            write_campaign_h5(planned[1].path, intruder)  # "another sweep", meanwhile
+
+    messages = []
+    done = run_sweep(planned, (1, 1), run_one, log=messages.append)
+    assert [p.index for p in done.ran] == [0] and [p.index for p in done.conflicts] == [1]
+    assert read_campaign_h5(planned[1].path).config.identify.seed == 5
+    assert "not overwritten" in messages[0]
+
+
+# ------------------------------------------------------------------------------------------ numerical faults
+
+
+def test_unstable_parameter_sets_are_penalised_counted_and_reported(tmp_path):
+    """Negative damping is in the box: those cars blow up. The campaign completes without a floating-point
+    warning, every cost is finite, and the penalised evaluations are counted in the file, the JSON and the output."""
+    extra = ["identify.unknowns=[m, cf, cr]", "identify.limits={cf: [-60000, 60000], cr: [-60000, 60000]}",
+             "identify.runs=2"]  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        campaign = run_campaign(small_config(*extra), jobs=1)
+    assert campaign.summary.penalised == sum(r.penalised for r in campaign.records) > 0
+    assert all(np.isfinite(r.cost) for r in campaign.records)
+    # run 1's 40 evaluations were all unstable: its "estimate" is meaningless, and the campaign says so
+    assert [r.penalised for r in campaign.records][1] == 40 and campaign.summary.at_penalty == 1
+    out, js = tmp_path / "c.h5", tmp_path / "c.json"
+    code, text = invoke("identify", BASE_CONFIG, *sets(SMALL + extra), "--jobs", 1, "-o", out, "--json", js)
+    assert code == 0, text
+    doc = json.loads(js.read_text())
+    assert doc["penalised_evaluations"] == campaign.summary.penalised and doc["runs_at_penalty"] == 1
+    assert f"{campaign.summary.penalised} of" in text and "penalty cost" in text
+    assert "1 of 2 run(s) found no usable parameter set" in text
+    with h5py.File(out) as h5:
+        assert h5["summary"].attrs["penalised"] == campaign.summary.penalised
+        assert list(h5["runs/penalised"][()]) == [r.penalised for r in campaign.records]

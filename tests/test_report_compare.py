@@ -1,0 +1,109 @@
+"""Reports over sweeps (issue 7): shards of a job array merge into one report; campaigns of different experiments,
+data or code are refused unless --allow-mixed."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from tests.conftest import BASE_CONFIG
+from tests.test_campaign import SMALL, small_config
+from vehid_cli.campaign import run_campaign
+from vehid_cli.cli import app
+from vehid_cli.report.compare import Provenance, differences
+from vehid_cli.results import write_campaign_h5
+
+
+def invoke(*args):
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    return result.exit_code, result.stdout or "", result.stderr or ""
+
+
+def sets(items):
+    return [x for s in items for x in ("--set", s)]
+
+
+def test_shards_into_one_directory_make_one_report(tmp_path):
+    args = ["sweep", BASE_CONFIG, "--vary", "identify.algorithm.name=de,cpso,abc,ga", *sets(SMALL), "--runs", 2]
+    args += ["--jobs", 1, "-o", tmp_path]
+    code, out, err = invoke(*args, "--shard", "1/2")
+    assert code == 0, err
+    code, out, err = invoke("report", tmp_path, "--format", "csv")
+    assert code == 0, err
+    assert "index.csv lists 2 campaign(s) with no file yet (name-cpso.h5, name-ga.h5)" in err
+    code, out, err = invoke(*args, "--shard", "2/2")
+    assert code == 0, err
+    code, md, err = invoke("report", tmp_path, "--format", "md")
+    assert code == 0 and err == "", err
+    assert md.count("**objective f2") == 1  # one table
+    header = next(line for line in md.splitlines() if line.startswith("|  | true"))
+    assert all(f"{a} est" in header for a in ("de", "cpso", "abc", "ga"))
+    code, text, err = invoke("report", tmp_path, "--format", "csv")
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert sorted({r["algorithm"] for r in rows}) == ["abc", "cpso", "de", "ga"] and len(rows) == 4 * 5
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("mixed")
+    made = {
+        "base": small_config("identify.runs=2"),
+        "cpso": small_config("identify.runs=2", "identify.algorithm.name=cpso", "noise.level=0.2", "sensors=acc"),
+        "stiffer": small_config("identify.runs=2", "vehicle.kf=50000"),
+    }
+    for name, cfg in made.items():
+        write_campaign_h5(d / f"{name}.h5", run_campaign(cfg, jobs=1))
+    return d
+
+
+def test_method_keys_may_differ(files):
+    code, out, err = invoke("report", files / "base.h5", files / "cpso.h5", "--format", "md")
+    assert code == 0 and err == "", err
+
+
+def test_another_car_is_refused_unless_allowed(files):
+    code, out, err = invoke("report", files / "base.h5", files / "stiffer.h5")
+    assert code == 2
+    assert "not comparable" in err and "base.h5" in err and "stiffer.h5" in err
+    assert "vehicle.kf (45000.0 vs 50000.0)" in err and "--allow-mixed" in err and "Traceback" not in err
+    code, out, err = invoke("report", files, "--allow-mixed", "--format", "json")
+    assert code == 0, err
+    assert "note (--allow-mixed)" in err and "vehicle.kf" in err
+    docs = json.loads(out)
+    assert len(docs) == 3 and all(len(d["provenance"]["config_sha256"]) == 64 for d in docs)
+    assert {d["provenance"]["git_commit"] for d in docs} and all("host" in d["provenance"] for d in docs)
+
+
+def test_keys_a_sweep_varied_may_differ(tmp_path):
+    code, out, err = invoke(
+        "sweep", BASE_CONFIG, "--vary", "road.speed_kmh=20,30", *sets(SMALL), "--runs", 1, "--jobs", 1, "-o", tmp_path
+    )
+    assert code == 0, err
+    code, out, err = invoke("report", tmp_path, "--format", "csv")
+    assert code == 0 and err == "", err
+
+
+def test_another_numpy_is_refused(files, tmp_path, monkeypatch):
+    import vehid_cli.results as results
+
+    real = results.provenance
+    monkeypatch.setattr(results, "provenance", lambda: dict(real(), numpy_version="1.0.0"))
+    write_campaign_h5(tmp_path / "old.h5", run_campaign(small_config("identify.runs=2"), jobs=1))
+    code, out, err = invoke("report", files / "base.h5", tmp_path / "old.h5")
+    assert code == 2 and "numpy_version" in err and "1.0.0" in err, err
+
+
+def test_data_files_must_match():
+    def prov(data_file="", data_sha256="", **code):
+        return Provenance("f.h5", {"a": 1}, "x", data_file, data_sha256, code, frozenset())
+
+    assert differences(prov(), prov()) == []
+    assert differences(prov("run.csv", "aa"), prov("run.csv", "aa")) == []
+    assert differences(prov("run.csv", "aa"), prov("run.csv", "bb"))[0].startswith("data (run.csv (sha256 aa)")
+    assert "simulated" in differences(prov(), prov("run.csv", "aa"))[0]
+    assert differences(prov(git_commit="abc"), prov(git_commit="unknown")) == []
+    assert differences(prov(vehid_version="0.1.0"), prov(vehid_version="0.2.0")) == ["vehid_version (0.1.0 vs 0.2.0)"]
