@@ -85,9 +85,7 @@ class DamperSpec:
         more = tuple(e for e in effects if e not in self.effects)
         return DamperSpec(self.model, {**self.values, **values}, self.table_shape, self.effects + more)
 
-    def simulate_batch(
-        self, unknowns: Sequence[str], X: NDArray, history: BenchHistory, substeps: int = 1
-    ) -> BenchRun:
+    def simulate_batch(self, unknowns: Sequence[str], X: NDArray, history: BenchHistory, substeps: int = 1) -> BenchRun:
         """Forces of a batch of candidates (`unknowns` = columns of X) on the history, effects included."""
         X = np.atleast_2d(np.asarray(X, dtype=float))
         rows = self.rows(unknowns, X)

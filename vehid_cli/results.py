@@ -274,8 +274,12 @@ def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
         raise InputError(f"{what} not found", source=source) from None
     except OSError as exc:
         raise InputError(f"not a readable HDF5 file: truncated, damaged or not HDF5 ({exc})", source=source) from None
-    if h5.attrs.get("kind") != kind:
+    try:
         found = h5.attrs.get("kind")
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # damaged metadata (no checksum)
+        h5.close()
+        raise InputError(f"damaged HDF5 file ({exc})", source=source) from None
+    if found != kind:
         h5.close()
         raise InputError(f"not a vehid {what} (kind {found!r})", source=source)
     return h5
@@ -339,7 +343,7 @@ def read_campaign_h5(path: str | Path):
                 sigma_source=str(h5.attrs["sigma_source"]), records=records, bound=bound, summary=summary,
                 data_sha256=str(h5.attrs.get("data_sha256", "")) or None,
             )  # fmt: skip
-        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:  # h5py's reactions to damage
+        except (KeyError, ValueError, TypeError, OSError, RuntimeError, yaml.YAMLError) as exc:  # reactions to damage
             raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None
 
 
