@@ -85,6 +85,17 @@ def candidate_specs(config) -> dict[str, Candidate]:
     return out
 
 
+def candidate_ranges(specs: dict[str, Candidate]) -> tuple[dict[str, tuple[float, float]], dict[str, float]]:
+    """Every candidate's search ranges (its unknowns' and its shape parameters') and start values, by name."""
+    limits: dict[str, tuple[float, float]] = {}
+    starts: dict[str, float] = {}
+    for c in specs.values():
+        limits.update(c.limits)
+        limits.update(c.shape_limits)
+        starts.update(c.start)
+    return limits, starts
+
+
 @dataclass(frozen=True)
 class Fit:
     """A least-squares fit: unknowns, estimate, training chi² per sample, evaluations."""

@@ -38,7 +38,7 @@ from ..models.effects import LIBRARY
 from ..noise import estimate_noise_sigma
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
-from .attribution import ALPHA, Candidate, Fit, lsq_fit
+from .attribution import ALPHA, Candidate, Fit, candidate_ranges, lsq_fit
 from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, fisher_ci, holdout_blocks
 from .quality import assess_bench
 from .residuals import analyse_bench, autocorrelation
@@ -124,13 +124,9 @@ def diagnose_bench(
     substeps = config.bench.substeps
     spec = configured_spec(config)
     declared_names = tuple(config.identify.unknowns)
-    box = dict(config.search_box())
     specs = bench_candidates(spec, train, declared_names)
-    limits, starts = dict(box), {}
-    for c in specs.values():
-        limits.update(c.limits)
-        limits.update(c.shape_limits)
-        starts.update(c.start)
+    effect_limits, starts = candidate_ranges(specs)
+    limits = {**config.search_box(), **effect_limits}
 
     n = train.t.size
     if held_out:
@@ -179,18 +175,16 @@ def diagnose_bench(
         per = {k: (v if np.isfinite(v) else float("inf")) for k, v in per.items()}
         return float(np.mean(list(per.values()))), per
 
-    def residual_rho(f: Fit) -> float:
-        _, r = problem_for(f.names)[0].residuals(np.asarray(f.x, dtype=float)[None, :])
-        return float(np.clip(autocorrelation(r[0], 1)[1], 0.0, 0.99)) if np.all(np.isfinite(r)) else 0.0
-
     R_train = int(n if keep is None else keep.sum())
 
-    def n_eff(f: Fit) -> float:
-        rho = residual_rho(f)
+    def n_eff(problem: Problem, x: NDArray) -> float:
+        """Effective training samples at x: R (1 - rho) / (1 + rho), rho the lag-1 autocorrelation of the residual."""
+        _, r = problem.residuals(np.asarray(x, dtype=float)[None, :])
+        rho = float(np.clip(autocorrelation(r[0], 1)[1], 0.0, 0.99)) if np.all(np.isfinite(r)) else 0.0
         return R_train * (1.0 - rho) / (1.0 + rho)
 
     def statistic(current: Fit):
-        ne = n_eff(current)
+        ne = n_eff(problem_for(current.names)[0], current.x)
         return lambda J0, J1: float(ne * np.log(J0 / J1)) if 0 < J1 < J0 else 0.0
 
     # 1. the declared model: the configured algorithm from the configured values, then a least-squares polish
@@ -207,8 +201,9 @@ def diagnose_bench(
     def report(f: Fit, effects) -> ModelReport:
         s = spec_for(f.names)
         force = s.simulate_batch(f.names, np.asarray(f.x)[None, :], train, substeps).force[0]
-        scale_var = f.J / R_train * R_train / max(n_eff(f), 1.0)  # residual-entry variance, AR(1)-inflated
-        ci = fisher_ci(problem_for(f.names)[0], f.x, scale_var)
+        problem = problem_for(f.names)[0]
+        scale_var = f.J / max(n_eff(problem, f.x), 1.0)  # variance of one residual entry, AR(1)-inflated
+        ci = fisher_ci(problem, f.x, scale_var)
         vJ, per = validation_J(f.names, f.x)
         an = analyse_bench(train, force, sigma)
         return ModelReport(tuple(effects), f.names, f.x, ci, f.J, an.chi2_per_sample, vJ, None, an, per)

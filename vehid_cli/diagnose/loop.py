@@ -30,6 +30,7 @@ from .attribution import (
     Candidate,
     Fit,
     Ranked,
+    candidate_ranges,
     candidate_specs,
     chi2_statistic,
     lsq_fit,
@@ -363,11 +364,8 @@ def diagnose(
 
     specs = candidate_specs(config)
     declared = set(config.vehicle.effect_values())
-    ranges: dict = {"limits": {}, "start": {}}
-    for c in specs.values():
-        ranges["limits"].update(c.limits)
-        ranges["limits"].update(c.shape_limits)
-        ranges["start"].update(c.start)
+    limits, starts = candidate_ranges(specs)
+    ranges = {"limits": limits, "start": starts}
 
     def validation_J(names: tuple[str, ...], x: NDArray) -> tuple[float, None]:
         vt = augmented(vtask, names, ranges)
