@@ -102,7 +102,7 @@ class DamperSpec:
 def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistory, substeps: int) -> BenchRun:
     """The declared model's force without its gas part, then the bench effects around it (lag on the damper
     force, parallel effects added, the gas force k1 (x_b - x0) on the piston's motion through the play)."""
-    from .models.damper import play
+    from .models.damper import play, refine
     from .models.effects import bench_effect_rows, bench_effects, bench_lag_state
     from .sim.kernel import integrate_bench
 
@@ -117,9 +117,7 @@ def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistor
         road[r, :, 3] = rows[r, 0] * (xb - rows[r, 1])
     eset = bench_effect_rows(effects, P)
     dt = float(h.t[1] - h.t[0])
-    if substeps > 1:  # the effects' states at the model's step, inputs linear between samples
-        fine = np.linspace(h.t[0], h.t[-1], (n - 1) * substeps + 1)
-        road = np.stack([np.stack([np.interp(fine, h.t, road[r, :, c]) for c in range(4)], -1) for r in range(P)])
+    road = refine(h.t, road, substeps)  # the effects' states at the model's step
     z0 = np.zeros((P, max(eset.n_z, 1)))
     lag = bench_lag_state(eset)
     if lag is not None:

@@ -309,6 +309,19 @@ def _hold(flags: NDArray) -> NDArray:
     return out
 
 
+def refine(t: NDArray, road: NDArray, substeps: int) -> NDArray:
+    """Bench channels (P, n, k) on the grid t, resampled at dt / substeps, linear between the samples."""
+    if substeps <= 1:
+        return road
+    P, n, k = road.shape
+    fine = np.linspace(t[0], t[-1], (n - 1) * substeps + 1)
+    out = np.empty((P, fine.size, k))
+    for r in range(P):
+        for c in range(k):
+            out[r, :, c] = np.interp(fine, t, road[r, :, c])
+    return out
+
+
 @dataclass(frozen=True)
 class BenchRun:
     """The force of a batch of candidate dampers on one bench history, and whether each stayed finite."""
@@ -349,13 +362,7 @@ def simulate_damper(
         )
     if model.uses_control:
         road[:, :, 2:] = delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4])
-    if substeps > 1:  # finer integration of the same inputs (linear between the bench's samples)
-        fine = np.linspace(t[0], t[-1], (n - 1) * substeps + 1)
-        coarse = road
-        road = np.empty((P, fine.size, channels))
-        for r in range(P):
-            for c in range(channels):
-                road[r, :, c] = np.interp(fine, t, coarse[r, :, c])
+    road = refine(t, road, substeps)  # finer integration of the same inputs
     z0 = np.zeros((P, model.n_states))
     if model.uses_control:
         z0[:, -1] = u[0]  # the lagged input starts at the command
