@@ -632,8 +632,8 @@ class DamperConfig(_Section):
                     )
                 per_axle = next(p.per_axle for p in LIBRARY[name].params if p.name == key)
                 why = bound_violation(name, f"{key}_f" if per_axle else key, value)
-                if why:
-                    raise _KeyedError(f"damper.effects.{name}.{key}", why)
+                if why:  # one damper: the per-axle name reads as the plain one
+                    raise _KeyedError(f"damper.effects.{name}.{key}", why.replace(f"{name}.{key}_f", f"{name}.{key}"))
 
     def effect_parameters(self) -> tuple[str, ...]:
         """The declared bench effects' parameters, as identify.unknowns names them (<effect>.<param>)."""
