@@ -137,7 +137,18 @@ def build_experiment(config: Config, road_file: str | Path | None = None) -> Exp
 
 def check_time_step(config: Config, dt: float, key: str) -> None:
     """Refuse a time step too coarse to resolve the fastest mode (the wheel hop) of the configured car."""
-    omega = assemble(config.vehicle.values()).natural_frequencies()
+    values = config.vehicle.values()
+    with np.errstate(all="ignore"):
+        mats = assemble(values)
+    if not all(np.all(np.isfinite(X)) for X in (mats.M, mats.C, mats.K)):
+        worst = max(values, key=lambda n: abs(values[n]))
+        raise InputError(
+            f"the configured car's mass, damping or stiffness matrix overflows; the largest value is "
+            f"vehicle.{worst} = {values[worst]:g}: expected physical values in SI units",
+            source=config.source,
+            key=f"vehicle.{worst}",
+        )
+    omega = mats.natural_frequencies()
     f_max = float(omega[-1]) / (2 * math.pi)
     dt_max = 1.0 / (MIN_SAMPLES_PER_PERIOD * f_max)
     if dt > dt_max * (1 + 1e-9):

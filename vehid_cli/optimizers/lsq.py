@@ -18,8 +18,9 @@ from .base import BudgetExhausted, Optimizer, Run, register
 JACOBIAN_STEP = 1e-7  # forward-difference step, as a fraction of each parameter's box width
 
 
-def polish(run: Run, x0: NDArray, max_nfev: int | None = None) -> NDArray:
-    """Least-squares polish from x0 using the run's budget; returns the final point (the run tracks the best)."""
+def polish(run: Run, x0: NDArray, max_nfev: int | None = None, tol: float = 1e-12) -> NDArray:
+    """Least-squares polish from x0 using the run's budget, to relative tolerance `tol` of the cost and the
+    step; returns the final point (the run tracks the best)."""
     lo, hi = run.problem.lower, run.problem.upper
     width = hi - lo
     cache: dict[bytes, NDArray] = {}
@@ -42,7 +43,7 @@ def polish(run: Run, x0: NDArray, max_nfev: int | None = None) -> NDArray:
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
     result = least_squares(
         residual, x0, jac=jacobian, bounds=(lo, hi), method="trf", x_scale=width,
-        xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_nfev,
+        xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
     )  # fmt: skip
     return result.x
 

@@ -38,11 +38,15 @@ finite numbers; a diverging candidate still turns NaN everywhere, through the de
 from __future__ import annotations
 
 import functools
+import hashlib
+import inspect
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal
 
 import numba
 import numpy as np
+from numba.core.caching import FunctionCache
 from numpy.typing import ArrayLike, NDArray
 
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
@@ -152,6 +156,33 @@ def _inlined(force):
     return numba.njit(inline="always", error_model=error_model)(py_func), error_model
 
 
+class _KeyedCache(FunctionCache):
+    """numba's on-disk function cache keyed by our own digest instead of the closure's pickled cells (which
+    hold freshly made dispatchers, so numba's own key differs in every process and the cache never hits)."""
+
+    def __init__(self, py_func, key: str):
+        super().__init__(py_func)
+        self._key = key
+
+    def _index_key(self, sig, codegen):
+        return (sig, codegen.magic_tuple(), (hashlib.sha256(self._py_func.__code__.co_code).hexdigest(), self._key))
+
+
+def _cache_key(force, error_model: str, *sizes: int) -> str | None:
+    """A digest of what the compiled loop for `force` depends on: this file, the source file that defines the
+    law (its helpers too), the error model and the sizes; None when the law's source cannot be read (then the
+    loop is compiled afresh in each process)."""
+    try:
+        law_file = inspect.getsourcefile(force.py_func)
+        if not law_file:
+            return None
+        parts = [Path(__file__).read_bytes(), Path(law_file).read_bytes(), force.py_func.__qualname__.encode()]
+    except (AttributeError, OSError, TypeError):
+        return None
+    parts.append(repr((error_model, sizes, numba.__version__)).encode())
+    return hashlib.sha256(b"\0".join(parts)).hexdigest()
+
+
 @functools.cache
 def _rk4_loop(force, nq: int, ns: int, nu: int):
     """The RK4 time loop compiled for one force law, n_q coordinates, n_s struts and n_u road channels.
@@ -159,9 +190,11 @@ def _rk4_loop(force, nq: int, ns: int, nu: int):
     The law is inlined at its four evaluations per step (``_inlined``) and the sizes are compile-time
     constants, so the small loops of the step unroll (twice as fast as with the sizes read from the arrays).
     Returns run(Mr, CT, KT, Br, Dr, Er, u, dt, params, q0, z0, out_q, out_v, out_a, out_f, out_z), arguments
-    as ``_integrate_newmark``'s; compiled on first use, once per law and sizes in a process. (The law is part
-    of the code: a law passed as an argument, as Newmark's loop takes it, cannot be inlined.)"""
+    as ``_integrate_newmark``'s; compiled on first use, once per law and sizes, and cached on disk by numba
+    (loaded in about a second instead of compiled in about six). (The law is part of the code: a law passed as
+    an argument, as Newmark's loop takes it, cannot be inlined.)"""
     law, error_model = _inlined(force)
+    key = _cache_key(force, error_model, nq, ns, nu)
 
     @numba.njit(inline="always", error_model=error_model)
     def rates(q, v, z, y, yd, Mr, CT, KT, Br, Dr, Er, par, d, dd, f, zd, rhs, a):  # pragma: no cover
@@ -170,7 +203,7 @@ def _rk4_loop(force, nq: int, ns: int, nu: int):
         law(d, dd, z, par, f, zd)
         _linear_rates(q, v, y, f, Mr, CT, KT, Br, Dr, rhs, a)
 
-    @numba.njit(cache=False, error_model=error_model)
+    @numba.njit(nogil=True, error_model=error_model)  # nogil: candidate fits run in parallel threads
     def run(Mr, CT, KT, Br, Dr, Er, u, dt, params, q0, z0, out_q, out_v, out_a, out_f, out_z):  # pragma: no cover
         """Every system p of the batch, every step k, by classical RK4; see ``_integrate_newmark``.
 
@@ -258,6 +291,8 @@ def _rk4_loop(force, nq: int, ns: int, nu: int):
                         for i in range(nz):
                             out_z[p, k, i] = z[i]
 
+    if key is not None:
+        run._cache = _KeyedCache(run.py_func, key)  # numba's on-disk cache, under our own key
     return run
 
 
@@ -332,7 +367,7 @@ def _newmark_step(q, v, z, a, f, zd, y0, y1, dt, MT, CT, Br, Dr, Er, KhT, force,
     return failed
 
 
-@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
+@numba.njit(cache=False, nogil=True)  # takes a force law as argument: not cacheable (numba#9237)
 def _integrate_newmark(
     Mr, CT, KT, Br, Dr, Er, MT, KhT, u, dt, force, params, q0, z0, out_q, out_v, out_a, out_f, out_z, unconverged
 ):  # pragma: no cover - compiled
@@ -563,7 +598,7 @@ def simulate_fullcar(
 # ------------------------------------------------------------------------------------------ test bench
 
 
-@numba.njit(cache=False)  # takes a force law as argument: not cacheable (numba#9237)
+@numba.njit(cache=False, nogil=True)  # takes a force law as argument: not cacheable (numba#9237)
 def _bench_rk4(force, params, road, dt, z0, out_f):  # pragma: no cover - compiled
     """RK4 for a strut on a test bench: the motion is prescribed (the road channels, linear between samples),
     so only the force law's internal states are integrated; same law interface as ``_integrate``. Bench laws
