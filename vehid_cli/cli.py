@@ -612,7 +612,6 @@ def diagnose(
     likelihood-ratio test is significant (p below 1e-3 / number of candidates), it lowers the validation J,
     and the data tell it from the runner-up; data too short, too noisy or unexcited get no claim.
     """
-    from rich.table import Table
 
     from .diagnose import diagnose as run_diagnosis
     from .diagnose.bench import diagnose_bench
@@ -633,40 +632,14 @@ def diagnose(
         cfg = load_config(config, ["identify.objective=wls", "noise.level=0", *(set_ or ())])
         result = run_diagnosis(cfg, data, validate[0] if validate else None, log=say)
     doc = result.to_json()
-    table = Table(title=f"candidate effects (round 1; alpha = {result.alpha:g}, Bonferroni)")
-    for col in ("effect", "k", "LR statistic", "p-value", "J with it", "BIC margin", "validation J", "accepted"):
-        table.add_column(col)
-    for r in result.rounds[0] if result.rounds else ():
-        table.add_row(
-            r.effect, str(r.k), f"{r.statistic:.4g}", f"{r.p_value:.3g}", f"{r.J:.4g}", f"{r.bic_margin:.4g}",
-            f"{r.validation_J:.4g}", "yes" if r.accepted else "no",
-        )  # fmt: skip
-    out.print(table)
-    ba = Table(title=f"before / after (J: {result.J_definition})")
-    ba.add_column("")
-    ba.add_column("before")
-    ba.add_column("after")
-
-    def fmt(v):
-        return "-" if v is None else f"{v:.4g}"
-
-    b, a = result.before, result.after
-    ba.add_row("effects", ", ".join(b.effects) or "(declared)", ", ".join(a.effects) or "(none added)")
-    ba.add_row("J", fmt(b.J), fmt(a.J))
-    ba.add_row("residual / noise power", fmt(b.chi2_per_sample), fmt(a.chi2_per_sample))
-    ba.add_row(
-        "validation J" if result.validation_from_file else "held-out J", fmt(b.validation_J), fmt(a.validation_J)
-    )
-    ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
-    for j, name in enumerate(a.names):
-        before = f"{b.x[j]:.5g} ± {b.ci[j]:.2g}" if j < len(b.names) else "-"
-        ba.add_row(name, before, f"{a.x[j]:.5g} ± {a.ci[j]:.2g}")
-    out.print(ba)
+    out.print(diagnosis_tables(result))
     for step in result.steps:
         out.print(
             f"added {step.effect}: J {step.J_before:.4g} -> {step.J_after:.4g}, "
             f"validation J {step.validation_J_before:.4g} -> {step.validation_J_after:.4g}"
         )
+    for note in result.notes:
+        out.print(f"note: {note}", markup=False)
     out.print(f"verdict: {result.verdict} ({result.wall_s:.1f} s)")
     if plots is not None:
         for path in plot_diagnosis_files(result, plots, (data or config).stem):
@@ -674,6 +647,49 @@ def diagnose(
     if json_out is not None:
         write_json(json_out, doc)
         out.print(f"wrote {json_out}")
+
+
+def diagnosis_tables(result):
+    """The candidate table (round 1) and the before/after table of a diagnosis, each within 80 columns."""
+    from rich import box
+    from rich.console import Group
+    from rich.table import Table
+
+    claimed = set(result.selected)
+    vname = "val. J" if result.validation_from_file else "held-out J"
+    table = Table(
+        title=f"candidates, round 1 (alpha = {result.alpha:g}, Bonferroni)", box=box.SIMPLE_HEAD,
+        caption="accepted: significant (p < alpha / candidates) and lowers the " + vname
+        + "; claimed: in the final model",
+    )  # fmt: skip
+    for col in ("candidate", "k", "LR", "p", "J", vname, "status"):
+        table.add_column(col, no_wrap=True, justify="left" if col in ("candidate", "status") else "right")
+    for r in result.rounds[0] if result.rounds else ():
+        status = "claimed" if r.effect in claimed else ("accepted" if r.accepted else "-")
+        table.add_row(
+            r.effect, str(r.k), f"{r.statistic:.3g}", f"{r.p_value:.2g}", f"{r.J:.4g}", f"{r.validation_J:.4g}", status
+        )  # fmt: skip
+    ba = Table(title="before / after (J: " + result.J_definition.split(":")[0] + ")", box=box.SIMPLE_HEAD)
+    for col in ("", "before", "after"):
+        ba.add_column(col, no_wrap=col == "")
+
+    def fmt(v):
+        return "-" if v is None else f"{v:.4g}"
+
+    def est(rep, j):
+        if rep.names[j] in rep.fixed:
+            return f"{rep.x[j]:.5g} (fixed)"
+        return f"{rep.x[j]:.5g} ± {rep.ci[j]:.2g}"
+
+    b, a = result.before, result.after
+    ba.add_row("model", ", ".join(b.effects) or "(declared)", ", ".join(a.effects) or "(nothing added)")
+    ba.add_row("J", fmt(b.J), fmt(a.J))
+    ba.add_row("residual / noise power", fmt(b.chi2_per_sample), fmt(a.chi2_per_sample))
+    ba.add_row(vname, fmt(b.validation_J), fmt(a.validation_J))
+    ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
+    for j, name in enumerate(a.names):
+        ba.add_row(name, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
+    return Group(table, ba)
 
 
 def plot_diagnosis_files(result, directory: Path, stem: str) -> list[Path]:

@@ -171,9 +171,24 @@ class SimulatedRun:
     noise_level: float
 
 
+DIVERGED_FACTOR = 100.0  # a body moving more than this many times the road's height has diverged
+
+
 def simulate_measurement(experiment: Experiment, rng: np.random.Generator) -> SimulatedRun:
     """Simulate the configured car and add Eq. 15 noise to each channel (accelerations first, then displacements)."""
     clean = experiment.simulate()
+    road = np.max(np.abs(experiment.road)) if np.size(experiment.road) else 0.0
+    limit = DIVERGED_FACTOR * max(road, 1e-3)
+    if not (np.all(np.isfinite(clean.disp)) and np.max(np.abs(clean.disp)) <= limit):
+        k = int(np.argmax(~np.isfinite(clean.disp).all(axis=1) | (np.abs(clean.disp) > limit).any(axis=1)))
+        raise InputError(
+            f"the simulation diverged at t = {clean.t[k]:.4g} s (body displacement beyond {limit:.3g} m, "
+            f"{DIVERGED_FACTOR:g} times the road's largest height): the configured effects are too stiff for "
+            f"this time step (an effect bottoming out, e.g. a gas column shorter than the strut's stroke); "
+            "check vehicle.effects or use a smaller simulation.dt",
+            source=experiment.config.source,
+            key="simulation.dt",
+        )
     level = experiment.config.noise.level
     acc = add_noise(clean.acc, level, rng)
     disp = add_noise(clean.disp, level, rng)

@@ -1,30 +1,40 @@
-"""Attribution: which missing effect explains the residual? A likelihood-ratio test per candidate.
+"""Attribution: which missing effect, or which mis-set known parameter, explains the residual?
 
-For every effect of the library the config does not declare: a short augmented fit (the current unknowns
-plus that effect's parameters, from the current fit, trust-region least squares with a modest budget),
-then
+Candidates are of two kinds: the library's effects the config does not declare, and the configured "known"
+parameters (springs kf, kr; dampers cf, cr; tyres ktf, ktr; anti-roll bar kR; unsprung masses mf, mr; on a
+bench the damper model's fixed parameters), named ``parameter:<name>`` (SPEC section 5). For each, a
+candidate fit (the current unknowns plus the candidate's, from the current fit) and then
 
 * the likelihood-ratio statistic LR = (chi²_before - chi²_with) x R, with chi² the noise-weighted residual
   power per sample over the R training residuals: 2 x the gain in Gaussian log-likelihood with the noise
-  sigma of the task (estimated from the data when noise.level is 0); the nested model is the effect
-  switched off, so the fit with the effect is never worse than without it (LR >= 0);
-* its p-value from chi²(k), k the number of added parameters;
-* a BIC margin LR - k ln R (positive: the effect pays for its parameters);
-* the validation chi² per sample (the --validate run, else held-out blocks of the data).
+  sigma of the task; the nested model is the candidate switched off (strength zero, or the parameter at its
+  configured value), so the fit with it is never worse than without (LR >= 0);
+* its p-value from chi²(k), k the number of parameters the fit freed;
+* a BIC margin LR - k ln R (positive: the candidate pays for its parameters);
+* the validation chi² per sample (the --validate run(s), else held-out blocks of the data).
 
-A candidate is accepted when p < alpha / (number of candidates) (Bonferroni) AND its validation chi² is
-below the current model's. Candidates are ranked by LR, best first.
+A candidate is accepted when p < alpha / (number of candidates) (Bonferroni) AND it lowers the validation J
+(on a bench with several held-out runs: on every one of them). Candidates are ranked by LR, best first.
 
-Search boxes: the effects' physical bounds (effects.py) narrowed to a range a passenger-car strut can have,
-so that the short fit starts well scaled; each effect's strength parameter per axle is added, and
-asymmetric damping also frees the damping it splits (cf, cr): the data's compression/rebound pair need not
-average to the configured damping, and the library's parametrisation keeps that mean at c.
+Shapes are identified, not assumed: an effect's shape parameters (a Bouc-Wen loop's yield, a friction or
+switch velocity, a gas column, a contact stiffness) start from several values spread over their physically
+plausible range; at each start the strengths (per axle) come from one linearised least-squares step (the
+force is proportional to them), all starts in two batched evaluations; the best start's shape parameters
+whose 95 % interval (Fisher information) is narrower than SHAPE_IDENTIFIABLE of their value are freed in the
+fit, the others stay at the start's value and the candidate says so (``fixed``).
+
+Search boxes: the effects' physical bounds (effects.py) narrowed to a range a passenger-car strut can have;
+known parameters within identify.bounds of their configured value (the car) or BENCH_PARAMETER_RANGE of it
+(a bench). Candidate fits run in parallel threads (the compiled kernels release the GIL).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import os
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,52 +46,124 @@ from ..optimizers.base import BudgetExhausted, Problem, Run
 from ..optimizers.lsq import polish
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
-CANDIDATE_BUDGET = 120  # model evaluations of one candidate's short fit
+CANDIDATE_BUDGET = 150  # model evaluations of one candidate's fit (after the screening of its starts)
 DISTINCT_VALIDATION = 0.1  # validation J this much lower tells the best candidate from a close runner-up
+SHAPE_IDENTIFIABLE = 0.5  # a shape parameter is freed when its 95 % half-width is below this fraction of it
+SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR to about 1e-7 R)
+SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
+PROBE = 1e-4  # difference step of the screening's Gauss-Newton step, as a fraction of each unknown's range
+Z95 = 1.959963984540054
+PARAMETER_GROUPS = {
+    "springs": ("kf", "kr"),
+    "dampers": ("cf", "cr"),
+    "tyres": ("ktf", "ktr"),
+    "anti-roll bar": ("kR",),
+    "unsprung masses": ("mf", "mr"),
+}  # the car's known parameters a diagnosis may free, as an engineer groups them
+PARAMETER_PREFIX = "parameter:"
 
 
 @dataclass(frozen=True)
 class Candidate:
-    """How one effect enters a fit: the unknowns it adds, their search range and start."""
+    """How one candidate enters a fit: the unknowns it adds, their search range and start.
 
-    effect: str
+    `strength`: the unknowns whose 95 % interval must exclude their `null` value (zero, or the configured
+    value of a known parameter) for the candidate to be claimed; `starts`: values of its shape (and, where
+    the force is not proportional to it, strength) parameters to start from; `linear` says the force is
+    proportional to the strengths (screened by one linearised step)."""
+
+    effect: str  # canonical effect name, or parameter:<name>
     unknowns: tuple[str, ...]  # effect.param names, and vehicle parameters it frees
     limits: dict[str, tuple[float, float]] = field(default_factory=dict)
     start: dict[str, float] = field(default_factory=dict)
-    shape: tuple[str, ...] = ()  # further effect parameters freed in the re-fit once the effect is selected
+    shape: tuple[str, ...] = ()  # shape parameters, freed where the data can tell them
     shape_limits: dict[str, tuple[float, float]] = field(default_factory=dict)
+    kind: str = "effect"  # "effect" or "parameter"
+    strength: tuple[str, ...] = ()
+    null: dict[str, float] = field(default_factory=dict)
+    starts: tuple[dict[str, float], ...] = ()
+    linear: bool = True
+    group: str = ""  # a known parameter's group (springs, dampers, ...)
+
+
+def parameter_candidate(name: str, configured: float, group: str = "", limits=None) -> Candidate:
+    """Freeing the configured known parameter `name` (its null: the configured value)."""
+    return Candidate(
+        PARAMETER_PREFIX + name, (name,), dict(limits or {}), {}, kind="parameter", strength=(name,),
+        null={name: float(configured)}, linear=False, group=group,
+    )  # fmt: skip
+
+
+def car_parameter_candidates(config) -> list[Candidate]:
+    """The car's known parameters (not among the unknowns) as candidates, in PARAMETER_GROUPS order."""
+    values = config.vehicle.values()
+    unknowns = set(config.identify.unknowns)
+    return [
+        parameter_candidate(n, values[n], group)
+        for group, names in PARAMETER_GROUPS.items()
+        for n in names
+        if n not in unknowns and values.get(n, 0.0) != 0.0
+    ]
+
+
+def yield_starts(yields_m: Sequence[float], A: float = 1.0) -> tuple[dict[str, float], ...]:
+    """Bouc-Wen starts (beta = gamma) whose hysteretic state saturates at each yield displacement [m]."""
+    return tuple({"hysteresis.beta": A / (2 * y * y), "hysteresis.gamma": A / (2 * y * y)} for y in yields_m)
 
 
 def candidate_specs(config) -> dict[str, Candidate]:
-    """The candidate form of each library effect (vehicle values from the config for damping-relative ranges)."""
+    """Every candidate for the car: the library effects (vehicle values for damping-relative ranges) and the
+    configured known parameters (``parameter:<name>``)."""
     v = config.vehicle.values()
     cf, cr = v["cf"], v["cr"]
 
-    def per_axle(effect, param, lo, hi, start=None, companions=(), shape=(), shape_limits=None):
+    def per_axle(effect, param, lo, hi, start=None, companions=(), shape=(), shape_limits=None, starts=(),
+                 linear=True):  # fmt: skip
         names = (f"{effect}.{param}_f", f"{effect}.{param}_r")
         limits = {n: (lo(a), hi(a)) for n, a in zip(names, (cf, cr), strict=True)}
         st = {n: start for n in names} if start is not None else {}
-        return Candidate(effect, names + tuple(companions), limits, st, shape, shape_limits or {})
+        return Candidate(
+            effect, names + tuple(companions), limits, st, shape, shape_limits or {}, strength=names,
+            null={n: 0.0 for n in names}, starts=tuple(starts), linear=linear,
+        )  # fmt: skip
 
     const = lambda x: lambda _c: x  # noqa: E731
+    velocity = lambda name: tuple({name: s} for s in (0.003, 0.015, 0.06))  # noqa: E731
     specs = [
         per_axle(
             "asymmetric_damping", "dc", lambda c: -2 * c, lambda c: 2 * c, companions=("cf", "cr"),
             shape=("asymmetric_damping.v_eps",), shape_limits={"asymmetric_damping.v_eps": (1e-3, 0.5)},
+            starts=velocity("asymmetric_damping.v_eps"),
         ),
         per_axle(
             "coulomb_friction", "Fc", const(0.0), const(2000.0),
             shape=("coulomb_friction.v_eps",), shape_limits={"coulomb_friction.v_eps": (1e-3, 0.5)},
+            starts=velocity("coulomb_friction.v_eps"),
         ),
         per_axle("progressive_spring", "k3", const(0.0), const(1e9)),
         per_axle("tyre_damping", "ct", const(0.0), const(5000.0)),
-        per_axle("hysteresis", "alpha", const(0.0), const(2e6)),
-        per_axle("gas_spring", "F0", const(0.0), const(2e4)),
-        per_axle("backlash", "gap", const(1e-5), const(0.02), start=1e-4),
-        per_axle("damper_lag", "T", const(1e-3), const(0.1), start=3e-3),
+        per_axle(
+            "hysteresis", "alpha", const(0.0), const(2e6), shape=("hysteresis.beta", "hysteresis.gamma"),
+            shape_limits={"hysteresis.beta": (1e3, 2e6), "hysteresis.gamma": (1e3, 2e6)},
+            starts=yield_starts((0.001, 0.003, 0.008, 0.018)),  # yield 0.5-20 mm
+        ),
+        per_axle(
+            "gas_spring", "F0", const(0.0), const(2e4), shape=("gas_spring.L",),
+            shape_limits={"gas_spring.L": (0.02, 1.0)}, starts=tuple({"gas_spring.L": s} for s in (0.04, 0.1, 0.3)),
+        ),
+        per_axle(
+            "backlash", "gap", const(1e-5), const(0.02), start=1e-4, shape=("backlash.k_contact",),
+            shape_limits={"backlash.k_contact": (1e4, 1e8)}, linear=False,
+            starts=tuple({"backlash.gap_f": g, "backlash.gap_r": g} for g in (1e-4, 1e-3, 5e-3)),
+        ),
+        per_axle(
+            "damper_lag", "T", const(1e-3), const(0.1), start=3e-3, linear=False,
+            starts=tuple({"damper_lag.T_f": t, "damper_lag.T_r": t} for t in (2e-3, 8e-3, 3e-2)),
+        ),
     ]  # fmt: skip
     out = {c.effect: c for c in specs}
     assert set(out) == set(EFFECT_NAMES)
+    out.update({c.effect: c for c in car_parameter_candidates(config)})
     return out
 
 
@@ -104,17 +186,144 @@ class Fit:
     x: NDArray
     J: float
     evaluations: int
+    fixed: tuple[str, ...] = ()  # unknowns held at their value in this fit (shapes the data cannot tell)
 
 
-def lsq_fit(problem: Problem, x0: NDArray, budget: int, seed: int = 0) -> Fit:
-    """Trust-region least squares from x0 within `budget` evaluations (the best point seen)."""
+def lsq_fit(problem: Problem, x0: NDArray, budget: int, seed: int = 0, tol: float = 1e-12) -> Fit:
+    """Trust-region least squares from x0 within `budget` evaluations (the best point seen), to relative
+    tolerance `tol`."""
     run = Run(problem, np.random.default_rng(seed), budget)
     try:
-        polish(run, x0)
+        polish(run, x0, tol=tol)
     except BudgetExhausted:
         pass
     x = run.best_x if run.best_x is not None else np.asarray(x0, dtype=float)
     return Fit(tuple(problem.names), x, float(run.best_cost), run.evaluations)
+
+
+def restricted(problem: Problem, x: NDArray, free: NDArray) -> Problem:
+    """The problem over the unknowns where `free` is True, the others held at their value in x."""
+    x = np.asarray(x, dtype=float)
+    free = np.asarray(free, dtype=bool)
+
+    def full(X: NDArray) -> NDArray:
+        out = np.repeat(x[None, :], len(X), axis=0)
+        out[:, free] = X
+        return out
+
+    cr = None if problem.residuals is None else (lambda X: problem.residuals(full(X)))
+    names = tuple(n for n, f in zip(problem.names, free, strict=True) if f)
+    return Problem(problem.lower[free], problem.upper[free], lambda X: problem.cost(full(X)), cr, problem.penalty,
+                   names)  # fmt: skip
+
+
+def fit_free(problem: Problem, x0: NDArray, free: NDArray, budget: int, tol: float = 1e-12) -> Fit:
+    """lsq_fit over the `free` unknowns only (the others held at x0); the Fit covers every unknown."""
+    free = np.asarray(free, dtype=bool)
+    x0 = np.asarray(x0, dtype=float)
+    if free.all():
+        return lsq_fit(problem, x0, budget, tol=tol)
+    sub = lsq_fit(restricted(problem, x0, free), x0[free], budget, tol=tol)
+    x = x0.copy()
+    x[free] = sub.x
+    fixed = tuple(n for n, f in zip(problem.names, free, strict=True) if not f)
+    return Fit(tuple(problem.names), x, sub.J, sub.evaluations, fixed)
+
+
+def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
+    """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
+    differences, one batch) and `scale` the variance of one residual entry (NaN where singular)."""
+    width = problem.upper - problem.lower
+    h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
+    step = np.where(x + h <= problem.upper, h, -h)
+    X = np.vstack([x[None, :], x[None, :] + np.diag(step)])
+    _, R = problem.residuals(X)
+    Jac = ((R[1:] - R[0][None, :]) / step[:, None]).T
+    if not np.all(np.isfinite(Jac)):
+        return np.full(x.size, np.nan)
+    try:
+        cov = np.linalg.inv(Jac.T @ Jac) * max(scale, 1e-300)
+    except np.linalg.LinAlgError:
+        return np.full(x.size, np.nan)
+    d = np.diag(cov)
+    return np.where(d >= 0, Z95 * np.sqrt(np.abs(d)), np.nan)
+
+
+def identifiable(names: Sequence[str], x: NDArray, ci: NDArray, shape: Sequence[str]) -> NDArray:
+    """(D,) True for every unknown to free: all but the `shape` ones the data cannot tell (95 % half-width
+    above SHAPE_IDENTIFIABLE of the value, or undetermined)."""
+    x, ci = np.asarray(x, dtype=float), np.asarray(ci, dtype=float)
+    out = np.ones(len(names), dtype=bool)
+    for j, n in enumerate(names):
+        if n in shape:
+            out[j] = bool(np.isfinite(ci[j]) and ci[j] < SHAPE_IDENTIFIABLE * abs(x[j]))
+    return out
+
+
+def screen_starts(problem: Problem, x0: NDArray, cand: Candidate, extra: Sequence[dict[str, float]] = ()) -> NDArray:
+    """The best start of a candidate: its `starts` (and `extra` ones) applied to x0, then SCREEN_STEPS damped
+    Gauss-Newton steps from each over every unknown but the shape parameters (the car moves back where the
+    declared fit bent it to mimic the effect), all starts in one batched evaluation per Jacobian and per
+    trial step; the point with the lowest cost."""
+    names = list(problem.names)
+    lo, hi = problem.lower, problem.upper
+    points = []
+    for s in (*(cand.starts or ({},)), *extra):
+        x = np.array(x0, dtype=float)
+        for k, v in s.items():
+            if k in names:
+                j = names.index(k)
+                x[j] = np.clip(v, lo[j], hi[j])
+        points.append(x)
+    free = [j for j, n in enumerate(names) if n not in cand.shape]
+    h = PROBE * (hi - lo)
+    P = np.array(points)
+    with np.errstate(all="ignore"):
+        cost = problem.cost(P)
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    for _ in range(SCREEN_STEPS):
+        rows = []
+        for x in P:
+            rows.append(x)
+            for j in free:
+                q = x.copy()
+                q[j] = x[j] + h[j] if x[j] + h[j] <= hi[j] else x[j] - h[j]
+                rows.append(q)
+        with np.errstate(all="ignore"):
+            _, R = problem.residuals(np.array(rows))
+        k = len(free) + 1
+        trial = P.copy()
+        for i, x in enumerate(P):
+            r0 = R[i * k]
+            D = np.stack([(R[i * k + 1 + m] - r0) / (rows[i * k + 1 + m][j] - x[j]) for m, j in enumerate(free)], 1)
+            if not (np.all(np.isfinite(D)) and np.all(np.isfinite(r0))):
+                continue
+            JtJ = D.T @ D
+            step = np.linalg.lstsq(JtJ + 1e-3 * np.diag(np.diag(JtJ)), -D.T @ r0, rcond=None)[0]
+            trial[i, free] = np.clip(x[free] + step, lo[free], hi[free])
+        with np.errstate(all="ignore"):
+            c = problem.cost(trial)
+        better = np.isfinite(c) & (c < cost)
+        P[better], cost[better] = trial[better], c[better]
+    return P[int(np.argmin(cost))]
+
+
+def candidate_fit(
+    problem: Problem, base: Fit, x_added: NDArray, cand: Candidate, budget: int, scale: float,
+    prior: dict[str, float] | None = None,
+) -> Fit:  # fmt: skip
+    """A candidate's fit: the best of its starts (and of `prior`, its own estimates from an earlier round),
+    its identifiable shape parameters freed, least squares to SCREEN_TOL."""
+    x0 = np.concatenate([base.x, x_added])
+    x0 = np.clip(x0, problem.lower, problem.upper)
+    extra = (prior,) if prior else ()
+    if cand.starts or cand.linear or extra:
+        x0 = screen_starts(problem, x0, cand, extra)
+    free = np.ones(x0.size, dtype=bool)
+    shapes = [n for n in cand.shape if n in problem.names]
+    if shapes:
+        free = identifiable(problem.names, x0, fisher_ci(problem, x0, scale), shapes)
+    return fit_free(problem, x0, free, budget, tol=SCREEN_TOL)
 
 
 @dataclass(frozen=True)
@@ -124,7 +333,7 @@ class Ranked:
     effect: str
     added: tuple[str, ...]
     k: int
-    J: float  # training chi² per sample reached with the effect
+    J: float  # training chi² per sample reached with the candidate
     statistic: float  # likelihood ratio
     p_value: float
     bic_margin: float  # LR - k ln R
@@ -132,10 +341,14 @@ class Ranked:
     accepted: bool
     fit: Fit
     seconds: float
+    kind: str = "effect"
+    validation_per_file: dict[str, float] | None = None
+    fixed: tuple[str, ...] = ()  # shape parameters the data could not tell (held at their start value)
 
     def to_json(self) -> dict:
-        return {
+        out = {
             "effect": self.effect,
+            "kind": self.kind,
             "statistic": self.statistic,
             "p_value": self.p_value,
             "J": self.J,
@@ -144,7 +357,11 @@ class Ranked:
             "validation_J": self.validation_J,
             "accepted": self.accepted,
             "estimates": dict(zip(self.fit.names, map(float, self.fit.x), strict=True)),
+            "shape_fixed": list(self.fixed),
         }
+        if self.validation_per_file:
+            out["validation_J_per_file"] = dict(self.validation_per_file)
+        return out
 
 
 def chi2_statistic(residual_count: int) -> Callable[[float, float], float]:
@@ -152,66 +369,108 @@ def chi2_statistic(residual_count: int) -> Callable[[float, float], float]:
     return lambda J0, J1: max(0.0, (J0 - J1) * residual_count)
 
 
+def workers() -> int:
+    """Threads for candidate fits: the cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def lowers_validation(vJ: float, per: dict[str, float] | None, base_vJ: float,
+                      base_per: dict[str, float] | None, min_gain: float) -> bool:  # fmt: skip
+    """Does the validation J fall (by the fraction min_gain), and on every held-out run where there are several?"""
+    if not (np.isfinite(vJ) and vJ < (1.0 - min_gain) * base_vJ):
+        return False
+    if per and base_per:
+        return all(per[k] < base_per[k] for k in base_per)
+    return True
+
+
 def rank_candidates(
     candidates: list[Candidate],
     base: Fit,
-    base_validation_J: float,
+    base_validation: tuple[float, dict[str, float] | None],
     make_problem: Callable[[tuple[str, ...], Candidate], tuple[Problem, NDArray]],
-    validation_J: Callable[[tuple[str, ...], NDArray], float],
+    validation_J: Callable[[tuple[str, ...], NDArray], tuple[float, dict[str, float] | None]],
     residual_count: int,
     alpha: float = ALPHA,
     budget: int = CANDIDATE_BUDGET,
     statistic: Callable[[float, float], float] | None = None,
     min_gain: float = 0.0,
     claim: bool = True,
+    scale: float = 1.0,
+    prior: dict[str, Ranked] | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
     make_problem(names, candidate) gives the augmented problem (its unknowns: names, then the added ones)
-    and the start of the added unknowns; validation_J(names, x) the validation J. statistic(J_before, J_with)
-    is the LR (default: chi² with known noise over `residual_count` residuals); a candidate must also lower
-    the validation J by the fraction `min_gain`; with claim=False nothing is accepted (the data cannot tell)."""
-    import time
-
+    and the start of the added unknowns; validation_J(names, x) the validation J (and per held-out run).
+    statistic(J_before, J_with) is the LR (default: chi² with known noise over `residual_count` residuals);
+    a candidate must also lower the validation J by the fraction `min_gain` (on every held-out run);
+    `scale` is the variance of one residual entry (for the shape parameters' intervals); with claim=False
+    nothing is accepted (the data cannot tell); `prior`: each candidate's test of an earlier round, whose
+    estimates of its own unknowns are one more start (warm start). Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
-    out = []
     level = alpha / max(len(candidates), 1)
-    for cand in candidates:
+    base_vJ, base_per = base_validation
+
+    def one(cand: Candidate) -> Ranked:
         t0 = time.perf_counter()
         problem, x_added = make_problem(base.names, cand)
         names = tuple(problem.names)
         added = names[len(base.names) :]
-        x0 = np.concatenate([base.x, x_added])
-        fit = lsq_fit(problem, x0, budget)
-        J = min(fit.J, base.J)  # the nested model (effect off) is always available
+        earlier = (prior or {}).get(cand.effect)
+        own = None
+        if earlier is not None and earlier.statistic > 0:
+            own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
+        fit = candidate_fit(problem, base, x_added, cand, budget, scale, own)
+        J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
-        k = len(added)
+        k = len(added) - len(fit.fixed)
         p = float(stats.chi2.sf(lr, k))
-        vJ = validation_J(names, fit.x) if fit.J < base.J else base_validation_J
-        better = np.isfinite(vJ) and vJ < (1.0 - min_gain) * base_validation_J
-        accepted = bool(claim and p < level and better)
-        out.append(
-            Ranked(
-                effect=cand.effect, added=added, k=k, J=J, statistic=lr, p_value=p,
-                bic_margin=lr - k * math.log(residual_count), validation_J=vJ, accepted=accepted, fit=fit,
-                seconds=time.perf_counter() - t0,
-            )
+        vJ, per = validation_J(names, fit.x) if fit.J < base.J else (base_vJ, base_per)
+        better = lowers_validation(vJ, per, base_vJ, base_per, min_gain)
+        return Ranked(
+            effect=cand.effect, added=added, k=k, J=J, statistic=lr, p_value=p,
+            bic_margin=lr - k * math.log(residual_count), validation_J=vJ,
+            accepted=bool(claim and p < level and better), fit=fit, seconds=time.perf_counter() - t0,
+            kind=cand.kind, validation_per_file=per, fixed=fit.fixed,
         )  # fmt: skip
+
+    n = min(workers(), len(candidates))
+    if n > 1:
+        with ThreadPoolExecutor(n) as pool:
+            out = list(pool.map(one, candidates))
+    else:
+        out = [one(c) for c in candidates]
     out.sort(key=lambda r: -r.statistic)
     return out
 
 
 def undistinguished(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ranked | None:
-    """The runner-up the data cannot tell from `best`, if any: another significant candidate whose LR falls
-    short of the best's by less than the critical value of a chi²(k_best) test at the per-candidate level
-    (the non-nested comparison of two augmented models: the training data must prefer one significantly),
-    unless the validation data prefer the best clearly (its validation J DISTINCT_VALIDATION lower)."""
+    """The runner-up of the same kind the data cannot tell from `best`, if any: another significant candidate
+    whose LR falls short of the best's by less than the critical value of a chi²(k_best) test at the
+    per-candidate level (the non-nested comparison of two augmented models: the training data must prefer
+    one significantly), unless the validation data prefer the best clearly (its validation J
+    DISTINCT_VALIDATION lower). A parameter and an effect are not rivals: parsimony decides (``parsimonious``)."""
     level = alpha / max(len(ranked), 1)
-    margin = float(stats.chi2.isf(level, best.k))
+    margin = float(stats.chi2.isf(level, max(best.k, 1)))
     for r in ranked:
-        if r is best or r.p_value >= level:
+        if r is best or r.p_value >= level or r.kind != best.kind:
             continue
         held_out_prefers = best.validation_J < (1.0 - DISTINCT_VALIDATION) * r.validation_J
         if best.statistic - r.statistic < margin and not held_out_prefers:
             return r
     return None
+
+
+def parsimonious(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ranked | None:
+    """An accepted known parameter that explains the residual as well as the effect `best` does (its LR short
+    of the effect's by less than the critical value of chi²(k_best)), the strongest such; None if none."""
+    if best.kind != "effect":
+        return None
+    level = alpha / max(len(ranked), 1)
+    margin = float(stats.chi2.isf(level, max(best.k, 1)))
+    rivals = [r for r in ranked if r.kind == "parameter" and r.accepted and best.statistic - r.statistic < margin]
+    return max(rivals, key=lambda r: r.statistic, default=None)

@@ -38,8 +38,8 @@ from ..models.effects import LIBRARY
 from ..noise import estimate_noise_sigma
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
-from .attribution import ALPHA, Candidate, Fit, candidate_ranges, lsq_fit
-from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, fisher_ci, holdout_blocks
+from .attribution import ALPHA, Candidate, Fit, candidate_ranges, fisher_ci, lsq_fit, parameter_candidate, restricted
+from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
 from .quality import assess_bench
 from .residuals import analyse_bench, autocorrelation
 
@@ -48,6 +48,7 @@ MIN_GAIN = 0.02
 CANDIDATE_BUDGET = 200
 REFIT_BUDGET = 800
 FRICTIONLESS = ("viscous", "gas_spring")  # models without a friction term of their own
+BENCH_PARAMETER_RANGE = (0.5, 2.0)  # a fixed damper parameter freed as a candidate: this factor range of its value
 
 
 def bench_candidates(spec: DamperSpec, history: BenchHistory, declared_unknowns) -> dict[str, Candidate]:
@@ -58,26 +59,43 @@ def bench_candidates(spec: DamperSpec, history: BenchHistory, declared_unknowns)
     zsat = 0.2 * X  # Bouc-Wen z saturates at sqrt(1 / (beta + gamma)): a fifth of the stroke to start
     bg = 0.5 / zsat**2
     dt = float(history.dt)
+    yields = (0.03 * X, 0.1 * X, 0.3 * X, 0.8 * X)  # loop widths from 3 % to 80 % of the stroke's spread
+    velocities = (0.02 * V, 0.1 * V, 0.5 * V)
+
+    def effect(name, strength, limits, start, shape=(), shape_limits=None, starts=(), linear=True):
+        return Candidate(
+            name, (strength,), limits, start, shape, shape_limits or {}, strength=(strength,),
+            null={strength: 0.0}, starts=tuple(starts), linear=linear,
+        )  # fmt: skip
+
     out = [
-        Candidate(
-            "hysteresis", ("hysteresis.alpha",), {"hysteresis.alpha": (0.0, 20.0 * F / zsat)},
+        effect(
+            "hysteresis", "hysteresis.alpha", {"hysteresis.alpha": (0.0, 20.0 * F / min(yields))},
             {"hysteresis.alpha": 0.0, "hysteresis.beta": bg, "hysteresis.gamma": bg},
             shape=("hysteresis.beta", "hysteresis.gamma"),
-            shape_limits={"hysteresis.beta": (bg / 100, 100 * bg), "hysteresis.gamma": (bg / 100, 100 * bg)},
+            shape_limits={"hysteresis.beta": (0.5 / max(yields) ** 2 / 4, 0.5 / min(yields) ** 2 * 4),
+                          "hysteresis.gamma": (0.5 / max(yields) ** 2 / 4, 0.5 / min(yields) ** 2 * 4)},
+            starts=tuple({"hysteresis.beta": 0.5 / y**2, "hysteresis.gamma": 0.5 / y**2} for y in yields),
         ),
-        Candidate(
-            "asymmetric_damping", ("asymmetric_damping.dc",), {"asymmetric_damping.dc": (-10 * F / V, 10 * F / V)},
+        effect(
+            "asymmetric_damping", "asymmetric_damping.dc", {"asymmetric_damping.dc": (-10 * F / V, 10 * F / V)},
             {"asymmetric_damping.dc": 0.0, "asymmetric_damping.v_eps": 0.2 * V},
             shape=("asymmetric_damping.v_eps",), shape_limits={"asymmetric_damping.v_eps": (0.005 * V, 2 * V)},
+            starts=tuple({"asymmetric_damping.v_eps": v} for v in velocities),
         ),
-        Candidate("damper_lag", ("damper_lag.T",), {"damper_lag.T": (1e-4, 0.2)}, {"damper_lag.T": max(dt, 1e-3)}),
+        effect("damper_lag", "damper_lag.T", {"damper_lag.T": (1e-4, 0.2)}, {"damper_lag.T": max(dt, 1e-3)},
+               starts=tuple({"damper_lag.T": t} for t in (max(dt, 1e-3), 5 * max(dt, 1e-3), 25 * max(dt, 1e-3))),
+               linear=False),
         Candidate("gas_spring", ("k1", "x0"), {"k1": (0.0, 20 * F / X), "x0": (-1.0, 1.0)},
-                  {"k1": 0.1 * F / X, "x0": float(np.mean(history.x))}),
-        Candidate("backlash", ("gap",), {"gap": (0.0, 0.5 * X)}, {"gap": 0.01 * X}),
-        Candidate(
-            "coulomb_friction", ("coulomb_friction.Fc",), {"coulomb_friction.Fc": (0.0, 3 * F)},
+                  {"k1": 0.1 * F / X, "x0": float(np.mean(history.x))}, strength=("k1",), null={"k1": 0.0},
+                  linear=False),
+        Candidate("backlash", ("gap",), {"gap": (0.0, 0.5 * X)}, {"gap": 0.01 * X}, strength=("gap",),
+                  null={"gap": 0.0}, linear=False, starts=tuple({"gap": g * X} for g in (0.003, 0.01, 0.05))),
+        effect(
+            "coulomb_friction", "coulomb_friction.Fc", {"coulomb_friction.Fc": (0.0, 3 * F)},
             {"coulomb_friction.Fc": 0.0, "coulomb_friction.v_eps": 0.1 * V},
             shape=("coulomb_friction.v_eps",), shape_limits={"coulomb_friction.v_eps": (0.005 * V, 2 * V)},
+            starts=tuple({"coulomb_friction.v_eps": v} for v in velocities),
         ),
     ]  # fmt: skip
     declared = set(spec.effects)
@@ -91,6 +109,11 @@ def bench_candidates(spec: DamperSpec, history: BenchHistory, declared_unknowns)
         declared.add("coulomb_friction")
     if spec.model == "force_map":  # a table over velocity holds any compression/rebound difference
         declared.add("asymmetric_damping")
+    out += [
+        parameter_candidate(n, v, "damper", {n: tuple(sorted(f * v for f in BENCH_PARAMETER_RANGE))})
+        for n, v in spec.values.items()
+        if n in spec.names and n not in declared_unknowns and v != 0.0 and n not in ("k1", "x0", "gap")
+    ]  # the damper model's fixed parameters (its gas force and play are the gas_spring and backlash candidates)
     return {c.effect: c for c in out if c.effect not in declared}
 
 
@@ -187,6 +210,10 @@ def diagnose_bench(
         ne = n_eff(problem_for(current.names)[0], current.x)
         return lambda J0, J1: float(ne * np.log(J0 / J1)) if 0 < J1 < J0 else 0.0
 
+    def scale(f: Fit) -> float:
+        """Variance of one residual entry at a fit, AR(1)-inflated."""
+        return f.J / max(n_eff(problem_for(f.names)[0], f.x), 1.0)
+
     # 1. the declared model: the configured algorithm from the configured values, then a least-squares polish
     ident = config.identify
     problem, x0 = problem_for(declared_names)
@@ -202,21 +229,22 @@ def diagnose_bench(
         s = spec_for(f.names)
         force = s.simulate_batch(f.names, np.asarray(f.x)[None, :], train, substeps).force[0]
         problem = problem_for(f.names)[0]
-        scale_var = f.J / max(n_eff(problem, f.x), 1.0)  # variance of one residual entry, AR(1)-inflated
-        ci = fisher_ci(problem, f.x, scale_var)
+        free = np.array([n not in f.fixed for n in f.names])
+        ci = np.full(len(f.names), np.nan)
+        ci[free] = fisher_ci(restricted(problem, f.x, free), f.x[free], scale(f))
         vJ, per = validation_J(f.names, f.x)
         an = analyse_bench(train, force, sigma)
-        return ModelReport(tuple(effects), f.names, f.x, ci, f.J, an.chi2_per_sample, vJ, None, an, per)
+        return ModelReport(tuple(effects), f.names, f.x, ci, f.J, an.chi2_per_sample, vJ, None, an, per, f.fixed)
 
     before = report(fit, ())
     quality = assess_bench(train, sigma, declared_names, before)
     subject = Subject(
         specs=specs, declared=frozenset(), problem_for=problem_for, validation_J=validation_J,
-        residual_count=R_train, statistic=statistic, min_gain=MIN_GAIN,
+        residual_count=R_train, statistic=statistic, scale=scale, min_gain=MIN_GAIN,
     )  # fmt: skip
     return close(
         subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, say=say, t_start=t_start, validation_source=vsource,
+        refit_budget=refit_budget, say=say, t_start=t_start, chi2_residuals=n, validation_source=vsource,
         sigma_source=f"force noise sigma {sigma:.4g} N estimated from the training run (third differences)",
         system="damper", validation_from_file=bool(held_out),
         J_definition="Fleps-Dezasse Eq. 7: mean squared force error over the variance of the measured force",

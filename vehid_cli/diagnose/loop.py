@@ -1,15 +1,23 @@
-"""The augmentation loop: fit the declared model, rank candidate effects, add the best accepted one,
-re-fit everything (car and effect), repeat until no candidate is accepted (at most MAX_ROUNDS).
+"""The augmentation loop: fit the declared model, rank the candidates (missing effects and mis-set known
+parameters), add the best accepted one, re-fit everything, repeat until none is accepted (at most MAX_ROUNDS);
+then say honestly whether the residual is now at the noise.
 
 J of the car is the wls objective, the noise-weighted residual power per sample (chi² per sample), on the
 training data; the validation J is the same on the --validate run (its own noise sigma, the parameters
 carried over unchanged: same car, another road), else on held-out blocks of the data (every HOLDOUT_EVERY-th
 block of BLOCK samples is kept out of every fit). Confidence intervals: 95 %, from the Fisher information
 J'J of the weighted residuals at the fit, scaled by the chi² per sample (the residual's own variance).
+
+What is claimed: a candidate the likelihood-ratio test accepts (attribution.py), preferred over an effect
+when it is a known parameter explaining the residual as well (parsimony), whose strength interval excludes
+its null (zero, or the configured value) after the re-fit, and which is still needed once everything else is
+re-fitted (backward checks after each round and at the end). The verdict compares the final residual power
+with the noise: above 1 + 5 sqrt(2/R) (R residuals) it is ``incomplete``, whatever was found.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,24 +35,37 @@ from ..optimizers.base import Problem
 from .attribution import (
     ALPHA,
     CANDIDATE_BUDGET,
+    PARAMETER_PREFIX,
+    Z95,
     Candidate,
     Fit,
     Ranked,
     candidate_ranges,
     candidate_specs,
     chi2_statistic,
+    fisher_ci,
+    fit_free,
+    identifiable,
+    lowers_validation,
     lsq_fit,
+    parsimonious,
     rank_candidates,
+    restricted,
     undistinguished,
 )
-from .quality import Quality, assess_vehicle
+from .quality import Quality, assess_vehicle, precheck_vehicle
 from .residuals import ResidualAnalysis, analyse
+from .unexplained import Unexplained, candidate_order, estimate_unexplained
 
-MAX_ROUNDS = 3
+MAX_ROUNDS = 4
 REFIT_BUDGET = 600
 BLOCK = 100  # samples per hold-out block
 HOLDOUT_EVERY = 4  # without --validate, every 4th block is held out
-Z95 = 1.959963984540054
+
+
+def chi2_limit(residual_count: int) -> float:
+    """The largest residual power per sample (over the noise power) that is still noise: 1 + 5 sqrt(2/R)."""
+    return 1.0 + 5.0 * math.sqrt(2.0 / max(residual_count, 1))
 
 
 def prepare_config(config: Config) -> Config:
@@ -58,28 +79,35 @@ def prepare_config(config: Config) -> Config:
 
 @dataclass(frozen=True)
 class ModelReport:
-    """One model's fit: estimates with 95 % intervals, J, validation J, NRE."""
+    """One model's fit: estimates with 95 % intervals (NaN: held fixed or undetermined), J, validation J, NRE."""
 
     effects: tuple[str, ...]
     names: tuple[str, ...]
     x: NDArray
-    ci: NDArray  # (D,) half-width of the 95 % interval (NaN where the information is singular)
+    ci: NDArray  # (D,) half-width of the 95 % interval (NaN where the information is singular or x is fixed)
     J: float
     chi2_per_sample: float | None
     validation_J: float | None
     nre_percent: float | None
     analysis: ResidualAnalysis | None = None
     validation_per_file: dict[str, float] | None = None
+    fixed: tuple[str, ...] = ()  # shape parameters the data could not tell, held at their start value
+    nre_bound_percent: float | None = None  # the NRE's Cramér–Rao bound for this model (RSS of relative sds)
 
     def to_json(self, validation_from_file: bool = True) -> dict:
+        def ci(v, h):
+            return [float(v - h), float(v + h)] if np.isfinite(h) else None
+
         out = {
             "effects": list(self.effects),
             "estimates": {n: float(v) for n, v in zip(self.names, self.x, strict=True)},
-            "ci95": {n: [float(v - h), float(v + h)] for n, v, h in zip(self.names, self.x, self.ci, strict=True)},
+            "ci95": {n: ci(v, h) for n, v, h in zip(self.names, self.x, self.ci, strict=True)},
+            "fixed": list(self.fixed),
             "J": self.J,
             "chi2_per_sample": self.chi2_per_sample,
             "validation_J": self.validation_J if validation_from_file else None,
             "nre_percent": self.nre_percent,
+            "nre_bound_percent": self.nre_bound_percent,
             "residual": None if self.analysis is None else self.analysis.summary(),
         }
         if not validation_from_file:
@@ -91,7 +119,7 @@ class ModelReport:
 
 @dataclass(frozen=True)
 class Step:
-    """One effect the loop added: J on the training data and on the validation data, before and after."""
+    """One candidate the loop added: J on the training data and on the validation data, before and after."""
 
     effect: str
     J_before: float
@@ -128,19 +156,42 @@ class Diagnosis:
     system: str = "vehicle"
     J_definition: str = "wls: noise-weighted residual power per sample (chi2 per sample) on the training data"
     validation_from_file: bool = True
+    chi2_limit: float | None = None  # residual power per sample above which the residual is not noise
+    unexplained: Unexplained | None = None  # the non-parametric strut force left unexplained (car, incomplete)
+
+    @property
+    def residual_ratio(self) -> float | None:
+        """The final residual power over the noise power (chi² per sample)."""
+        return self.after.chi2_per_sample
+
+    @property
+    def at_noise(self) -> bool | None:
+        """Is the final residual at the noise (None where the noise is unknown)?"""
+        r = self.residual_ratio
+        if r is None or self.chi2_limit is None or not np.isfinite(r):
+            return None
+        return bool(r <= self.chi2_limit)
 
     @property
     def verdict(self) -> str:
-        """One line: what the loop concluded."""
-        if self.selected:
-            found = "missing physics found: " + ", ".join(self.selected)
-            ambiguous = [n for n in self.notes if n.startswith("cannot tell")]
-            return found + (f" (then stopped: {ambiguous[0]})" if ambiguous else "")
+        """One line whose first word is adequate, found, incomplete or inconclusive (SPEC section 5)."""
+        ambiguous = next((n for n in self.notes if n.startswith("cannot tell")), None)
         if not self.quality.ok:
             return "inconclusive, no effect claimed: " + "; ".join(self.quality.reasons)
-        if any(n.startswith("cannot tell") for n in self.notes):
-            return "inconclusive, no effect claimed: " + next(n for n in self.notes if n.startswith("cannot tell"))
-        return "nothing missing: no candidate is significant and improves the validation fit"
+        if ambiguous and not self.selected:
+            return "inconclusive, no effect claimed: " + ambiguous
+        found = ", ".join(self.selected)
+        if self.at_noise is False:
+            out = f"incomplete: residual {self.residual_ratio:.3g}x the noise (noise: at most {self.chi2_limit:.3g}x)"
+            none = "; no library effect or known parameter explains it"
+            out += f"; the library's best approximation adds {found} but does not explain it" if found else none
+            if self.unexplained is not None and self.unexplained.significant:
+                out += f"; the unexplained strut force {self.unexplained.summary()}"
+            return out + (f" (then stopped: {ambiguous})" if ambiguous else "")
+        level = "" if self.at_noise is None else f" (residual {self.residual_ratio:.3g}x the noise)"
+        if self.selected:
+            return f"found: {found}; the residual is now at the noise{level}"
+        return f"adequate: nothing missing, the residual is at the noise{level}"
 
     def to_json(self) -> dict:
         vf = self.validation_from_file
@@ -154,6 +205,8 @@ class Diagnosis:
             "selected": list(self.selected),
             "steps": [s.to_json() for s in self.steps],
             "verdict": self.verdict,
+            "chi2_limit": self.chi2_limit,
+            "unexplained": None if self.unexplained is None else self.unexplained.to_json(),
             "data_quality": self.quality.to_json(),
             "alpha": self.alpha,
             "validation": self.validation_source,
@@ -167,9 +220,10 @@ class Diagnosis:
 class Subject:
     """What the loop needs of the system under diagnosis (the car or a damper on a bench).
 
-    problem_for(names): the training problem over the unknowns `names` (declared first, then effect
+    problem_for(names): the training problem over the unknowns `names` (declared first, then candidates'
     parameters) and a start value for each; validation_J(names, x): J on the validation data, and per file;
-    statistic(current): the LR function (J_before, J_with) -> statistic for tests against the fit `current`.
+    statistic(current): the LR function (J_before, J_with) -> statistic for tests against the fit `current`;
+    scale(fit): the variance of one training residual entry at a fit (for intervals).
     """
 
     specs: dict[str, Candidate]
@@ -178,7 +232,17 @@ class Subject:
     validation_J: Callable[[tuple[str, ...], NDArray], tuple[float, dict[str, float] | None]]
     residual_count: int
     statistic: Callable[[Fit], Callable[[float, float], float]]
+    scale: Callable[[Fit], float]
     min_gain: float = 0.0
+    noise_limit: float | None = None  # training J at or below which the residual is noise (None: J is not chi²)
+
+    def intervals(self, fit: Fit) -> NDArray:
+        """95 % half-widths at a fit over its free unknowns (NaN for the fixed ones)."""
+        problem, _ = self.problem_for(fit.names)
+        free = np.array([n not in fit.fixed for n in fit.names])
+        out = np.full(len(fit.names), np.nan)
+        out[free] = fisher_ci(restricted(problem, fit.x, free), fit.x[free], self.scale(fit))
+        return out
 
 
 @dataclass(frozen=True)
@@ -192,6 +256,25 @@ class Loop:
     notes: tuple[str, ...] = ()
 
 
+def own_unknowns(cand: Candidate, names: tuple[str, ...]) -> list[str]:
+    """A claimed candidate's own unknowns among `names`: an effect's parameters (not the car's it also
+    freed), a known parameter itself."""
+    if cand.kind == "parameter":
+        return [n for n in cand.unknowns if n in names]
+    return [n for n in names if n.partition(".")[0] == cand.effect]
+
+
+def strength_excludes_null(cand: Candidate, fit: Fit, ci: NDArray) -> list[str]:
+    """The candidate's strength unknowns whose 95 % interval at the fit excludes their null value."""
+    out = []
+    for n in cand.strength:
+        if n in fit.names:
+            j = fit.names.index(n)
+            if np.isfinite(ci[j]) and abs(fit.x[j] - cand.null.get(n, 0.0)) > ci[j]:
+                out.append(n)
+    return out
+
+
 def augment(
     subject: Subject,
     fit: Fit,
@@ -201,40 +284,71 @@ def augment(
     candidate_budget: int,
     refit_budget: int,
     claim: bool = True,
+    order: tuple[str, ...] = (),
     say: Callable[[str], None] = lambda _m: None,
 ) -> Loop:
-    """Rank the candidates against `fit`, add the best accepted one, re-fit everything (its shape parameters
-    freed too), repeat until none is accepted or max_rounds; with claim=False only rank once."""
+    """Rank the candidates against `fit`, add the best accepted one (a known parameter before an effect that
+    explains no more), re-fit everything (identifiable shape parameters freed), keep it only if its strength
+    interval excludes its null and it is still needed; repeat until none is accepted or max_rounds; then
+    drop whatever the final model no longer needs. With claim=False only rank once. `order`: candidates to fit
+    first (the non-parametric estimate's resemblance)."""
     specs = subject.specs
-    effects: list[str] = []
+    claimed: list[str] = []
     rounds: list[tuple[Ranked, ...]] = []
     steps: list[Step] = []
     notes: list[str] = []
     dropped: set[str] = set()
     current = fit
-    current_vJ, _ = subject.validation_J(fit.names, fit.x)
+    current_v = subject.validation_J(fit.names, fit.x)
+    level_of = lambda n: alpha / max(n, 1)  # noqa: E731
 
     def make_problem(names: tuple[str, ...], cand: Candidate):
-        new = tuple(n for n in cand.unknowns if n not in names)
+        new = tuple(n for n in cand.unknowns + cand.shape if n not in names)
         problem, start = subject.problem_for(names + new)
         return problem, start[len(names) :]
 
-    def vJ(names, x) -> float:
-        return subject.validation_J(names, x)[0]
+    def removal_p(f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
+        """p-value of keeping `cand` in the fit f: a short fit without its own unknowns, the LR test."""
+        own = own_unknowns(cand, f.names)
+        reduced = tuple(n for n in f.names if n not in own)
+        problem_r, _ = subject.problem_for(reduced)
+        idx = [f.names.index(n) for n in reduced]
+        free = np.array([n not in f.fixed for n in reduced])
+        without = fit_free(problem_r, f.x[idx], free, budget)
+        k = len([n for n in own if n not in f.fixed])
+        return float(stats.chi2.sf(subject.statistic(f)(without.J, f.J), max(k, 1))), without
 
-    for _ in range(max_rounds if claim else 1):
-        todo = [specs[e] for e in specs if e not in subject.declared and e not in effects and e not in dropped]
+    ordered = [e for e in order if e in specs] + [e for e in specs if e not in order]
+    for _ in range(max_rounds if claim else min(max_rounds, 1)):
+        if claimed and subject.noise_limit is not None and current.J <= subject.noise_limit:
+            notes.append(f"stopped: the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g})")
+            say(notes[-1])
+            break
+        todo = [
+            specs[e] for e in ordered
+            if e not in subject.declared and e not in claimed and e not in dropped
+            and not (specs[e].kind == "parameter" and specs[e].unknowns[0] in current.names)
+        ]  # fmt: skip
         if not todo:
             break
         ranked = rank_candidates(
-            todo, current, current_vJ, make_problem, vJ, subject.residual_count, alpha, candidate_budget,
-            statistic=subject.statistic(current), min_gain=subject.min_gain, claim=claim,
+            todo, current, current_v, make_problem, subject.validation_J, subject.residual_count, alpha,
+            candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain, claim=claim,
+            scale=subject.scale(current), prior={r.effect: r for r in rounds[-1]} if rounds else None,
         )  # fmt: skip
         rounds.append(tuple(ranked))
         say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
         best = next((r for r in ranked if r.accepted), None)
         if best is None:
             break
+        simpler = parsimonious(ranked, best, alpha)
+        if simpler is not None:
+            notes.append(
+                f"{simpler.effect} explains the residual as well as {best.effect} (LR {simpler.statistic:.4g} "
+                f"against {best.statistic:.4g}): the known parameter is preferred"
+            )
+            say(notes[-1])
+            best = simpler
         rival = undistinguished(ranked, best, alpha)
         if rival is not None:
             notes.append(
@@ -243,43 +357,84 @@ def augment(
             )
             say(notes[-1])
             break
-        effects.append(best.effect)
-        names = best.fit.names + tuple(n for n in specs[best.effect].shape if n not in best.fit.names)
-        problem, start = subject.problem_for(names)
-        x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
-        refit = lsq_fit(problem, x0, refit_budget)
-        if refit.J > best.fit.J:  # keep the short fit if the re-fit found nothing better
-            refit = Fit(names, x0, best.fit.J, refit.evaluations)
-        # backward check: with everything re-fitted, is the effect still needed? (a short fit without it)
-        added = [n for n in names if n not in current.names]
-        own = [n for n in added if "." in n] or added  # its own parameters, not the car's it also freed
-        reduced = tuple(n for n in names if n not in own)
-        problem_r, _ = subject.problem_for(reduced)
-        without = lsq_fit(problem_r, refit.x[[names.index(n) for n in reduced]], candidate_budget)
-        J_without = min(without.J, current.J)
-        p_keep = float(stats.chi2.sf(subject.statistic(refit)(J_without, refit.J), len(own)))
-        if p_keep >= alpha / len(todo):
-            effects.pop()
+        cand = specs[best.effect]
+        # re-fit everything from the candidate's fit, the identifiable shape parameters of every claim freed
+        names = best.fit.names
+        problem, _ = subject.problem_for(names)
+        shapes = [n for e in (*claimed, best.effect) for n in specs[e].shape]
+        free = identifiable(names, best.fit.x, fisher_ci(problem, best.fit.x, subject.scale(best.fit)), shapes)
+        refit = fit_free(problem, best.fit.x, free, refit_budget)
+        if refit.J > best.fit.J:  # keep the candidate's fit if the re-fit found nothing better
+            refit = best.fit
+        ci = subject.intervals(refit)
+        if not strength_excludes_null(cand, refit, ci):
+            shown = ", ".join(
+                f"{n} = {refit.x[refit.names.index(n)]:.3g} ± {ci[refit.names.index(n)]:.2g}"
+                for n in cand.strength if n in refit.names
+            )  # fmt: skip
+            what = "its configured value" if cand.kind == "parameter" else "zero"
+            notes.append(f"{best.effect} not claimed: its strength interval includes {what} ({shown})")
+            say(notes[-1])
+            dropped.add(best.effect)
+            continue
+        p_keep, without = removal_p(refit, cand, candidate_budget)
+        if p_keep >= level_of(len(todo)):
             dropped.add(best.effect)
             notes.append(
-                f"{best.effect} dropped after the re-fit: without it J = {J_without:.4g} against {refit.J:.4g} "
+                f"{best.effect} dropped after the re-fit: without it J = {without.J:.4g} against {refit.J:.4g} "
                 f"(p = {p_keep:.2g}); its gain was the other parameters converging"
             )
             say(notes[-1])
             if without.J < current.J:
                 current = without
-                current_vJ, _ = subject.validation_J(current.names, current.x)
+                current_v = subject.validation_J(current.names, current.x)
             continue
-        for n in own:  # an estimate on its search bound: say so (the effect may stand for something else)
+        for n in own_unknowns(cand, names):  # an estimate on its search bound: say so
             j = names.index(n)
             lo, hi = problem.lower[j], problem.upper[j]
-            if min(refit.x[j] - lo, hi - refit.x[j]) <= 1e-6 * (hi - lo):
+            if n not in refit.fixed and min(refit.x[j] - lo, hi - refit.x[j]) <= 1e-6 * (hi - lo):
                 notes.append(f"{n} = {refit.x[j]:.4g} sits on its search bound [{lo:.4g}, {hi:.4g}]")
-        new_vJ, per_file = subject.validation_J(refit.names, refit.x)
-        steps.append(Step(best.effect, current.J, refit.J, current_vJ, new_vJ, per_file))
-        current, current_vJ = refit, new_vJ
-        say(f"added {best.effect}: J = {current.J:.4g}, validation J = {current_vJ:.4g}")
-    return Loop(current, tuple(effects), tuple(rounds), tuple(steps), tuple(notes))
+        for n in refit.fixed:
+            if n in specs[best.effect].shape:
+                notes.append(f"{n} held at {refit.x[names.index(n)]:.4g}: the data cannot tell it (Fisher information)")
+        new_v = subject.validation_J(refit.names, refit.x)
+        if not lowers_validation(*new_v, *current_v, 0.0):
+            runs = "" if not new_v[1] else " on every held-out run"
+            notes.append(f"{best.effect} not claimed: after the re-fit it does not lower the validation J{runs}")
+            say(notes[-1])
+            dropped.add(best.effect)
+            continue
+        claimed.append(best.effect)
+        steps.append(Step(best.effect, current.J, refit.J, current_v[0], new_v[0], new_v[1]))
+        current, current_v = refit, new_v
+        say(f"added {best.effect}: J = {current.J:.4g}, validation J = {current_v[0]:.4g}")
+    if claim and len(claimed) > 1:  # the final model: is every claim still needed beside the others?
+        for e in list(claimed):
+            p_keep, without = removal_p(current, specs[e], refit_budget)
+            if p_keep >= level_of(len(specs)):
+                claimed.remove(e)
+                notes.append(f"{e} dropped at the end: with the later claims it is no longer needed (p = {p_keep:.2g})")
+                say(notes[-1])
+                current = without
+                current_v = subject.validation_J(current.names, current.x)
+    # known parameters an effect freed beside its own (asymmetric damping's cf, cr) whose effect was dropped:
+    # back to their configured value unless the data say they are off, then claimed as parameter:<name>
+    companions = {n for e in claimed for n in specs[e].unknowns if "." not in n}
+    for n in [n for n in current.names[len(fit.names) :] if "." not in n and n not in companions]:
+        name = PARAMETER_PREFIX + n
+        if name in claimed or name not in specs:
+            continue
+        p_keep, without = removal_p(current, specs[name], refit_budget)
+        ci = subject.intervals(current)
+        if p_keep < level_of(len(specs)) and strength_excludes_null(specs[name], current, ci):
+            claimed.append(name)
+            notes.append(f"{n}, freed with a dropped effect, is off its configured value: claimed as {name}")
+        else:
+            current = without
+            current_v = subject.validation_J(current.names, current.x)
+            notes.append(f"{n}, freed with a dropped effect, is back at its configured value (p = {p_keep:.2g})")
+        say(notes[-1])
+    return Loop(current, tuple(claimed), tuple(rounds), tuple(steps), tuple(notes))
 
 
 def block_size(n: int) -> int:
@@ -303,22 +458,6 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
             return np.mean(r**2, axis=1), r
 
     return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names)
-
-
-def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
-    """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
-    differences, one batch) and `scale` the variance of one residual entry."""
-    width = problem.upper - problem.lower
-    h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
-    step = np.where(x + h <= problem.upper, h, -h)
-    X = np.vstack([x[None, :], x[None, :] + np.diag(step)])
-    _, R = problem.residuals(X)
-    Jac = ((R[1:] - R[0][None, :]) / step[:, None]).T
-    try:
-        cov = np.linalg.inv(Jac.T @ Jac) * max(scale, 1e-300)
-        return Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0))
-    except np.linalg.LinAlgError:
-        return np.full(x.size, np.nan)
 
 
 def diagnose(
@@ -376,37 +515,58 @@ def diagnose(
         t = augmented(task, names, ranges)
         return problem_of(t, ref, keep), t.nominal
 
-    # 1. the declared model, by the configured algorithm (the campaign's run 0 streams)
+    # 0. can the data tell at all? (before any fit: length, noise, excitation)
+    pre = precheck_vehicle(task, ref)
+    # 1. the declared model, by the configured algorithm (the campaign's run 0 streams), then polished
     ident = config.identify
     base_problem = problem_of(task, ref, keep)
-    opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, ident.algorithm.iterations)
-    x0 = task.nominal if ident.start == "nominal" else None
-    res = opt.minimize(base_problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
-    fit = lsq_fit(base_problem, res.x, refit_budget)  # polish to the likelihood's minimum
-    say(f"declared model: J = {fit.J:.4g} ({res.evaluations + fit.evaluations} evaluations)")
+    if pre.ok:
+        opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, ident.algorithm.iterations)
+        x0 = task.nominal if ident.start == "nominal" else None
+        res = opt.minimize(base_problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
+        fit = lsq_fit(base_problem, res.x, refit_budget)  # polish to the likelihood's minimum
+        evaluations = res.evaluations + fit.evaluations
+    else:  # no claim will be made: a local fit from the configured values is enough for the record
+        fit = lsq_fit(base_problem, task.nominal, refit_budget)
+        evaluations = fit.evaluations
+    say(f"declared model: J = {fit.J:.4g} ({evaluations} evaluations)")
 
     def report(f: Fit, effs) -> ModelReport:
         t = augmented(task, f.names, ranges)
-        ci = fisher_ci(problem_of(t, ref, keep), f.x, f.J)
-        nre = None
-        if task.truth is not None:
+        problem = problem_of(t, ref, keep)
+        free = np.array([n not in f.fixed for n in f.names])
+        ci = np.full(len(f.names), np.nan)
+        ci[free] = fisher_ci(restricted(problem, f.x, free), f.x[free], f.J)
+        nre = bound = None
+        if task.truth is not None:  # the NRE of the declared unknowns, and its bound (sd = half-width / 1.96)
             idx = [f.names.index(n) for n in task.names]
             nre = float(np.linalg.norm(100.0 * (f.x[idx] - task.truth) / task.truth))
+            bound = float(np.linalg.norm(100.0 * ci[idx] / Z95 / task.truth))
         vJ, _ = validation_J(f.names, f.x)
         an = analyse(t, ref, f.names, f.x) if analyse_residuals else None
         chi2 = an.chi2_per_sample if an is not None else f.J
-        return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an)
+        return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an, fixed=f.fixed,
+                           nre_bound_percent=bound)  # fmt: skip
+
+    def unexplained(f: Fit) -> Unexplained | None:
+        t = augmented(task, f.names, ranges)
+        return estimate_unexplained(t, ref, f.names, f.x, keep=keep)
 
     before = report(fit, ())
-    quality = assess_vehicle(task, ref, before)
+    quality = assess_vehicle(task, ref, before, pre)
+    order: tuple[str, ...] = ()
+    if quality.ok:  # the missing force's shape, non-parametrically: which candidates to fit first
+        order = tuple(candidate_order(unexplained(fit), tuple(specs)))
     subject = Subject(
         specs=specs, declared=frozenset(declared), problem_for=problem_for, validation_J=validation_J,
-        residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
+        residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train), scale=lambda f: f.J,
+        noise_limit=chi2_limit(R_train),
     )  # fmt: skip
     return close(
         subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, say=say, t_start=t_start, validation_source=vsource,
-        sigma_source=task.sigma_source, validation_from_file=validate_file is not None,
+        refit_budget=refit_budget, say=say, t_start=t_start, order=order, unexplained=unexplained,
+        chi2_residuals=R_total, validation_source=vsource, sigma_source=task.sigma_source,
+        validation_from_file=validate_file is not None,
     )  # fmt: skip
 
 
@@ -423,17 +583,28 @@ def close(
     refit_budget: int,
     say: Callable[[str], None],
     t_start: float,
+    chi2_residuals: int,
+    order: tuple[str, ...] = (),
+    unexplained: Callable[[Fit], Unexplained | None] | None = None,
     **fields,
 ) -> Diagnosis:
     """Run the loop from the declared fit (no claims when the data fail `quality`) and report the outcome;
+    `chi2_residuals` is how many residuals the final chi² per sample averages (its noise limit);
+    `unexplained(fit)` estimates the strut force left unexplained when the residual stays above the noise;
     `fields` are the Diagnosis's descriptive fields (validation and noise sources, system, J definition)."""
+    rounds = max_rounds if quality.ok else (0 if quality.before_fit else 1)  # a failed pre-check: no fits at all
     loop = augment(
-        subject, fit, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, claim=quality.ok, say=say,
+        subject, fit, alpha=alpha, max_rounds=rounds, candidate_budget=candidate_budget,
+        refit_budget=refit_budget, claim=quality.ok, say=say, order=order,
     )  # fmt: skip
+    after = report(loop.fit, loop.effects) if loop.fit is not fit else before
+    limit = chi2_limit(chi2_residuals)
+    left = None
+    if unexplained is not None and quality.ok and after.chi2_per_sample is not None and after.chi2_per_sample > limit:
+        left = unexplained(loop.fit)
     return Diagnosis(
         before=before,
-        after=report(loop.fit, loop.effects) if loop.effects else before,
+        after=after,
         rounds=loop.rounds,
         selected=loop.effects,
         alpha=alpha,
@@ -441,5 +612,7 @@ def close(
         steps=loop.steps,
         quality=quality,
         notes=loop.notes,
+        chi2_limit=limit,
+        unexplained=left,
         **fields,
     )

@@ -21,7 +21,7 @@ When any check fails the loop still ranks the candidates (for the record) but ac
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +40,7 @@ class Quality:
     samples: int = 0
     noise_ratio: float | None = None  # median over channels of sigma / std(signal)
     worst_relative_ci: float | None = None  # largest 95 % half-width / |estimate| among declared unknowns
+    before_fit: bool = False  # a check that needs no fit failed (length, noise, excitation): nothing was fitted
 
     @property
     def ok(self) -> bool:
@@ -76,8 +77,8 @@ def _checks(samples: int, noise_ratio: float, names, x: NDArray, ci: NDArray, ex
     return Quality(tuple(reasons), int(samples), float(noise_ratio), worst)
 
 
-def assess_vehicle(task, reference: dict[str, NDArray], before) -> Quality:
-    """The checks for the full car: samples of the run, sigma over each channel's std, the declared fit's CIs."""
+def precheck_vehicle(task, reference: dict[str, NDArray]) -> Quality:
+    """The car's checks that need no fit: samples of the run, sigma over each channel's std, roll excitation."""
     ratios = np.concatenate(
         [
             np.asarray(task.sigma[f], dtype=float) / np.maximum(np.std(ref, axis=0), 1e-300)
@@ -95,8 +96,17 @@ def assess_vehicle(task, reference: dict[str, NDArray], before) -> Quality:
             f"not excited enough: the road is the same left and right (difference {100 * roll:.2g} % of the sum), "
             "so roll is not excited"
         )
-    return _checks(int(task.experiment.t.size), float(np.median(ratios)), task.names, before.x[: len(task.names)],
-                   before.ci[: len(task.names)], extra)  # fmt: skip
+    q = _checks(int(task.experiment.t.size), float(np.median(ratios)), (), np.zeros(0), np.zeros(0), extra)
+    return replace(q, before_fit=not q.ok)
+
+
+def assess_vehicle(task, reference: dict[str, NDArray], before, pre: Quality | None = None) -> Quality:
+    """Every check for the full car: the pre-fit ones (`pre`, else computed) and the declared fit's CIs."""
+    pre = pre if pre is not None else precheck_vehicle(task, reference)
+    n = len(task.names)
+    post = _checks(pre.samples, pre.noise_ratio, task.names, before.x[:n], before.ci[:n], [])
+    reasons = tuple(dict.fromkeys(pre.reasons + post.reasons))
+    return Quality(reasons, pre.samples, pre.noise_ratio, post.worst_relative_ci, pre.before_fit)
 
 
 def assess_bench(history, sigma: float, names, before) -> Quality:

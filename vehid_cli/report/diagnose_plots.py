@@ -27,7 +27,8 @@ def _label(report, name: str) -> str:
 
 
 def plot_diagnosis(diagnosis, directory: str | Path, stem: str = "diagnose") -> list[Path]:
-    """Write <stem>-residual.png, <stem>-fingerprint.png and <stem>-spectrum.png; return their paths."""
+    """Write <stem>-residual.png, <stem>-fingerprint.png, <stem>-spectrum.png and, when the residual stayed above
+    the noise, <stem>-unexplained.png (the estimated missing strut force); return their paths."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     before, after = diagnosis.before.analysis, diagnosis.after.analysis
@@ -85,4 +86,41 @@ def plot_diagnosis(diagnosis, directory: str | Path, stem: str = "diagnose") -> 
         ax.set_title("spectral residual")
         ax.legend(fontsize=8)
         paths.append(_save(fig, directory / f"{stem}-spectrum.png"))
+    if getattr(diagnosis, "unexplained", None) is not None:
+        paths.append(plot_unexplained(diagnosis.unexplained, directory / f"{stem}-unexplained.png"))
     return paths
+
+
+def plot_unexplained(unexplained, path: str | Path) -> Path:
+    """Write the estimated missing strut force (``diagnose.unexplained``) as a 2x2 figure: front/rear x force [N]
+    over deflection [mm] and over velocity [m/s], each with its 95 % band and the closest library shape."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7), squeeze=False, constrained_layout=True)
+    for i, axle in enumerate((unexplained.front, unexplained.rear)):
+        for j, curve in enumerate((axle.g, axle.h)):
+            ax = axes[i, j]
+            deflection = curve.variable == "deflection"
+            x = curve.grid * (1e3 if deflection else 1.0)
+            ax.fill_between(x, curve.band[0], curve.band[1], color="C0", alpha=0.2, lw=0, label="95 % band")
+            ax.plot(x, curve.force, color="C0", lw=1.5, label="estimate")
+            res = curve.resembles
+            shape = res.best.replace("_", " ")
+            ax.axhline(0.0, color="k", lw=0.5)
+            ax.axvline(0.0, color="k", lw=0.5)
+            ax.set_xlabel(f"{axle.axle} {'deflection [mm]' if deflection else 'velocity [m/s]'}")
+            ax.set_ylabel("missing force [N]")
+            what = f"{axle.axle} {'g(d)' if deflection else 'h(v)'}"
+            if curve.significant:
+                ax.set_title(f"{what}: like {shape} (R² = {res.r2[res.best]:.2f})", fontsize=9)
+            else:
+                ax.set_title(f"{what}: nothing significant (closest: {shape})", fontsize=9)
+            if i == 0 and j == 0:
+                ax.legend(fontsize=8)
+    fig.suptitle(
+        f"unexplained strut force: chi² per sample {unexplained.chi2_before:.3g} -> {unexplained.chi2_after:.3g}, "
+        f"edf {unexplained.edf:.1f}, p = {max(unexplained.p_value, 1e-300):.2g}; closest library shape: "
+        f"{unexplained.resembles.replace('_', ' ')}",
+        fontsize=10,
+    )
+    return _save(fig, path)

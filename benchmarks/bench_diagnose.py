@@ -1,0 +1,75 @@
+"""Wall time of `vehid diagnose` as a user runs it (a benchmark, not a test).
+
+Targets (issue 11): one 3 s car case in <= 10 s wall on 2 cores; a 60 s drive-length record in <= 60 s; data
+too short to tell answered before any fit. Each case is simulated once by `vehid simulate` (the project's own
+simulator) and then diagnosed through the CLI in a fresh process (imports and the cached kernels included),
+`--repeats` times; the median is reported. Run: python benchmarks/bench_diagnose.py [--repeats 3] [--long]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"
+HYSTERESIS = ROOT / "configs" / "effects" / "hysteresis.yaml"
+CASES = {  # name: (truth config, simulate --set overrides, diagnose --set overrides)
+    "3 s bump, kf +20 % and cr -15 % (two known parameters)": (
+        BASE, ["vehicle.kf=54000", "vehicle.cr=2975"], []),
+    "3 s bump, Bouc-Wen yielding at 13 mm": (
+        HYSTERESIS, ["vehicle.effects.hysteresis.beta=3e3", "vehicle.effects.hysteresis.gamma=3e3"], []),
+    "3 s bump, nothing missing": (BASE, [], []),
+    "0.3 s bump (too short: refused before any fit)": (BASE, ["simulation.duration=0.3"], ["simulation.duration=0.3"]),
+}  # fmt: skip
+LONG = {
+    "60 s ISO class C road at 1 kHz, hysteresis": (
+        HYSTERESIS, ["road.bump=null", "road.random.iso_class=C", "simulation.duration=60"],
+        ["road.bump=null", "road.random.iso_class=C", "simulation.duration=60"]),
+}  # fmt: skip
+
+
+def vehid(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vehid_cli", *args], cwd=ROOT, capture_output=True, text=True)
+
+
+def sets(values: list[str]) -> list[str]:
+    return [a for v in values for a in ("--set", v)]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--long", action="store_true", help="also the 60 s record")
+    args = parser.parse_args()
+    print(f"# {platform.node()} {platform.machine()}, {os.cpu_count()} cpus, python {platform.python_version()}")
+    cases = {**CASES, **(LONG if args.long else {})}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, (truth, sim_sets, diag_sets) in cases.items():
+            data, out = Path(tmp) / "run.csv", Path(tmp) / "diag.json"
+            res = vehid("simulate", str(truth), "-o", str(data), "--set", "noise.level=0.05", *sets(sim_sets))
+            if res.returncode:
+                raise SystemExit(res.stderr)
+            walls = []
+            for _ in range(args.repeats):
+                start = time.perf_counter()
+                res = vehid("diagnose", str(BASE), "--data", str(data), "--json", str(out), *sets(diag_sets))
+                walls.append(time.perf_counter() - start)
+                if res.returncode:
+                    raise SystemExit(res.stderr)
+            doc = json.loads(out.read_text())
+            runs = ", ".join(f"{w:.1f}" for w in walls)
+            print(f"{name}: median {statistics.median(walls):.1f} s wall ({runs}); selected {doc['selected']}; "
+                  f"verdict: {doc['verdict'][:70]}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
