@@ -39,6 +39,7 @@ bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_simulation.py
 	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_damper.py
 	$(BIN)/python benchmarks/bench_campaign.py --repeats 3
+	$(BIN)/python benchmarks/bench_diagnose.py --repeats 3 --long
 
 ## bench-sweep: also time the whole Table 1 + 2 sweep (about 2-4 minutes)
 bench-sweep: $(STAMP)

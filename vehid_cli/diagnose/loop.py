@@ -601,7 +601,7 @@ def close(
     limit = chi2_limit(chi2_residuals)
     left = None
     if unexplained is not None and quality.ok and after.chi2_per_sample is not None and after.chi2_per_sample > limit:
-        left = unexplained(loop.fit)
+        left = unexplained(fit)  # against the declared model: what the library added did not explain it
     return Diagnosis(
         before=before,
         after=after,
