@@ -148,6 +148,17 @@ def check_time_step(config: Config, dt: float, key: str) -> None:
             source=config.source,
             key=f"vehicle.{worst}",
         )
+    for matrix, family in ((mats.M, ("m", "mf", "mr", "Ix", "Iy")), (mats.K, ("kf", "kr", "ktf", "ktr"))):
+        eig = np.linalg.eigvalsh(matrix)
+        if not eig[0] > 1e-12 * eig[-1]:  # singular or indefinite: no static equilibrium, no modes
+            worst = min(family, key=lambda n: abs(values[n]))
+            kind = "mass" if family[0] == "m" else "stiffness"
+            raise InputError(
+                f"the configured car's {kind} matrix is singular (condition beyond 1e12): the smallest {kind} is "
+                f"vehicle.{worst} = {values[worst]:g}: expected physical values in SI units",
+                source=config.source,
+                key=f"vehicle.{worst}",
+            )
     omega = mats.natural_frequencies()
     f_max = float(omega[-1]) / (2 * math.pi)
     dt_max = 1.0 / (MIN_SAMPLES_PER_PERIOD * f_max)
