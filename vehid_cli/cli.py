@@ -604,13 +604,15 @@ def diagnose(
     ] = None,
     set_: SetOption = None,
 ) -> None:
-    """Close the loop: fit, analyse the residual, rank candidate missing effects, add the best, re-fit.
+    """Close the loop: fit, analyse the residual, rank candidates (missing effects, mis-set known parameters),
+    add the best, re-fit; say whether the residual is now at the noise.
 
     Full car: J is wls (chi2 per sample); the noise is estimated from the data unless --set noise.level=Np
     gives it; the integrator is rk4 unless the config sets newmark. Damper on a bench: J is Eq. 7; the
     validation runs are --validate, else the config's data.validate. A candidate is accepted when its
     likelihood-ratio test is significant (p below 1e-3 / number of candidates), it lowers the validation J,
-    and the data tell it from the runner-up; data too short, too noisy or unexcited get no claim.
+    and the data tell it from the runner-up; a known parameter that explains as much wins over an effect.
+    The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
     from .diagnose import diagnose as run_diagnosis

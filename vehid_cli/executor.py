@@ -32,6 +32,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
 
 from .errors import InputError
+from .sim.kernel import set_threads
 
 S = TypeVar("S")
 T = TypeVar("T")
@@ -77,6 +78,7 @@ def _init_local_worker(parent: int) -> None:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
+    set_threads(1)  # the pool's parallelism is over runs: one thread per batch
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True, name="vehid-parent-watch").start()
@@ -203,6 +205,7 @@ def _on_dask_worker(fn: Callable[[Any, Any], Any], shared: Any, item: Any, ident
         from threadpoolctl import threadpool_limits
 
         threadpool_limits(1)
+        set_threads(1)
         _WORKER_IDENTITY = code_identity()
     diffs = identity_mismatch(identity, _WORKER_IDENTITY)
     if diffs:

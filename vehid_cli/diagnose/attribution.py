@@ -23,6 +23,10 @@ force is proportional to them), all starts in two batched evaluations; the best 
 whose 95 % interval (Fisher information) is narrower than SHAPE_IDENTIFIABLE of their value are freed in the
 fit, the others stay at the start's value and the candidate says so (``fixed``).
 
+Asymmetric damping replaces the configured damping by a rebound and a compression value: its test frees only
+dc (per axle), and once it is selected the re-fit also frees the damping it splits (cf, cr), whose pair need
+not average to the configured value (a test with them free would credit a mis-set damper to the effect).
+
 Search boxes: the effects' physical bounds (effects.py) narrowed to a range a passenger-car strut can have;
 known parameters within identify.bounds of their configured value (the car) or BENCH_PARAMETER_RANGE of it
 (a bench). Candidate fits run in parallel threads (the compiled kernels release the GIL).
@@ -84,6 +88,7 @@ class Candidate:
     starts: tuple[dict[str, float], ...] = ()
     linear: bool = True
     group: str = ""  # a known parameter's group (springs, dampers, ...)
+    companions: tuple[str, ...] = ()  # known parameters the effect replaces, freed with it once it is selected
 
 
 def parameter_candidate(name: str, configured: float, group: str = "", limits=None) -> Candidate:
@@ -123,8 +128,8 @@ def candidate_specs(config) -> dict[str, Candidate]:
         limits = {n: (lo(a), hi(a)) for n, a in zip(names, (cf, cr), strict=True)}
         st = {n: start for n in names} if start is not None else {}
         return Candidate(
-            effect, names + tuple(companions), limits, st, shape, shape_limits or {}, strength=names,
-            null={n: 0.0 for n in names}, starts=tuple(starts), linear=linear,
+            effect, names, limits, st, shape, shape_limits or {}, strength=names, null={n: 0.0 for n in names},
+            starts=tuple(starts), linear=linear, companions=tuple(companions),
         )  # fmt: skip
 
     const = lambda x: lambda _c: x  # noqa: E731

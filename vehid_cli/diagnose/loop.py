@@ -359,13 +359,15 @@ def augment(
             break
         cand = specs[best.effect]
         # re-fit everything from the candidate's fit, the identifiable shape parameters of every claim freed
-        names = best.fit.names
-        problem, _ = subject.problem_for(names)
+        extra = tuple(n for n in cand.companions if n not in best.fit.names)
+        names = best.fit.names + extra
+        problem, start = subject.problem_for(names)
+        x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
         shapes = [n for e in (*claimed, best.effect) for n in specs[e].shape]
-        free = identifiable(names, best.fit.x, fisher_ci(problem, best.fit.x, subject.scale(best.fit)), shapes)
-        refit = fit_free(problem, best.fit.x, free, refit_budget)
+        free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
+        refit = fit_free(problem, x0, free, refit_budget)
         if refit.J > best.fit.J:  # keep the candidate's fit if the re-fit found nothing better
-            refit = best.fit
+            refit = Fit(names, x0, best.fit.J, refit.evaluations, best.fit.fixed)
         ci = subject.intervals(refit)
         if not strength_excludes_null(cand, refit, ci):
             shown = ", ".join(
@@ -419,7 +421,7 @@ def augment(
                 current_v = subject.validation_J(current.names, current.x)
     # known parameters an effect freed beside its own (asymmetric damping's cf, cr) whose effect was dropped:
     # back to their configured value unless the data say they are off, then claimed as parameter:<name>
-    companions = {n for e in claimed for n in specs[e].unknowns if "." not in n}
+    companions = {n for e in claimed for n in specs[e].companions}
     for n in [n for n in current.names[len(fit.names) :] if "." not in n and n not in companions]:
         name = PARAMETER_PREFIX + n
         if name in claimed or name not in specs:

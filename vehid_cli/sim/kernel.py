@@ -40,6 +40,9 @@ from __future__ import annotations
 import functools
 import hashlib
 import inspect
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -471,6 +474,33 @@ def _nonzero_rows(X: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     )
 
 
+_THREADS: int | None = None  # threads one batch is split over (None: the cores this process may use)
+
+
+def set_threads(n: int | None) -> None:
+    """Split each batch over at most n threads (1: none; None: the cores this process may use). Pool workers
+    of a campaign set 1: their parallelism is over runs."""
+    global _THREADS
+    _THREADS = n
+
+
+def _in_parallel(P: int, rows) -> None:
+    """rows(slice) over the batch's P systems, split into contiguous parts over threads (the compiled loops
+    release the GIL; each system is integrated alone, so results are the same as in one call). Only from the
+    main thread: a caller already running threads (parallel candidate fits) keeps its own split."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    k = min(_THREADS or cores, P)
+    if k <= 1 or threading.current_thread() is not threading.main_thread():
+        rows(slice(0, P))
+        return
+    bounds = np.linspace(0, P, k + 1).astype(int)
+    with ThreadPoolExecutor(k) as pool:
+        list(pool.map(rows, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]))
+
+
 def integrate(
     method: Literal["rk4", "newmark"],
     M: ArrayLike,
@@ -521,7 +551,16 @@ def integrate(
     unconverged = np.zeros(P, dtype=np.int64)
     if method == "rk4":
         run = _rk4_loop(force, nq, ns, nu)
-        run(Mr, CT, KT, Br, Dr, Er, u, float(dt), params, q0, z0, out_q, out_v, out_a, out_f, out_z)
+
+        def rows(s: slice) -> None:
+            def part(X):
+                return (X[0], X[1][s], X[2])
+
+            us = u if u.shape[0] == 1 else u[s]
+            run(part(Mr), CT[s], KT[s], part(Br), part(Dr), part(Er), us, float(dt), params[s], q0[s], z0[s],
+                out_q[s], out_v[s], out_a[s], out_f[s], out_z[s])  # fmt: skip
+
+        _in_parallel(P, rows)
     else:
         Khat_inv = np.linalg.inv(K + (2.0 / dt) * C + (4.0 / dt**2) * M)
         MT, KhT = (np.ascontiguousarray(np.swapaxes(X, -1, -2)) for X in (M, Khat_inv))
