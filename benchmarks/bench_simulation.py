@@ -31,7 +31,7 @@ from scipy import signal  # noqa: E402
 
 from vehid_cli.config import load_config  # noqa: E402
 from vehid_cli.experiment import build_experiment  # noqa: E402
-from vehid_cli.sim.kernel import cubic_spring, simulate_fullcar  # noqa: E402
+from vehid_cli.sim.kernel import cubic_spring, set_threads, simulate_fullcar  # noqa: E402
 from vehid_cli.sim.linear import simulate  # noqa: E402
 from vehid_cli.sim.modal import statespace_foh  # noqa: E402
 
@@ -69,6 +69,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     node, machine = platform.node(), platform.machine()
     print(f"# {node} {machine} {cpu_model()}, {os.cpu_count()} cpus, python {platform.python_version()}")
+    set_threads(1)  # one core: the kernel would otherwise split each batch over the process's cores
     threads = ", ".join(f"{v}={os.environ[v]}" for v in ("NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS"))
     print(f"# numpy {np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}, {threads}")
     print(f"# experiment: {exp.t.size} samples, dt = {dt * 1e3:g} ms, 4 acceleration channels; repeats {args.repeats}")

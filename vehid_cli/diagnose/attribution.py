@@ -52,6 +52,7 @@ from ..optimizers.lsq import polish
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
 CANDIDATE_BUDGET = 150  # model evaluations of one candidate's fit (after the screening of its starts)
 DISTINCT_VALIDATION = 0.1  # validation J this much lower tells the best candidate from a close runner-up
+PARSIMONY_SHARE = 0.9  # a known parameter explaining this share of an effect's LR is preferred to it
 SHAPE_IDENTIFIABLE = 0.5  # a shape parameter is freed when its 95 % half-width is below this fraction of it
 SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR to about 1e-7 R)
 SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
@@ -472,10 +473,16 @@ def undistinguished(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) ->
 
 def parsimonious(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ranked | None:
     """An accepted known parameter that explains the residual as well as the effect `best` does (its LR short
-    of the effect's by less than the critical value of chi²(k_best)), the strongest such; None if none."""
+    of the effect's by less than the critical value of chi²(k_best), or at least PARSIMONY_SHARE of it), the
+    strongest such; None if none. (An effect that only mimicked the parameter, a Bouc-Wen element that never
+    yields standing in for a stiffer spring, then loses; a real effect is tested again in the next round and
+    the backward checks drop the parameter if the effect alone explains it.)"""
     if best.kind != "effect":
         return None
     level = alpha / max(len(ranked), 1)
     margin = float(stats.chi2.isf(level, max(best.k, 1)))
-    rivals = [r for r in ranked if r.kind == "parameter" and r.accepted and best.statistic - r.statistic < margin]
+    rivals = [
+        r for r in ranked if r.kind == "parameter" and r.accepted
+        and (best.statistic - r.statistic < margin or r.statistic >= PARSIMONY_SHARE * best.statistic)
+    ]  # fmt: skip
     return max(rivals, key=lambda r: r.statistic, default=None)
