@@ -255,6 +255,14 @@ def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
     return np.where(d >= 0, Z95 * np.sqrt(np.abs(d)), np.nan)
 
 
+def fit_intervals(problem: Problem, fit: Fit, scale: float) -> NDArray:
+    """95 % half-widths at a fit over its free unknowns (NaN for those it held fixed); `problem` over fit.names."""
+    free = np.array([n not in fit.fixed for n in fit.names])
+    out = np.full(len(fit.names), np.nan)
+    out[free] = fisher_ci(restricted(problem, fit.x, free), fit.x[free], scale)
+    return out
+
+
 def identifiable(names: Sequence[str], x: NDArray, ci: NDArray, shape: Sequence[str]) -> NDArray:
     """(D,) True for every unknown to free: all but the `shape` ones the data cannot tell (95 % half-width
     above SHAPE_IDENTIFIABLE of the value, or undetermined)."""

@@ -38,7 +38,7 @@ from ..models.effects import LIBRARY
 from ..noise import estimate_noise_sigma
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
-from .attribution import ALPHA, Candidate, Fit, candidate_ranges, fisher_ci, lsq_fit, parameter_candidate, restricted
+from .attribution import ALPHA, Candidate, Fit, candidate_ranges, fit_intervals, lsq_fit, parameter_candidate
 from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
 from .quality import assess_bench
 from .residuals import analyse_bench, autocorrelation
@@ -228,10 +228,7 @@ def diagnose_bench(
     def report(f: Fit, effects) -> ModelReport:
         s = spec_for(f.names)
         force = s.simulate_batch(f.names, np.asarray(f.x)[None, :], train, substeps).force[0]
-        problem = problem_for(f.names)[0]
-        free = np.array([n not in f.fixed for n in f.names])
-        ci = np.full(len(f.names), np.nan)
-        ci[free] = fisher_ci(restricted(problem, f.x, free), f.x[free], scale(f))
+        ci = fit_intervals(problem_for(f.names)[0], f, scale(f))
         vJ, per = validation_J(f.names, f.x)
         an = analyse_bench(train, force, sigma)
         return ModelReport(tuple(effects), f.names, f.x, ci, f.J, an.chi2_per_sample, vJ, None, an, per, f.fixed)

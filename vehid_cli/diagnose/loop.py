@@ -45,12 +45,12 @@ from .attribution import (
     chi2_statistic,
     fisher_ci,
     fit_free,
+    fit_intervals,
     identifiable,
     lowers_validation,
     lsq_fit,
     parsimonious,
     rank_candidates,
-    restricted,
     undistinguished,
 )
 from .quality import Quality, assess_vehicle, precheck_vehicle
@@ -238,11 +238,7 @@ class Subject:
 
     def intervals(self, fit: Fit) -> NDArray:
         """95 % half-widths at a fit over its free unknowns (NaN for the fixed ones)."""
-        problem, _ = self.problem_for(fit.names)
-        free = np.array([n not in fit.fixed for n in fit.names])
-        out = np.full(len(fit.names), np.nan)
-        out[free] = fisher_ci(restricted(problem, fit.x, free), fit.x[free], self.scale(fit))
-        return out
+        return fit_intervals(self.problem_for(fit.names)[0], fit, self.scale(fit))
 
 
 @dataclass(frozen=True)
@@ -535,10 +531,7 @@ def diagnose(
 
     def report(f: Fit, effs) -> ModelReport:
         t = augmented(task, f.names, ranges)
-        problem = problem_of(t, ref, keep)
-        free = np.array([n not in f.fixed for n in f.names])
-        ci = np.full(len(f.names), np.nan)
-        ci[free] = fisher_ci(restricted(problem, f.x, free), f.x[free], f.J)
+        ci = fit_intervals(problem_of(t, ref, keep), f, f.J)
         nre = bound = None
         if task.truth is not None:  # the NRE of the declared unknowns, and its bound (sd = half-width / 1.96)
             idx = [f.names.index(n) for n in task.names]
