@@ -70,3 +70,17 @@ def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
     assert "0 campaign(s) run, 4 up to date" in again.stdout
     changed = vehid(*args, "--set", "identify.seed=9")
     assert "4 campaign(s) run" in changed.stdout
+
+
+def test_sweep_of_a_damper_config_is_refused_before_anything_is_written(tmp_path):
+    """Was an AttributeError (exit 1) after writing index.csv; now exit 2 naming the config's system."""
+    from typer.testing import CliRunner
+
+    from vehid_cli.cli import app
+
+    config = ROOT / "configs" / "dampers" / "synthetic_force_map_steps.yaml"
+    out = tmp_path / "sweep"
+    result = CliRunner().invoke(app, ["sweep", str(config), "--vary", "identify.seed=1,2", "-o", str(out)])
+    assert result.exit_code == 2, result.output
+    assert "system" in result.output and "damper" in result.output
+    assert not out.exists()
