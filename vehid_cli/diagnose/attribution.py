@@ -35,7 +35,6 @@ known parameters within identify.bounds of their configured value (the car) or B
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -48,6 +47,7 @@ from scipy import stats
 from ..models.effects import EFFECT_NAMES
 from ..optimizers.base import BudgetExhausted, Problem, Run
 from ..optimizers.lsq import polish
+from ..sim.kernel import available_cores
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
 CANDIDATE_BUDGET = 150  # model evaluations of one candidate's fit (after the screening of its starts)
@@ -383,14 +383,6 @@ def chi2_statistic(residual_count: int) -> Callable[[float, float], float]:
     return lambda J0, J1: max(0.0, (J0 - J1) * residual_count)
 
 
-def workers() -> int:
-    """Threads for candidate fits: the cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
 def lowers_validation(vJ: float, per: dict[str, float] | None, base_vJ: float,
                       base_per: dict[str, float] | None, min_gain: float) -> bool:  # fmt: skip
     """Does the validation J fall (by the fraction min_gain), and on every held-out run where there are several?"""
@@ -452,7 +444,7 @@ def rank_candidates(
             kind=cand.kind, validation_per_file=per, fixed=fit.fixed,
         )  # fmt: skip
 
-    n = min(workers(), len(candidates))
+    n = min(available_cores(), len(candidates))
     if n > 1:
         with ThreadPoolExecutor(n) as pool:
             out = list(pool.map(one, candidates))

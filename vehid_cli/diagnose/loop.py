@@ -543,15 +543,12 @@ def diagnose(
         return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an, fixed=f.fixed,
                            nre_bound_percent=bound)  # fmt: skip
 
-    def unexplained(f: Fit) -> Unexplained | None:
-        t = augmented(task, f.names, ranges)
-        return estimate_unexplained(t, ref, f.names, f.x, keep=keep)
-
     before = report(fit, ())
     quality = assess_vehicle(task, ref, before, pre)
-    order: tuple[str, ...] = ()
-    if quality.ok:  # the missing force's shape, non-parametrically: which candidates to fit first
-        order = tuple(candidate_order(unexplained(fit), tuple(specs)))
+    missing, order = None, ()
+    if quality.ok:  # the strut force the declared model misses, non-parametrically: which candidates to fit first
+        missing = estimate_unexplained(task, ref, fit.names, fit.x, keep=keep)
+        order = tuple(candidate_order(missing, tuple(specs)))
     subject = Subject(
         specs=specs, declared=frozenset(declared), problem_for=problem_for, validation_J=validation_J,
         residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train), scale=lambda f: f.J,
@@ -559,7 +556,7 @@ def diagnose(
     )  # fmt: skip
     return close(
         subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, say=say, t_start=t_start, order=order, unexplained=unexplained,
+        refit_budget=refit_budget, say=say, t_start=t_start, order=order, unexplained=missing,
         chi2_residuals=R_total, validation_source=vsource, sigma_source=task.sigma_source,
         validation_from_file=validate_file is not None,
     )  # fmt: skip
@@ -580,12 +577,13 @@ def close(
     t_start: float,
     chi2_residuals: int,
     order: tuple[str, ...] = (),
-    unexplained: Callable[[Fit], Unexplained | None] | None = None,
+    unexplained: Unexplained | None = None,
     **fields,
 ) -> Diagnosis:
     """Run the loop from the declared fit (no claims when the data fail `quality`) and report the outcome;
     `chi2_residuals` is how many residuals the final chi² per sample averages (its noise limit);
-    `unexplained(fit)` estimates the strut force left unexplained when the residual stays above the noise;
+    `unexplained`: the strut force the declared model misses, reported when the residual stays above the noise
+    (against the declared model: what the library added did not explain it);
     `fields` are the Diagnosis's descriptive fields (validation and noise sources, system, J definition)."""
     rounds = max_rounds if quality.ok else (0 if quality.before_fit else 1)  # a failed pre-check: no fits at all
     loop = augment(
@@ -594,9 +592,8 @@ def close(
     )  # fmt: skip
     after = report(loop.fit, loop.effects) if loop.fit is not fit else before
     limit = chi2_limit(chi2_residuals)
-    left = None
-    if unexplained is not None and quality.ok and after.chi2_per_sample is not None and after.chi2_per_sample > limit:
-        left = unexplained(fit)  # against the declared model: what the library added did not explain it
+    incomplete = after.chi2_per_sample is not None and after.chi2_per_sample > limit
+    left = unexplained if quality.ok and incomplete else None
     return Diagnosis(
         before=before,
         after=after,
