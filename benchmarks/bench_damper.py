@@ -16,8 +16,9 @@ import time
 import numpy as np
 
 from vehid_cli.bench import sine
-from vehid_cli.damper_fit import DamperSpec, default_values
-from vehid_cli.models.damper import simulate_damper
+from vehid_cli.damper_fit import DamperSpec
+from vehid_cli.models.damper import default_values
+from vehid_cli.sim.bench import simulate_damper
 
 CASES = {
     "viscous": ((), dict(c0=1500.0)),

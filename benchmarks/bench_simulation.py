@@ -31,9 +31,10 @@ from scipy import signal  # noqa: E402
 
 from vehid_cli.config import load_config  # noqa: E402
 from vehid_cli.experiment import build_experiment  # noqa: E402
-from vehid_cli.sim.kernel import cubic_spring, set_threads, simulate_fullcar  # noqa: E402
+from vehid_cli.sim.kernel import cubic_spring, set_threads  # noqa: E402
 from vehid_cli.sim.linear import simulate  # noqa: E402
 from vehid_cli.sim.modal import statespace_foh  # noqa: E402
+from vehid_cli.sim.nonlinear import simulate_fullcar  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -8,7 +8,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from vehid_cli.bench import BenchHistory, constant_velocity, sawtooth, sine, with_force
-from vehid_cli.damper_fit import DamperSpec, cost_J, default_values, fit, realtime_check, scaled_bounds
+from vehid_cli.config import scaled_bounds
+from vehid_cli.damper_fit import DamperSpec, cost_J, fit, realtime_check
+from vehid_cli.models.damper import default_values
 
 A, FREQ = 0.025, 0.8
 W = 2 * np.pi * FREQ

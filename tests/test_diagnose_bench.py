@@ -15,8 +15,9 @@ from typer.testing import CliRunner
 from vehid_cli.bench import sine
 from vehid_cli.cli import app
 from vehid_cli.config import load_config
-from vehid_cli.damper_fit import DamperSpec, default_values
+from vehid_cli.damper_fit import DamperSpec
 from vehid_cli.diagnose.bench import diagnose_bench
+from vehid_cli.models.damper import default_values
 
 ROOT = Path(__file__).resolve().parents[1]
 BRFD = ROOT / "configs" / "dampers" / "brfd_bingham.yaml"

@@ -14,8 +14,8 @@ from vehid_cli.data import read_measurement, time_grid
 from vehid_cli.experiment import build_experiment
 from vehid_cli.models.effects import LIBRARY, effect_rows, strut_effects
 from vehid_cli.models.fullcar import assemble
-from vehid_cli.sim.kernel import fullcar_struts, integrate
-from vehid_cli.sim.nonlinear import simulate_effects
+from vehid_cli.sim.kernel import integrate
+from vehid_cli.sim.nonlinear import fullcar_struts, simulate_effects
 
 EFFECTS_DIR = ROOT / "configs" / "effects"
 NOISE = 0.05  # the level each truth config's effect must stand out of (RMS, relative to each channel's std)

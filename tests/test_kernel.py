@@ -10,8 +10,9 @@ from tests.reference import rel_rms
 from tests.test_linear import smooth_road
 from vehid_cli.data import time_grid
 from vehid_cli.models.fullcar import assemble
-from vehid_cli.sim.kernel import cubic_spring, integrate, simulate_fullcar
+from vehid_cli.sim.kernel import cubic_spring, integrate
 from vehid_cli.sim.linear import simulate
+from vehid_cli.sim.nonlinear import simulate_fullcar
 
 K3 = 5e7  # N/m³: at 3 cm of deflection the cubic force is ~ the linear spring's, so the car is clearly nonlinear
 KNOT = 8e-3  # s: the test road is linear between knots every 8 ms, so every step size below samples it exactly

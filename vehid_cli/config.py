@@ -18,15 +18,11 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from .errors import InputError
+from .models.fullcar import VEHICLE_PARAMETERS
 
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
-
-VEHICLE_PARAMETERS = (
-    "m", "mf", "mr", "Ix", "Iy", "a1", "a2", "b1", "b2",
-    "kf", "kr", "ktf", "ktr", "kR", "cf", "cr",
-)  # fmt: skip
 
 
 class _Section(BaseModel):
@@ -653,7 +649,7 @@ class DamperConfig(_Section):
 
     def values(self) -> dict[str, float]:
         """All parameter values: the configured ones over the neutral defaults (damper_fit.default_values)."""
-        from .damper_fit import default_values
+        from .models.damper import default_values
         from .models.effects import LIBRARY
 
         effects = {
@@ -666,8 +662,6 @@ class DamperConfig(_Section):
     def search_box(self) -> dict[str, tuple[float, float]]:
         """Search range of each unknown [SI]: 'limits' where given, else 'bounds' x configured value
         (a symmetric range of +-1 for values at 0, where a factor means nothing)."""
-        from .damper_fit import scaled_bounds
-
         ident = self.identify
         scaled = scaled_bounds(self.values(), ident.unknowns, *ident.bounds)
         return {n: tuple(ident.limits.get(n, scaled[n])) for n in ident.unknowns}
@@ -887,3 +881,14 @@ def _explain(exc: ValidationError, root: type[BaseModel] | None = None) -> str:
             else:
                 lines.append(f"{msg}{shown}")
     return "; ".join(lines)
+
+
+def scaled_bounds(
+    values: typing.Mapping[str, float], names: typing.Sequence[str], low: float = 0.1, high: float = 10.0
+) -> dict[str, tuple[float, float]]:
+    """Bounds by scaling the starting values (the paper's choice), with a symmetric range for values near 0."""
+    out = {}
+    for n in names:
+        v = float(values[n])
+        out[n] = (min(low * v, high * v), max(low * v, high * v)) if abs(v) > 1e-12 else (-1.0, 1.0)
+    return out

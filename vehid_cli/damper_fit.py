@@ -16,8 +16,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bench import BenchHistory
-from .models.damper import DELAYS, FRONT, MODELS, BenchRun, DamperModel, simulate_damper
+from .models.damper import MODELS, DamperModel, play
+from .models.effects import bench_effect_rows, bench_effects, bench_lag_state
 from .optimizers import Problem, get_optimizer
+from .sim.bench import BenchRun, refine, simulate_damper
+from .sim.kernel import integrate_bench
 
 PENALTY_FACTOR = 10.0  # an unstable candidate costs this many times the initial J (at least 10)
 
@@ -102,9 +105,6 @@ class DamperSpec:
 def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistory, substeps: int) -> BenchRun:
     """The declared model's force without its gas part, then the bench effects around it (lag on the damper
     force, parallel effects added, the gas force k1 (x_b - x0) on the piston's motion through the play)."""
-    from .models.damper import play, refine
-    from .models.effects import bench_effect_rows, bench_effects, bench_lag_state
-    from .sim.kernel import integrate_bench
 
     P, n = rows.shape[0], h.t.size
     no_gas = rows.copy()
@@ -127,27 +127,6 @@ def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistor
     force = force[:, ::substeps, 0]
     stable = damper.stable & np.all(np.isfinite(force), axis=1)
     return BenchRun(t=h.t, force=np.where(stable[:, None], force, np.nan), stable=stable)
-
-
-def default_values(model: str, table_shape: tuple[int, ...] = ()) -> dict[str, float]:
-    """Neutral starting values: no gas, no backlash, no lag or delay, mid-range damper parameters."""
-    values = {n: 0.0 for n in FRONT + DELAYS}
-    values["v_switch"] = 0.01
-    typical = dict(c0=1000.0, fc=100.0, v_eps=0.01, k0=100.0, c1=10000.0, alpha=500.0, beta=1e5, gamma=1e5, delta=300.0)
-    for name in MODELS[model].layout(table_shape)[len(values) :]:
-        base = name.split("_")[0] if name.split("_")[0] in typical else name
-        values[name] = typical.get(base, 0.0)
-    if model == "generalized_bouc_wen":
-        (m,) = table_shape or (1,)
-        values["m"] = m
-        for j in range(m):
-            values[f"u_node_{j + 1}"] = j / max(m - 1, 1)
-    if model == "force_map":  # the table size, evenly spread nodes, a flat (zero) map
-        nv, nu = table_shape
-        values.update(nv=nv, nu=nu)
-        values.update({f"v_node_{i + 1}": v for i, v in enumerate(np.linspace(-0.5, 0.5, nv))})
-        values.update({f"u_node_{j + 1}": u for j, u in enumerate(np.linspace(0.0, 1.0, nu))})
-    return values
 
 
 @dataclass(frozen=True)
@@ -212,15 +191,6 @@ def fit(
         history_evals=result.history_evals,
         history_cost=result.history_cost,
     )
-
-
-def scaled_bounds(values: Mapping[str, float], names: Sequence[str], low: float = 0.1, high: float = 10.0):
-    """Bounds by scaling the starting values (the paper's choice), with a symmetric range for values near 0."""
-    out = {}
-    for n in names:
-        v = float(values[n])
-        out[n] = (min(low * v, high * v), max(low * v, high * v)) if abs(v) > 1e-12 else (-1.0, 1.0)
-    return out
 
 
 # ------------------------------------------------------------------------------------------ step by step

@@ -49,8 +49,8 @@ from scipy import stats
 from scipy.interpolate import BSpline
 
 from ..models.fullcar import N_CORNERS, N_DOF
-from ..sim.kernel import fullcar_struts
 from ..sim.linear import foh_discretisation
+from ..sim.nonlinear import fullcar_struts
 
 Z95 = 1.959963984540054
 ALPHA = 1e-3  # significance level below which candidate_order reorders (attribution's family-wise level)

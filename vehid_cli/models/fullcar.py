@@ -16,16 +16,29 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-
-from ..config import VEHICLE_PARAMETERS, Vehicle
 
 N_DOF = 7
 N_CORNERS = 4
 DOF_NAMES = ("bounce", "roll", "pitch", "wheel1", "wheel2", "wheel3", "wheel4")
 FRONT = np.array([True, True, False, False])  # corners 1, 2 front; 3, 4 rear
+VEHICLE_PARAMETERS = (  # the 16 model parameters (SPEC section 1)
+    "m", "mf", "mr", "Ix", "Iy", "a1", "a2", "b1", "b2",
+    "kf", "kr", "ktf", "ktr", "kR", "cf", "cr",
+)  # fmt: skip
+
+
+class CarValues(Protocol):
+    """What a configured car offers the model: its 16 parameter values, wheelbase L and track w [m]
+    (config.Vehicle is one)."""
+
+    L: float
+    w: float
+
+    def values(self) -> dict[str, float]: ...
 
 
 def geometry(a1: ArrayLike, a2: ArrayLike, b1: ArrayLike, b2: ArrayLike) -> NDArray:
@@ -115,7 +128,7 @@ def assemble(p: Mapping[str, ArrayLike]) -> FullCarMatrices:
     return FullCarMatrices(M=M, C=C, K=K, B=B, G=G)
 
 
-def parameter_batch(vehicle: Vehicle, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:
+def parameter_batch(vehicle: CarValues, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:
     """The 16 parameters for a batch of cars: the configured car with some parameters replaced.
 
     Wheelbase and track stay at their configured values when a1/a2 or b1/b2 change (SPEC section 1):

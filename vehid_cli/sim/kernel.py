@@ -6,8 +6,8 @@ states z of the force laws:
     M qdd + C qd + K q + D' f = B y(t),     d = D q + E y,   dd = D qd + E yd,
     f, zd = force(d, dd, z, params)
 
-M, C, K, B the linear part; D maps coordinates to strut deflections (``fullcar_struts`` gives the full
-car's [G, -I]); E lets the road drive a strut directly (a damper on a test bench has n_q = 0 and d = y).
+M, C, K, B the linear part; D maps coordinates to strut deflections (``sim.nonlinear.fullcar_struts`` gives
+the full car's [G, -I]); E lets the road drive a strut directly (a damper on a test bench has n_q = 0 and d = y).
 The road y is sampled every dt and linear between samples (first-order hold), the assumption of the
 ``exact`` linear path, so the linear car through this kernel differs from ``exact`` by the scheme
 error only.
@@ -51,9 +51,6 @@ import numba
 import numpy as np
 from numba.core.caching import FunctionCache
 from numpy.typing import ArrayLike, NDArray
-
-from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
-from .linear import Response
 
 RK4, NEWMARK = 0, 1
 METHODS = {"rk4": RK4, "newmark": NEWMARK}
@@ -591,51 +588,6 @@ def integrate(
             unconverged,
         )
     return KernelResult(q=out_q, qd=out_v, qdd=out_a, force=out_f, z=out_z, unconverged=unconverged)
-
-
-def fullcar_struts(mats: FullCarMatrices) -> NDArray:
-    """D (..., 4, 7) = [G, -I]: suspension deflection of each corner (body point minus wheel) [m]."""
-    D = np.zeros(mats.batch_shape + (N_CORNERS, N_DOF))
-    D[..., :, :3] = mats.G
-    D[..., :, 3:] = -np.eye(N_CORNERS)
-    return D
-
-
-def simulate_fullcar(
-    mats: FullCarMatrices,
-    road: ArrayLike,
-    dt: float,
-    method: Literal["rk4", "newmark"],
-    force=no_force,
-    params: ArrayLike | None = None,
-    n_z: int = 0,
-) -> tuple[Response, KernelResult]:
-    """The full car with a strut force law added at each corner (on top of its linear springs and dampers).
-
-    Returns the Response (batch flattened to (P, n, .), or (n, .) for one car) and the raw kernel result.
-    """
-    P = int(np.prod(mats.batch_shape, dtype=int))
-    res = integrate(
-        method,
-        mats.M.reshape(P, N_DOF, N_DOF),
-        mats.C.reshape(P, N_DOF, N_DOF),
-        mats.K.reshape(P, N_DOF, N_DOF),
-        mats.B.reshape(P, N_DOF, N_CORNERS),
-        road,
-        dt,
-        force,
-        params,
-        n_z,
-        D=fullcar_struts(mats).reshape(P, N_CORNERS, N_DOF),
-    )
-    G = np.broadcast_to(mats.G, mats.batch_shape + (N_CORNERS, 3)).reshape(P, N_CORNERS, 3)
-    Gt = np.swapaxes(G, -1, -2)
-    q, qd, qdd = res.q, res.qd, res.qdd
-    disp, acc = q[..., :3] @ Gt, qdd[..., :3] @ Gt
-    if mats.batch_shape == ():
-        q, qd, qdd, disp, acc = q[0], qd[0], qdd[0], disp[0], acc[0]
-    t = np.arange(q.shape[-2]) * dt
-    return Response(t=t, q=q, qd=qd, qdd=qdd, disp=disp, acc=acc), res
 
 
 # ------------------------------------------------------------------------------------------ test bench

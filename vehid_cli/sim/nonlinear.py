@@ -21,8 +21,53 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..models.effects import effect_rows, strut_effects
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
-from .kernel import fullcar_struts, integrate
+from .kernel import KernelResult, integrate, no_force
 from .linear import Response
+
+
+def fullcar_struts(mats: FullCarMatrices) -> NDArray:
+    """D (..., 4, 7) = [G, -I]: suspension deflection of each corner (body point minus wheel) [m]."""
+    D = np.zeros(mats.batch_shape + (N_CORNERS, N_DOF))
+    D[..., :, :3] = mats.G
+    D[..., :, 3:] = -np.eye(N_CORNERS)
+    return D
+
+
+def simulate_fullcar(
+    mats: FullCarMatrices,
+    road: ArrayLike,
+    dt: float,
+    method: Literal["rk4", "newmark"],
+    force=no_force,
+    params: ArrayLike | None = None,
+    n_z: int = 0,
+) -> tuple[Response, KernelResult]:
+    """The full car with a strut force law added at each corner (on top of its linear springs and dampers).
+
+    Returns the Response (batch flattened to (P, n, .), or (n, .) for one car) and the raw kernel result.
+    """
+    P = int(np.prod(mats.batch_shape, dtype=int))
+    res = integrate(
+        method,
+        mats.M.reshape(P, N_DOF, N_DOF),
+        mats.C.reshape(P, N_DOF, N_DOF),
+        mats.K.reshape(P, N_DOF, N_DOF),
+        mats.B.reshape(P, N_DOF, N_CORNERS),
+        road,
+        dt,
+        force,
+        params,
+        n_z,
+        D=fullcar_struts(mats).reshape(P, N_CORNERS, N_DOF),
+    )
+    G = np.broadcast_to(mats.G, mats.batch_shape + (N_CORNERS, 3)).reshape(P, N_CORNERS, 3)
+    Gt = np.swapaxes(G, -1, -2)
+    q, qd, qdd = res.q, res.qd, res.qdd
+    disp, acc = q[..., :3] @ Gt, qdd[..., :3] @ Gt
+    if mats.batch_shape == ():
+        q, qd, qdd, disp, acc = q[0], qd[0], qdd[0], disp[0], acc[0]
+    t = np.arange(q.shape[-2]) * dt
+    return Response(t=t, q=q, qd=qd, qdd=qdd, disp=disp, acc=acc), res
 
 
 def upsample(road: NDArray, substeps: int) -> NDArray:
