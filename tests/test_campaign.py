@@ -9,6 +9,7 @@ import sys
 import h5py
 import numpy as np
 import pytest
+import yaml
 
 from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, needs_shared
 from vehid_cli.campaign import run_campaign
@@ -160,20 +161,40 @@ def test_identify_bad_input_exits_2(tmp_path, args, fragment):
     assert not (tmp_path / "c.h5").exists()
 
 
-def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path):
+def damper_config(tmp_path, runs: int = 4, budget: int = 150):
+    """A small synthetic damper campaign (Bingham on a sine bench, 2 % force noise)."""
+    cfg = {
+        "system": "damper",
+        "damper": {"model": "bingham", "parameters": {"k1": 2000.0, "x0": -0.05, "c0": 1500.0, "fc": 200.0}},
+        "bench": {"excitation": "sine", "amplitude": 0.025, "frequency": 0.8, "cycles": 2, "dt": 0.002},
+        "noise": {"level": 0.02},
+        "identify": {"unknowns": ["k1", "c0", "fc"], "bounds": [0.5, 2.0], "budget": budget, "runs": runs},
+    }
+    path = tmp_path / "damper.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+@pytest.mark.parametrize("system", ["vehicle", "damper"])
+def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path, system):
     """Acceptance: kill -9 a running `vehid identify` (2 worker processes), run it again, get the uninterrupted
-    campaign's content. The killed campaign's pool workers exit by themselves (SIGTERM, SIGINT: test_reliability)."""
+    campaign's content, for the car and for the damper (one pipeline). The killed campaign's pool workers exit by
+    themselves (SIGTERM, SIGINT: test_reliability)."""
     import os
     import signal
     import time
 
     from tests.test_reliability import children, running
 
-    sets = [x for s in SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"] for x in ("--set", s)]
-    whole = vehid("identify", BASE_CONFIG, *sets, "--jobs", 1, "-o", tmp_path / "whole.h5")
+    if system == "vehicle":
+        config = BASE_CONFIG
+        sets = [x for s in SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"] for x in ("--set", s)]
+    else:
+        config, sets = damper_config(tmp_path, runs=12, budget=400), []
+    whole = vehid("identify", config, *sets, "--jobs", 1, "-o", tmp_path / "whole.h5")
     assert whole.returncode == 0, whole.stderr
     target = tmp_path / "killed.h5"
-    cmd = [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), *sets, "--jobs", "2", "-o", str(target)]
+    cmd = [sys.executable, "-m", "vehid_cli", "identify", str(config), *sets, "--jobs", "2", "-o", str(target)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     partial = tmp_path / "killed.h5.partial"
     deadline = time.time() + 60
@@ -188,10 +209,50 @@ def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path):
     while time.time() < deadline and any(running(w) for w in workers):
         time.sleep(0.05)
     assert workers and not any(running(w) for w in workers), "pool workers outlived their killed campaign"
-    resumed = vehid("identify", BASE_CONFIG, *sets, "--jobs", 1, "-o", target)
+    resumed = vehid("identify", config, *sets, "--jobs", 1, "-o", target)
     assert resumed.returncode == 0, resumed.stderr
+    assert f"resumed {finished_before} of 12 runs" in resumed.stderr
     assert_same_content(tmp_path / "whole.h5", target)
     assert not partial.exists()
+
+
+def test_damper_campaign_is_parallel_and_resumes_bit_identically(tmp_path):
+    """The damper through the one runner: --jobs 1 and 2 give the same file; an interrupted campaign resumes
+    from its checkpoint to the same content."""
+    cfg = load_config(damper_config(tmp_path))
+    for jobs in (1, 2):
+        write_campaign_h5(tmp_path / f"j{jobs}.h5", run_campaign(cfg, jobs=jobs))
+    assert_same_content(tmp_path / "j1.h5", tmp_path / "j2.h5")
+
+    def interrupt_after_two(done, total):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    partial = tmp_path / "part.h5.partial"
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(cfg, jobs=1, checkpoint_dir=partial, on_run=interrupt_after_two)
+    notes = []
+    resumed = run_campaign(cfg, jobs=2, checkpoint_dir=partial, log=notes.append)
+    assert notes == [f"note: resumed 2 of 4 runs from {partial}"]
+    write_campaign_h5(tmp_path / "part.h5", resumed)
+    assert_same_content(tmp_path / "j1.h5", tmp_path / "part.h5")
+    back = read_campaign_h5(tmp_path / "part.h5")
+    assert back.system == "damper" and back.findings.model == "bingham"
+    assert [r.cost for r in back.records] == [r.cost for r in resumed.records]
+    assert all(r.evaluations == 150 for r in back.records)  # the evaluation budget, honoured exactly
+
+
+def test_identify_refuses_a_file_of_another_config_unless_forced(tmp_path):
+    out = tmp_path / "c.h5"
+    sets = [x for s in SMALL + ["identify.runs=2"] for x in ("--set", s)]
+    assert vehid("identify", BASE_CONFIG, *sets, "-o", out).returncode == 0
+    before = out.read_bytes()
+    other = vehid("identify", BASE_CONFIG, *sets, "--set", "noise.level=0.2", "-o", out)
+    assert other.returncode == 2 and "noise.level: 0.1 in the file, 0.2 now" in other.stderr
+    assert "--force" in other.stderr and out.read_bytes() == before
+    forced = vehid("identify", BASE_CONFIG, *sets, "--set", "noise.level=0.2", "-o", out, "--force")
+    assert forced.returncode == 0, forced.stderr
+    assert read_campaign_h5(out).config.noise.level == 0.2
 
 
 def test_converged_means_no_worse_than_the_truth_on_the_same_data():

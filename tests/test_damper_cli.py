@@ -65,10 +65,12 @@ def test_simulate_identify_round_trip(tmp_path):
     assert np.allclose(doc["J"], LEVEL**2, rtol=0.3)  # white noise of sigma = LEVEL std(F): J -> LEVEL^2
     assert len(set(doc["J"])) == 3  # three noise realisations
     with h5py.File(out) as h5:
-        assert h5.attrs["kind"] == "vehid.damper" and "system: damper" in h5.attrs["config_yaml"]
-        tr = h5["traces/00"]
+        assert h5.attrs["kind"] == "vehid.campaign" and h5.attrs["system"] == "damper"
+        assert "system: damper" in h5.attrs["config_yaml"]
+        tr = h5["damper/traces/00"]
         assert J(tr["measured"][()], tr["model"][()]) == pytest.approx(doc["J"][0], rel=1e-9)
-        assert bool(h5["realtime"].attrs["stable"])
+        np.testing.assert_allclose(h5["runs/cost"][()], doc["J"], rtol=1e-12)  # J is the campaign's cost
+        assert bool(h5["damper/realtime"].attrs["stable"])
 
     # identify from the simulated file: one fit from a random start, the truth declared
     out2 = tmp_path / "fromfile.h5"
@@ -78,13 +80,15 @@ def test_simulate_identify_round_trip(tmp_path):
     with h5py.File(out2) as h5:
         est = dict(zip([n.decode() for n in h5["parameters"][()]], h5["runs/estimate"][0], strict=True))
         assert h5.attrs["data_file"] == str(bench)
-        measured = h5["traces/00/measured"][()]
+        measured = h5["damper/traces/00/measured"][()]
     for name, value in est.items():
         assert value == pytest.approx(TRUTH[name], rel=0.05), name
     np.testing.assert_allclose(measured, table["force"], rtol=1e-9)  # the file's force column, unchanged
 
     # report: markdown and the figure of the run
-    res = vehid("report", out, out2, "--format", "md", "--plots", tmp_path / "figs")
+    res = vehid("report", out, out2, "--format", "md")  # simulated vs measured data: not comparable
+    assert res.returncode == 2 and "not comparable" in res.stderr and "identify.truth" in res.stderr
+    res = vehid("report", out, out2, "--format", "md", "--plots", tmp_path / "figs", "--allow-mixed")
     assert res.returncode == 0, res.stderr
     assert "#### Cost J (Eq. 7)" in res.stdout and "Real-time check" in res.stdout
     assert len(list((tmp_path / "figs").glob("*.png"))) == 2
@@ -103,14 +107,15 @@ def test_measured_mr_damper_small_window(tmp_path):
     assert res.returncode == 0, res.stderr
     raw = np.genfromtxt(data, delimiter=",", names=True)
     with h5py.File(out) as h5:
-        train, held = h5["traces/00"], h5["traces/01"]
+        train, held = h5["damper/traces/00"], h5["damper/traces/01"]
         keep = slice(0, train["t"].size)
         assert abs(train["t"].size - 600) <= 1  # 6 s at 10 ms (the edge sample depends on round-off)
         np.testing.assert_allclose(train["measured"][()], raw["force_N"][keep])
         np.testing.assert_allclose(train["x"][()], 1e-3 * raw["pos_mm"][keep])
         J_train = J(train["measured"][()], train["model"][()])
-        assert J_train == pytest.approx(float(h5["runs/J"][0]), rel=1e-9)
-        assert J(held["measured"][()], held["model"][()]) == pytest.approx(float(h5["validation/J"][0]), rel=1e-9)
+        assert J_train == pytest.approx(float(h5["runs/cost"][0]), rel=1e-9)
+        held_J = float(h5["damper/validation/J"][0])
+        assert J(held["measured"][()], held["model"][()]) == pytest.approx(held_J, rel=1e-9)
     assert J_train < 0.1  # a viscous + friction + spring model explains over 90 % of the force variance
 
 

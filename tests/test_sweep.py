@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import csv
+import io
+import json
 import subprocess
 import sys
+from pathlib import Path
 
+import h5py
+import numpy as np
 import pytest
 
 from tests.conftest import BASE_CONFIG, ROOT
@@ -68,19 +74,32 @@ def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
     assert (tmp_path / "index.csv").read_text().count("\n") == 5
     again = vehid(*args)
     assert "0 campaign(s) run, 4 up to date" in again.stdout
-    changed = vehid(*args, "--set", "identify.seed=9")
-    assert "4 campaign(s) run" in changed.stdout
+    changed = vehid(*args, "--set", "identify.seed=9")  # files of another config: refused before any work
+    assert changed.returncode == 2 and "4 campaign file(s) here hold other configs" in changed.stderr
+    assert "identify.seed: 2015 in the file, 9 now" in changed.stderr
+    forced = vehid(*args, "--set", "identify.seed=9", "--force")
+    assert "4 campaign(s) run" in forced.stdout
 
 
-def test_sweep_of_a_damper_config_is_refused_before_anything_is_written(tmp_path):
-    """Was an AttributeError (exit 1) after writing index.csv; now exit 2 naming the config's system."""
-    from typer.testing import CliRunner
-
-    from vehid_cli.cli import app
-
+def test_sweep_of_a_damper_config_runs_and_reports_like_the_car(tmp_path):
+    """Was an AttributeError (exit 1) after writing index.csv: a damper sweep now runs through the one pipeline,
+    one campaign file per setting (system = damper), and `report` reads the directory."""
     config = ROOT / "configs" / "dampers" / "synthetic_force_map_steps.yaml"
     out = tmp_path / "sweep"
-    result = CliRunner().invoke(app, ["sweep", str(config), "--vary", "identify.seed=1,2", "-o", str(out)])
-    assert result.exit_code == 2, result.output
-    assert "system" in result.output and "damper" in result.output
-    assert not out.exists()
+    args = ["sweep", config, "--vary", "identify.seed=1,2", "-o", out, "--runs", "2", "--jobs", "2"]
+    res = vehid(*args, "--set", "identify.budget=60")
+    assert res.returncode == 0, res.stderr
+    assert "2 campaign(s) run" in res.stdout
+    estimates = []
+    for name in ("seed-1.h5", "seed-2.h5"):
+        with h5py.File(out / name) as h5:
+            assert h5.attrs["system"] == "damper" and h5.attrs["runs"] == 2
+            assert json.loads(h5.attrs["sweep_vary"]) == ["identify.seed"]
+            estimates.append(h5["runs/estimate"][()])
+    assert not np.array_equal(*estimates)  # the seeds drew different noise
+    again = vehid(*args, "--set", "identify.budget=60")
+    assert "0 campaign(s) run, 2 up to date" in again.stdout
+    report = vehid("report", out, "--format", "csv")
+    assert report.returncode == 0, report.stderr
+    rows = list(csv.DictReader(io.StringIO(report.stdout)))
+    assert {Path(r["file"]).name for r in rows} == {"seed-1.h5", "seed-2.h5"}

@@ -168,23 +168,6 @@ def _saved_runs(output: Path) -> str:
     return f"{n} finished run(s) saved in {partial}; run the same command again to resume"
 
 
-def _penalty_note(s) -> str | None:
-    """A note when evaluations made the model unstable (NaN/Inf) and got the penalty cost, else None."""
-    total = int(s.evaluations.sum())
-    if not s.penalised:
-        return None
-    note = (
-        f"{s.penalised} of {total} evaluations ({100 * s.penalised / max(total, 1):.2g} %) made the model unstable or "
-        "non-finite and got the finite penalty cost (counted in 'penalised'; the runs went on)"
-    )
-    if s.at_penalty:
-        note += (
-            f"; [bold]{s.at_penalty} of {len(s.evaluations)} run(s) found no usable parameter set[/] (best cost = the "
-            "penalty): their estimates are meaningless and bias the mean; narrow identify.bounds or identify.limits"
-        )
-    return note
-
-
 def _version(value: bool) -> None:
     if value:
         out.print(f"vehid {__version__}")
@@ -257,7 +240,7 @@ def simulate(
 
 def _simulate_damper(cfg: DamperConfig, config: Path, target: Path, plot: Path | None, seed: int) -> None:
     """`vehid simulate` for a damper: the configured bench run, force noise from run 0's noise stream."""
-    from .damper_campaign import simulate_bench, write_bench_csv, write_bench_h5
+    from .systems.damper import simulate_bench, write_bench_csv, write_bench_h5
 
     run = simulate_bench(cfg, run_streams(seed, 0).noise)
     h = run.history
@@ -282,27 +265,6 @@ def _simulate_damper(cfg: DamperConfig, config: Path, target: Path, plot: Path |
     )
 
 
-def _identify_damper(
-    cfg: DamperConfig, config: Path, data: Path | None, output: Path | None, json_out: Path | None
-) -> None:
-    """`vehid identify` for a damper: a campaign on synthetic data, one fit (plus validation) on measured data."""
-    from .damper_campaign import result_json, run_identification, write_result_h5
-    from .damper_report import parameter_table
-    from .results import write_json
-
-    target = _results_target(config, cfg, output, json_out)
-    measured = data is not None or (cfg.data is not None and cfg.data.file is not None)
-    total = 1 if measured else cfg.identify.runs
-    with _progress("identify") as progress:
-        bar = progress.add_task(f"{cfg.damper.model}/{cfg.identify.algorithm.name}", total=total)
-        result = run_identification(cfg, data, on_run=lambda d, n: progress.update(bar, completed=d))
-    write_result_h5(target, result)
-    if json_out is not None:
-        write_json(json_out, result_json(result))
-    out.print(parameter_table(result, str(target)))
-    out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
-
-
 @app.command()
 @_guarded
 def identify(
@@ -322,8 +284,11 @@ def identify(
     set_: SetOption = None,
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite an output file that holds a campaign of another config.")
+    ] = False,
 ) -> None:
-    """Run a statistical identification campaign: one HDF5 file, and the RE/NRE summary table.
+    """Run a statistical identification campaign (a car or a damper): one HDF5 file, and the summary table.
 
     Each run identifies from its own noise realisation with its own optimizer stream, so results are
     identical for any --jobs and executor (--executor dask --scheduler tcp://HOST:PORT runs them on a Dask
@@ -333,43 +298,28 @@ def identify(
 
     from .campaign import run_campaign_to_file
     from .executor import check_executor_options, make_executor
-    from .report.tables import summary_table
+    from .report import campaign_notes, rich_tables
     from .results import campaign_json, write_json
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
-    if isinstance(cfg, DamperConfig):
-        if executor != "local" or scheduler is not None:
-            raise InputError("--executor and --scheduler are for vehicle campaigns; damper identification runs here")
-        _identify_damper(cfg, config, data, output, json_out)
-        return
     target = _results_target(config, cfg, output, json_out)
     with (
         _interruptible(lambda: _saved_runs(target)),
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
         _progress("identify") as progress,
     ):
-        bar = progress.add_task(f"{cfg.identify.algorithm.name}/{cfg.identify.objective}", total=cfg.identify.runs)
+        bar = progress.add_task(f"{cfg.identify.algorithm.name}", total=None)
         campaign = run_campaign_to_file(
-            cfg, target, data, executor=pool, on_run=lambda d, n: progress.update(bar, completed=d), log=_warn
-        )
+            cfg, target, data, executor=pool, log=_warn, force=force,
+            on_run=lambda d, n: progress.update(bar, completed=d, total=n),
+        )  # fmt: skip
     if json_out is not None:
         write_json(json_out, campaign_json(campaign))
-    out.print(summary_table(campaign))
-    s = campaign.summary
-    if s.model_inadequate:
-        out.print(
-            f"[yellow]warning:[/] at the estimates the residual power is {s.chi2_median:.3g} times the noise power "
-            f"the data implies (an adequate model gives at most {s.chi2_limit:.3g}, noise from "
-            f"{campaign.sigma_source}): the model lacks something, or noise.level is too small; the estimates are "
-            "then biased"
-        )
-    unidentifiable = campaign.bound.unidentifiable()
-    if unidentifiable:
-        out.print(f"[yellow]warning:[/] the sensors cannot identify {', '.join(unidentifiable)} (Fisher information)")
-    penalised = _penalty_note(s)
-    if penalised:
-        out.print(f"[yellow]note:[/] {penalised}")
+    for table in rich_tables([campaign], [str(target)]):
+        out.print(table)
+    for note in campaign_notes(campaign):
+        out.print(note)
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
 
 
@@ -389,8 +339,11 @@ def sweep(
     set_: SetOption = None,
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite campaign files in the directory that hold other configs.")
+    ] = False,
 ) -> None:
-    """Run the Cartesian product of campaigns, one HDF5 file each, plus index.csv.
+    """Run the Cartesian product of campaigns (a car or a damper), one HDF5 file each, plus index.csv.
 
     Campaigns whose file already holds the same resolved config are skipped, so a sweep can be rerun
     to finish what an interrupted one left; --shard K/N splits the work among independent processes, and
@@ -401,7 +354,7 @@ def sweep(
 
     from .campaign import run_campaign_to_file
     from .executor import check_executor_options, make_executor
-    from .sweep import parse_shard, parse_vary, plan_sweep, run_sweep, write_index
+    from .sweep import check_no_other_campaigns, parse_shard, parse_vary, plan_sweep, run_sweep, write_index
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     overrides = _campaign_overrides(set_, runs, seed, jobs)
@@ -411,6 +364,8 @@ def sweep(
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("sweep output must be a directory", source=str(out_dir))
     planned = plan_sweep(config, overrides, variations, out_dir)
+    if not force:
+        check_no_other_campaigns(planned)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_index(out_dir, planned, log=_warn)
     mine = [p for p in planned if p.index % n == k - 1]
@@ -435,7 +390,9 @@ def sweep(
             progress.update(bar, description=p.path.stem)
             current.append(p.path)
             attrs = {"sweep_vary": varied, "sweep_overrides": " ".join(p.overrides)}
-            s = run_campaign_to_file(p.config, p.path, executor=pool, log=_warn, attrs=attrs, lock=False).summary
+            s = run_campaign_to_file(
+                p.config, p.path, executor=pool, log=_warn, attrs=attrs, lock=False, force=True
+            ).summary  # files of other configs were refused up front (unless --force)
             nre = "–" if s.nre_percent is None else f"{s.nre_percent:.3f} %"
             pen = f", {s.penalised} evaluations penalised" if s.penalised else ""
             pen += f" ({s.at_penalty} run(s) found no usable parameter set)" if s.at_penalty else ""
@@ -489,9 +446,8 @@ def report(
     of different experiments (config keys other than the method keys and a sweep's varied keys), data files
     or code versions are refused unless --allow-mixed is given.
     """
-    from .report import FORMATS, collect, load_published, render, sweep_notes
+    from .report import FORMATS, collect, load_published, render, rich_tables, sweep_notes
     from .report.compare import check_comparable
-    from .report.tables import summary_table
 
     if fmt not in FORMATS:
         raise InputError(f"--format must be one of {', '.join(FORMATS)}, got '{fmt}'")
@@ -499,24 +455,20 @@ def report(
         check_writable(output, (".md", ".csv", ".tex", ".json", ".txt"))
     if plots is not None and plots.exists() and not plots.is_dir():
         raise InputError("--plots must name a directory", source=str(plots))
-    damper_files = _damper_result_files(paths)
-    if damper_files:
-        _report_dampers(damper_files, fmt, output, plots)
-        return
     campaigns, files = collect(paths)
     for note in sweep_notes(paths):
         _warn(f"warning: {note}")
     for note in check_comparable(files, allow_mixed):
         _warn(f"note (--allow-mixed): {note}")
     if fmt == "table":
-        text = _tables(output, [summary_table(c) for c in campaigns])
+        text = _tables(output, rich_tables(campaigns, files))
     else:
         text = render(campaigns, files, fmt, load_published(published) if published else None)
     _emit(text, output)
     if plots is not None:
-        from .report.plots import write_campaign_plots
+        from .report.figures import write_plots
 
-        written = write_campaign_plots(campaigns, files, plots)
+        written = write_plots(campaigns, files, plots)
         out.print(f"wrote {len(written)} figure(s) to {plots}")
 
 
@@ -545,44 +497,6 @@ def _emit(text: str | None, output: Path | None) -> None:
     with atomic_path(output) as tmp:
         tmp.write_text(text)
     out.print(f"wrote {output}")
-
-
-def _damper_result_files(paths: list[Path]) -> list[Path]:
-    """The damper results files among `paths` (directories searched for *.h5); [] when there are none.
-    Mixing damper results with vehicle campaign files is an error: they make different tables."""
-    from .damper_campaign import is_result_file
-
-    files = []
-    for path in paths:
-        files += [f for f in sorted(path.glob("*.h5")) if is_result_file(f)] if path.is_dir() else [path]
-    damper = [f for f in files if f.suffix.lower() in (".h5", ".hdf5") and f.is_file() and is_result_file(f)]
-    if damper and len(damper) != len(files) and not all(p.is_dir() for p in paths):
-        other = next(f for f in files if f not in damper)
-        raise InputError(
-            "is not a damper results file; report damper and vehicle results separately", source=str(other)
-        )
-    return damper
-
-
-def _report_dampers(files: list[Path], fmt: str, output: Path | None, plots: Path | None) -> None:
-    """`vehid report` for damper results: tables (table, md, csv, json) and force figures."""
-    from . import damper_report as dr
-    from .damper_campaign import read_result_h5
-
-    results = [read_result_h5(f) for f in files]
-    names = [str(f) for f in files]
-    if fmt == "latex":
-        raise InputError("--format latex is not available for damper results; use table, md, csv or json")
-    if fmt == "table":
-        text = _tables(output, [dr.parameter_table(res, name) for res, name in zip(results, names, strict=True)])
-    else:
-        text = {"md": dr.markdown, "csv": dr.csv_text, "json": dr.json_text}[fmt](results, names)
-    _emit(text, output)
-    if plots is not None:
-        from .report.damper_plots import write_damper_plots
-
-        written = write_damper_plots(results, [dr.label(r, n) for r, n in zip(results, names, strict=True)], plots)
-        out.print(f"wrote {len(written)} figure(s) to {plots}")
 
 
 @app.command()

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from .errors import InputError
 from .models.fullcar import VEHICLE_PARAMETERS
@@ -238,6 +238,14 @@ class Algorithm(_Section):
     iterations: Annotated[int, Field(ge=1)] = 50
 
 
+def _start_alias(value: object) -> object:
+    """`nominal` is the old name of `config` (vehicle configs before the vocabulary was shared)."""
+    return "config" if value == "nominal" else value
+
+
+Start = Annotated[Literal["auto", "random", "config"], BeforeValidator(_start_alias)]  # one vocabulary for all systems
+
+
 class Identify(_Section):
     """What to identify and how. Bounds are relative to the configured (true or nominal) values."""
 
@@ -253,10 +261,10 @@ class Identify(_Section):
     budget: Annotated[int, Field(ge=1)] | None = Field(
         None, description="model evaluations per run; default population x iterations"
     )
-    start: Literal["random", "nominal"] = Field(
+    start: Start = Field(
         "random",
-        description="where local methods (lsq, nelder-mead) start: a random point in the box from the run's "
-        "stream, or the configured values",
+        description="where a run starts: random (the optimizer's own random start from the run's stream), config "
+        "(the configured values), auto (random for simulated data, config for measured data)",
     )
     truth: Literal["auto", "config", "none"] = Field(
         "auto",
@@ -509,7 +517,7 @@ class DamperIdentify(_Section):
     )
     runs: Annotated[int, Field(ge=1)] = 10
     seed: Annotated[int, Field(ge=0)] = 2013
-    start: Literal["auto", "random", "config"] = Field(
+    start: Start = Field(
         "auto",
         description="where a fit starts: a random point in the box (from the run's stream) or the configured "
         "values; auto: random for synthetic data, config for measured data",
@@ -892,3 +900,13 @@ def scaled_bounds(
         v = float(values[n])
         out[n] = (min(low * v, high * v), max(low * v, high * v)) if abs(v) > 1e-12 else (-1.0, 1.0)
     return out
+
+
+def flatten(node, prefix: str = "") -> dict[str, object]:
+    """A nested mapping as dotted keys -> leaf values (an empty mapping stays a leaf)."""
+    if isinstance(node, dict):
+        out: dict[str, object] = {}
+        for key, value in node.items():
+            out.update(flatten(value, f"{prefix}{key}."))
+        return out or {prefix[:-1]: {}}
+    return {prefix[:-1]: node}

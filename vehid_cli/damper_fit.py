@@ -1,5 +1,5 @@
-"""Damper identification (Fleps-Dezasse section 4): the cost J, bounded fits, the step-by-step procedure,
-and the real-time check.
+"""Damper identification (Fleps-Dezasse section 4): the cost J, bounded fits and the real-time check (the
+step-by-step procedure is `systems/damper.py`).
 
 J (Eq. 7) is the mean squared force error over the variance of the measured force. A candidate whose
 simulation blows up gets a finite penalty larger than the initial cost, as in the paper, so an
@@ -130,8 +130,8 @@ def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistor
 
 
 @dataclass(frozen=True)
-class Fit:
-    """One identification: the values found, J before and after, and the effort."""
+class BenchFit:
+    """One fit on a bench run: the values found, J before and after, and the effort."""
 
     spec: DamperSpec
     unknowns: tuple[str, ...]
@@ -144,19 +144,15 @@ class Fit:
     history_cost: NDArray = field(repr=False, default_factory=lambda: np.zeros(0))
 
 
-def fit(
+def j_problem(
     spec: DamperSpec,
     history: BenchHistory,
     unknowns: Sequence[str],
     bounds: Mapping[str, tuple[float, float]],
-    *,
-    algorithm: str = "nelder-mead",
-    budget: int = 2000,
-    population: int = 20,
-    rng: np.random.Generator,
     substeps: int = 1,
-) -> Fit:
-    """Minimise J over `unknowns` in their bounds, starting from the spec's values."""
+) -> tuple[Problem, NDArray, float]:
+    """J over `unknowns` in their bounds as the optimizers' Problem, the start (the spec's values, clipped into the
+    box) and J there; an unstable candidate costs PENALTY_FACTOR x J at the start (at least 10)."""
     if history.force is None:
         raise ValueError("a fit needs a measured force")
     unknowns = tuple(unknowns)
@@ -176,13 +172,30 @@ def fit(
 
     J0 = float(cost(x0[None, :])[0])
     penalty = PENALTY_FACTOR * max(J0 if np.isfinite(J0) else 1.0, 1.0)
-    problem = Problem(lower, upper, cost, residuals=cost_and_residuals, penalty=penalty, names=unknowns)
+    return Problem(lower, upper, cost, residuals=cost_and_residuals, penalty=penalty, names=unknowns), x0, J0
+
+
+def fit(
+    spec: DamperSpec,
+    history: BenchHistory,
+    unknowns: Sequence[str],
+    bounds: Mapping[str, tuple[float, float]],
+    *,
+    algorithm: str = "nelder-mead",
+    budget: int = 2000,
+    population: int = 20,
+    rng: np.random.Generator,
+    substeps: int = 1,
+) -> BenchFit:
+    """Minimise J over `unknowns` in their bounds, starting from the spec's values, in exactly `budget` model
+    evaluations (J at the start is the first) unless the algorithm converges sooner."""
+    problem, x0, J0 = j_problem(spec, history, unknowns, bounds, substeps)
     optimizer = get_optimizer(algorithm, population=population, iterations=max(1, budget // population))
-    result = optimizer.minimize(problem, rng, budget=budget, x0=x0)
-    best = spec.with_values(dict(zip(unknowns, result.x, strict=True)))
-    return Fit(
+    result = optimizer.minimize(problem, rng, budget=max(budget - 1, 1), x0=x0)
+    best = spec.with_values(dict(zip(problem.names, result.x, strict=True)))
+    return BenchFit(
         spec=best,
-        unknowns=unknowns,
+        unknowns=tuple(problem.names),
         J_initial=J0,
         J=float(result.cost),
         evaluations=result.evaluations + 1,
@@ -191,40 +204,6 @@ def fit(
         history_evals=result.history_evals,
         history_cost=result.history_cost,
     )
-
-
-# ------------------------------------------------------------------------------------------ step by step
-
-
-@dataclass(frozen=True)
-class Step:
-    """One stage of the step-by-step identification (Fleps-Dezasse section 4.2)."""
-
-    name: str
-    history: BenchHistory
-    unknowns: tuple[str, ...]
-    bounds: Mapping[str, tuple[float, float]]
-
-
-def step_by_step(
-    spec: DamperSpec,
-    steps: Sequence[Step],
-    *,
-    algorithm: str = "nelder-mead",
-    budget: int = 2000,
-    rng: np.random.Generator,
-    substeps: int = 1,
-) -> list[Fit]:
-    """Run the stages in order, each starting from (and keeping) what the previous ones found."""
-    fits = []
-    for step in steps:
-        result = fit(
-            spec, step.history, step.unknowns, step.bounds, algorithm=algorithm, budget=budget, rng=rng,
-            substeps=substeps,
-        )  # fmt: skip
-        fits.append(result)
-        spec = result.spec
-    return fits
 
 
 # ------------------------------------------------------------------------------------------ real time

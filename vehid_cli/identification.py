@@ -144,9 +144,10 @@ class Task:
         """Simulated data without noise: the bound is zero (the weights keep a floor only to stay finite)."""
         return self.measured is None and self.config.noise.level == 0
 
-    def bound(self) -> CramerRao:
-        """The Cramér–Rao bound of this experiment at the truth (or at the nominal car when it is unknown)."""
-        at = self.truth if self.truth is not None else self.nominal
+    def bound(self, at: NDArray | None = None) -> CramerRao:
+        """The Cramér–Rao bound of this experiment at `at` (default: the truth, or the nominal car when unknown)."""
+        if at is None:
+            at = self.truth if self.truth is not None else self.nominal
         bound = cramer_rao(self.experiment, self.names, at, self.sigma)
         if self.noise_free:  # the bound scales with sigma, and sigma is zero
             bound = dataclasses.replace(bound, re_sd_percent=np.zeros_like(bound.re_sd_percent), nre_rms_percent=0.0)

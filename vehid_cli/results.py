@@ -15,11 +15,17 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import yaml
 
+from .config import config_from_dict, flatten
+from .crlb import CramerRao
 from .data import atomic_path
+from .errors import InputError
 from .experiment import SimulatedRun
 from .models.fullcar import DOF_NAMES
 from .provenance import provenance
+from .records import Campaign, RunRecord, summarise
+from .systems import SYSTEMS
 
 
 def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
@@ -87,8 +93,6 @@ def check_integrity(path: str | Path) -> str | None:
     """InputError naming the file if it carries a vehid checksum its bytes no longer match (or a damaged one);
     the checksum when it matches; None for an HDF5 file without one (written before checksums, or by another
     tool: HDF5 then reports what it finds)."""
-    from .errors import InputError
-
     source = str(path)
     try:
         with open(path, "rb") as fh:
@@ -117,15 +121,19 @@ def check_integrity(path: str | Path) -> str | None:
 
 
 def write_campaign_h5(path: str | Path, campaign, attrs: Mapping[str, str] | None = None) -> None:
-    """One campaign in one file, written atomically. Layout (README, "Campaign files"):
+    """One campaign of any system in one file, written atomically. Layout (README, "Campaign files"):
 
-    attrs: kind, config_yaml, config_sha256, seed, runs, objective, algorithm, data_file, data_sha256,
-    sigma_source, provenance, `attrs` (e.g. a sweep's varied keys); the user block holds the file's checksum
+    attrs: kind, system (vehicle, damper), config_yaml, config_sha256, seed, runs, objective (f1, f2, wls; J for
+    a damper), algorithm, data_file, data_sha256, sigma_source, provenance, `attrs` (e.g. a sweep's varied keys);
+    the user block holds the file's checksum
     /parameters (D,) names; /truth (D,) (NaN when unknown; attr known); /nominal, /bounds (D, 2)
     /runs/{estimate (N, D), cost, evaluations, penalised, wall_s (N,), history_evals, history_cost (N, H)}
     /summary/{mean, sd, re_percent, per_run_nre_percent, ...} with scalar figures as attributes
     /crlb/{re_sd_percent (D,), fisher (D, D), identifiable (D,)} with nre_rms_percent, condition attributes
-    /noise_sigma/<family> (4,) noise standard deviation per channel used by wls and the bound
+    /noise_sigma/<family> (4,) noise standard deviation per channel used by wls and the bound (a damper: force (1,))
+    /runs/initial_cost (N,): the cost at the start (a damper fit's J before; NaN when not recorded)
+    /<system>/...: what the system concluded after the runs (a damper: model_names, model_values, validation/{files,
+    J}, realtime attrs, traces/<k>/{t, x, v, measured, model} with attrs name, J)
     """
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w", userblock_size=USERBLOCK) as h5:
@@ -137,14 +145,18 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
     cfg, s, b = campaign.config, campaign.summary, campaign.bound
     D = len(campaign.names)
     h5.attrs["kind"] = CAMPAIGN_KIND
+    h5.attrs["system"] = campaign.system
     h5.attrs["config_yaml"] = cfg.to_yaml()
     h5.attrs["config_sha256"] = cfg.digest()
     h5.attrs["seed"] = cfg.identify.seed
     h5.attrs["seed_scheme"] = SEED_SCHEME
     h5.attrs["runs"] = len(campaign.records)
-    h5.attrs["objective"] = cfg.identify.objective
+    h5.attrs["objective"] = objective_of(campaign)
     h5.attrs["algorithm"] = cfg.identify.algorithm.name
-    h5.attrs["sensors"] = cfg.sensors
+    if campaign.system == "vehicle":
+        h5.attrs["sensors"] = cfg.sensors
+    else:
+        h5.attrs["model"] = cfg.damper.model
     h5.attrs["noise_level"] = cfg.noise.level
     h5.attrs["data_file"] = campaign.data_file or ""
     h5.attrs["data_sha256"] = campaign.data_sha256 or ""
@@ -167,6 +179,7 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
     runs.create_dataset("wall_s", data=np.array([r.wall_s for r in recs]))
     runs.create_dataset("truth_cost", data=np.array([r.truth_cost for r in recs]))
     runs.create_dataset("chi2", data=np.array([r.chi2 for r in recs]))
+    runs.create_dataset("initial_cost", data=np.array([r.initial_cost for r in recs]))
     runs.create_dataset("history_evals", data=_padded([r.history_evals for r in recs], -1).astype(np.int64))
     runs.create_dataset("history_cost", data=_padded([r.history_cost for r in recs], np.nan))
     sg = h5.create_group("summary")
@@ -195,6 +208,13 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
     ng = h5.create_group("noise_sigma")
     for family, sigma in campaign.sigma.items():
         ng.create_dataset(family, data=sigma)
+    if campaign.findings is not None:
+        campaign.findings.write_h5(h5.create_group(campaign.system))
+
+
+def objective_of(campaign: Campaign) -> str:
+    """What a campaign's cost is: the car's objective (f1, f2, wls) or J (Eq. 7) for a damper."""
+    return SYSTEMS[campaign.system].objective if campaign.system != "vehicle" else campaign.config.identify.objective
 
 
 def finite_or_none(value) -> float | None:
@@ -256,16 +276,16 @@ def campaign_json(campaign) -> dict:
         "converged_runs": s.converged,
         "chi2_per_sample": s.chi2_median,
         "model_inadequate": s.model_inadequate,
-        "objective": campaign.config.identify.objective,
+        "objective": objective_of(campaign),
         "algorithm": campaign.config.identify.algorithm.name,
         "noise_level": campaign.config.noise.level,
+        "system": campaign.system,
+        **({} if campaign.findings is None else campaign.findings.to_json(campaign)),
     }
 
 
 def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
     """Open a results file for reading, checking its kind; InputError for a missing, unreadable or other file."""
-    from .errors import InputError
-
     source = str(path)
     try:
         check_integrity(path)
@@ -287,13 +307,6 @@ def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
 
 def read_campaign_h5(path: str | Path):
     """Read a campaign file back into a `Campaign` (raises InputError for a file that is not one)."""
-    import yaml
-
-    from .campaign import Campaign, RunRecord, summarise
-    from .config import config_from_dict
-    from .crlb import CramerRao
-    from .errors import InputError
-
     source = str(path)
     with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
         try:
@@ -305,6 +318,7 @@ def read_campaign_h5(path: str | Path):
             pen, wall = runs["penalised"][()], runs["wall_s"][()]
             tcost = runs["truth_cost"][()]
             chi2 = runs["chi2"][()]
+            initial = runs["initial_cost"][()] if "initial_cost" in runs else np.full(len(est), np.nan)
             hev, hco = runs["history_evals"][()], runs["history_cost"][()]
             records = tuple(
                 RunRecord(
@@ -318,6 +332,7 @@ def read_campaign_h5(path: str | Path):
                     history_cost=hco[i][~np.isnan(hco[i])],
                     truth_cost=float(tcost[i]),
                     chi2=float(chi2[i]),
+                    initial_cost=float(initial[i]),
                 )
                 for i in range(len(est))
             )
@@ -337,11 +352,16 @@ def read_campaign_h5(path: str | Path):
             )  # fmt: skip
             bounds = h5["bounds"][()]
             sigma = {k: h5["noise_sigma"][k][()] for k in h5["noise_sigma"]}
+            system = str(h5.attrs.get("system", "vehicle"))
+            if system not in SYSTEMS:
+                raise ValueError(f"unknown system {system!r}")
+            kind = SYSTEMS[system].findings_type
+            findings = None if kind is None else kind.read_h5(h5[system])
             return Campaign(
                 config=config, data_file=h5.attrs["data_file"] or None, names=names, truth=truth,
                 nominal=h5["nominal"][()], lower=bounds[:, 0], upper=bounds[:, 1], sigma=sigma,
                 sigma_source=str(h5.attrs["sigma_source"]), records=records, bound=bound, summary=summary,
-                data_sha256=str(h5.attrs.get("data_sha256", "")) or None,
+                data_sha256=str(h5.attrs.get("data_sha256", "")) or None, system=system, findings=findings,
             )  # fmt: skip
         except (KeyError, ValueError, TypeError, OSError, RuntimeError, yaml.YAMLError) as exc:  # reactions to damage
             raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None
@@ -350,11 +370,31 @@ def read_campaign_h5(path: str | Path):
 def campaign_file_digest(path: str | Path) -> str:
     """The config digest of a whole, undamaged campaign file (InputError for a damaged or foreign one): what a
     sweep compares before it skips a campaign as up to date."""
-    from .errors import InputError
-
     source = str(path)
     with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
         try:
             return str(h5.attrs["config_sha256"])
         except (KeyError, OSError, RuntimeError) as exc:
             raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None
+
+
+def config_difference(path: str | Path, config, data_sha256: str | None) -> list[str]:
+    """How the campaign stored in `path` differs from `config` (and the data file's SHA-256): dotted keys with
+    both values, or the data file; [] when it is the same campaign. InputError for a damaged or foreign file."""
+    source = str(path)
+    with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
+        try:
+            stored = yaml.safe_load(str(h5.attrs["config_yaml"]))
+            stored_data = str(h5.attrs.get("data_sha256", "")) or None
+        except (KeyError, OSError, RuntimeError, yaml.YAMLError) as exc:
+            raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None
+    mine = flatten(yaml.safe_load(config.to_yaml()))
+    theirs = flatten(stored if isinstance(stored, dict) else {})
+    diffs = [
+        f"{k}: {theirs.get(k, '(absent)')!r} in the file, {mine.get(k, '(absent)')!r} now"
+        for k in sorted(set(mine) | set(theirs))
+        if mine.get(k, "(absent)") != theirs.get(k, "(absent)")
+    ]
+    if stored_data != data_sha256:
+        diffs.append("the data file's bytes (SHA-256) differ")
+    return diffs

@@ -23,10 +23,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import Config, DamperConfig, load_config
+from .config import AnyConfig, load_config
 from .data import atomic_path
 from .errors import InputError
 from .locking import Busy, exclusive
+from .results import campaign_file_digest, config_difference
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,7 @@ class Variation:
 class PlannedCampaign:
     index: int
     overrides: tuple[str, ...]  # the --set lines that make this campaign
-    config: Config
+    config: AnyConfig
     path: Path
 
 
@@ -101,13 +102,6 @@ def plan_sweep(config_path: str | Path, base_overrides: Sequence[str], variation
     for index, combo in enumerate(itertools.product(*(v.values for v in variations))):
         overrides = tuple(f"{v.key}={value}" for v, value in zip(variations, combo, strict=True))
         config = load_config(config_path, list(base_overrides) + list(overrides))
-        if isinstance(config, DamperConfig):  # the damper has its own campaign runner, not a sweep's yet
-            raise InputError(
-                "vehid sweep runs vehicle campaigns; for a damper config (system: damper) run vehid identify "
-                "once per setting",
-                source=str(config_path),
-                key="system",
-            )
         name = "_".join(_slug(v.key, value) for v, value in zip(variations, combo, strict=True))
         planned.append(PlannedCampaign(index, overrides, config, out_dir / f"{name}.h5"))
     names = [p.path.name for p in planned]
@@ -118,8 +112,6 @@ def plan_sweep(config_path: str | Path, base_overrides: Sequence[str], variation
 
 def stored_digest(path: Path) -> str | None:
     """The config digest a finished campaign file records, or None if there is no readable one."""
-    from .results import campaign_file_digest
-
     try:
         return campaign_file_digest(path)
     except InputError:
@@ -129,8 +121,6 @@ def stored_digest(path: Path) -> str | None:
 def file_state(path: Path) -> tuple[str | None, str | None]:
     """(config digest, None) of a whole campaign file; (None, None) without a file; (None, reason) for a
     damaged one."""
-    from .results import campaign_file_digest
-
     if not path.exists():
         return None, None
     try:
@@ -183,6 +173,24 @@ class SweepOutcome:
     ran: tuple[PlannedCampaign, ...]  # campaigns this process ran
     skipped: tuple[PlannedCampaign, ...]  # up to date (before, or finished meanwhile by another process)
     conflicts: tuple[PlannedCampaign, ...]  # rewritten meanwhile by another process with another config
+
+
+def check_no_other_campaigns(planned: Sequence[PlannedCampaign]) -> None:
+    """InputError, before any work, if a planned file already holds a campaign of another config (a sweep with
+    other settings wrote it): naming the files and the first difference; `--force` overwrites them."""
+    others = []
+    for p in planned:
+        digest, _ = file_state(p.path)
+        if digest is not None and digest != p.config.digest():
+            diffs = config_difference(p.path, p.config, None)
+            others.append(f"{p.path.name} ({diffs[0] if diffs else 'another config'})")
+    if others:
+        shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+        raise InputError(
+            f"{len(others)} campaign file(s) here hold other configs: {shown}; choose another -o, or --force to "
+            "overwrite them",
+            source=str(planned[0].path.parent),
+        )
 
 
 def run_sweep(

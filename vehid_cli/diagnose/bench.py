@@ -31,13 +31,13 @@ from numpy.typing import NDArray
 
 from ..bench import BenchHistory
 from ..config import DamperConfig
-from ..damper_campaign import configured_spec, load_measured
 from ..damper_fit import PENALTY_FACTOR, DamperSpec
 from ..experiment import run_streams
 from ..models.effects import LIBRARY
 from ..noise import estimate_noise_sigma
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
+from ..systems.damper import configured_spec, load_measured
 from .attribution import ALPHA, Candidate, Fit, candidate_ranges, fit_intervals, lsq_fit, parameter_candidate
 from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
 from .quality import assess_bench

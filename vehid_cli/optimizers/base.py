@@ -167,7 +167,8 @@ class Optimizer(ABC):
         budget: int | None = None,
         x0: NDArray | None = None,
     ) -> OptimizeResult:
-        """Run the algorithm until its iterations are done or the evaluation budget is spent."""
+        """Run the algorithm until the evaluation budget is spent (exactly: a given budget is never cut short by the
+        iteration count) or it converges; without a budget, population x iterations evaluations."""
         lo, hi = np.asarray(problem.lower, dtype=float), np.asarray(problem.upper, dtype=float)
         if lo.shape != hi.shape or lo.ndim != 1 or np.any(~(lo < hi)):
             raise ValueError("bounds must be 1-D with lower < upper")
@@ -177,9 +178,10 @@ class Optimizer(ABC):
         iterations, message = 0, "iterations done"
         try:
             state = self._initialize(run, None if x0 is None else np.clip(np.asarray(x0, dtype=float), lo, hi))
-            while iterations < self.iterations and run.remaining > 0:
+            while (budget is not None or iterations < self.iterations) and run.remaining > 0:
                 iterations += 1
-                if self._step(run, state) is False:
+                before = run.evaluations
+                if self._step(run, state) is False or run.evaluations == before:  # converged, or nothing left to try
                     message = "converged"
                     break
             if run.remaining <= 0:

@@ -6,9 +6,11 @@ import csv
 import io
 from pathlib import Path
 
-from ..campaign import Campaign
 from ..errors import InputError
-from ..results import CAMPAIGN_KIND, campaign_json, read_campaign_h5, to_json
+from ..records import Campaign
+from ..results import CAMPAIGN_KIND, campaign_json, check_integrity, open_results, read_campaign_h5, to_json
+from ..sweep import read_index
+from . import damper, tables
 
 FORMATS = ("table", "md", "csv", "latex", "json")
 
@@ -17,8 +19,6 @@ def is_campaign_file(path: Path) -> bool:
     """A vehid campaign file? False for other HDF5 files; InputError for a file HDF5 cannot open (truncated or
     damaged): a report never drops a campaign silently."""
     import h5py
-
-    from ..results import check_integrity
 
     try:
         check_integrity(path)
@@ -50,8 +50,6 @@ def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
 def sweep_notes(paths: list[Path]) -> list[str]:
     """Warnings about unfinished sweeps in the directories among `paths`: campaigns index.csv lists that have
     no file yet (a shard not run, still running or failed), and checkpoints of interrupted campaigns."""
-    from ..sweep import read_index
-
     notes = []
     for path in paths:
         if not path.is_dir():
@@ -86,8 +84,6 @@ def load_published(path: Path) -> dict:
 
 def file_provenance(path: str) -> dict:
     """The provenance attributes a campaign file records (config hash, seed, code versions, host, time)."""
-    from ..results import check_integrity, open_results
-
     keys = (
         "config_sha256", "seed", "data_file", "data_sha256", "vehid_version", "git_commit", "host", "python",
         "created_utc", "numpy_version", "scipy_version", "numba_version", "h5py_version", "pydantic_version",
@@ -102,10 +98,63 @@ def file_provenance(path: str) -> dict:
         return out
 
 
+def system_of(campaigns: list[Campaign], files: list[str]) -> str:
+    """The one system the campaigns share (their tables differ by system); InputError naming a file otherwise."""
+    first = campaigns[0].system
+    for c, f in zip(campaigns, files, strict=True):
+        if c.system != first:
+            raise InputError(
+                f"is a {c.system} campaign but {files[0]} is a {first} campaign; report each system separately",
+                source=f,
+            )
+    return first
+
+
+def rich_tables(campaigns: list[Campaign], files: list[str]) -> list:
+    """The terminal tables: one per campaign (a damper's parameters and J), or the car's summary tables."""
+    if system_of(campaigns, files) == "damper":
+        return [damper.parameter_table(c, f) for c, f in zip(campaigns, files, strict=True)]
+    return [tables.summary_table(c) for c in campaigns]
+
+
+def campaign_notes(c: Campaign) -> list[str]:
+    """What a user must know about a finished campaign beyond its table: a residual far above the noise,
+    unidentifiable parameters, evaluations that got the penalty (rich markup)."""
+    s, notes = c.summary, []
+    if s.model_inadequate:
+        notes.append(
+            f"[yellow]warning:[/] at the estimates the residual power is {s.chi2_median:.3g} times the noise power "
+            f"the data implies (an adequate model gives at most {s.chi2_limit:.3g}, noise from "
+            f"{c.sigma_source}): the model lacks something, or noise.level is too small; the estimates are "
+            "then biased"
+        )
+    unidentifiable = c.bound.unidentifiable()
+    if unidentifiable:
+        notes.append(
+            f"[yellow]warning:[/] the sensors cannot identify {', '.join(unidentifiable)} (Fisher information)"
+        )
+    total = int(s.evaluations.sum())
+    if s.penalised:
+        note = (
+            f"{s.penalised} of {total} evaluations ({100 * s.penalised / max(total, 1):.2g} %) made the model unstable "
+            "or non-finite and got the finite penalty cost (counted in 'penalised'; the runs went on)"
+        )
+        if s.at_penalty:
+            note += (
+                f"; [bold]{s.at_penalty} of {len(s.evaluations)} run(s) found no usable parameter set[/] (best cost = "
+                "the penalty): their estimates are meaningless and bias the mean; narrow identify.bounds or "
+                "identify.limits"
+            )
+        notes.append(f"[yellow]note:[/] {note}")
+    return notes
+
+
 def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dict | None = None) -> str:
     """The report as text in format `fmt` (all but 'table', which is printed with rich)."""
-    from . import tables
-
+    if system_of(campaigns, files) == "damper":
+        if fmt == "latex":
+            raise InputError("--format latex is not available for damper campaigns; use table, md, csv or json")
+        return {"md": damper.markdown, "csv": damper.csv_text, "json": damper.json_text}[fmt](campaigns, files)
     if fmt == "md":
         return tables.markdown(campaigns, published)
     if fmt == "latex":

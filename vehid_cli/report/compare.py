@@ -24,7 +24,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
+
+from ..config import flatten
 from ..errors import InputError
+from ..results import CAMPAIGN_KIND, open_results
 
 METHOD_KEYS = (
     "identify.algorithm", "identify.objective", "identify.runs", "identify.seed", "identify.budget",
@@ -49,10 +53,6 @@ class Provenance:
 
 def read_provenance(path: str | Path) -> Provenance:
     """The provenance attributes of a campaign file (InputError for a file that is not one)."""
-    import yaml
-
-    from ..results import CAMPAIGN_KIND, open_results
-
     source = str(path)
     with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
         attrs = dict(h5.attrs)
@@ -72,15 +72,6 @@ def read_provenance(path: str | Path) -> Provenance:
     )
 
 
-def _flatten(node, prefix: str = "") -> dict[str, object]:
-    if isinstance(node, dict):
-        out: dict[str, object] = {}
-        for key, value in node.items():
-            out.update(_flatten(value, f"{prefix}{key}."))
-        return out or {prefix[:-1]: {}}
-    return {prefix[:-1]: node}
-
-
 def _covered(key: str, allowed) -> bool:
     return any(key == a or key.startswith(a + ".") for a in allowed)
 
@@ -92,7 +83,7 @@ def _show(value) -> str:
 def differences(a: Provenance, b: Provenance) -> list[str]:
     """What makes two campaigns incomparable (empty if they are comparable), each as 'what (a vs b)'."""
     out = []
-    fa, fb = _flatten(a.config), _flatten(b.config)
+    fa, fb = flatten(a.config), flatten(b.config)
     allowed = set(METHOD_KEYS) | a.varied | b.varied
     for key in sorted(set(fa) | set(fb)):
         va, vb = fa.get(key, _MISSING), fb.get(key, _MISSING)

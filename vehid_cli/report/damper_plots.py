@@ -51,7 +51,8 @@ def plot_traces(name: str, entries: list[tuple[str, object]], path: str | Path) 
 
 
 def write_damper_plots(results, labels: list[str], out_dir: str | Path) -> list[Path]:
-    """One figure per bench run (training and held-out), every result that has a trace on it overlaid."""
+    """One figure per bench run (training and held-out), every result (a damper campaign's findings) that has a
+    trace on it overlaid."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     runs: dict[str, list[tuple[str, object]]] = {}

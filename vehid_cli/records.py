@@ -1,0 +1,184 @@
+"""What a campaign produced: one record per run, the summary statistics (computed once) and the whole campaign.
+
+Plain data shared by every system (the car, the damper on a bench): `systems` make RunRecords, `campaign`
+collects them, `results` writes and reads them, `report` renders them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .config import AnyConfig
+from .crlb import CramerRao
+from .data import atomic_path
+from .optimizers.base import Problem
+
+PENALTY = Problem.__dataclass_fields__["penalty"].default  # the cost of a NaN/Inf evaluation (optimizers/base.py)
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """The outcome of one identification run."""
+
+    index: int
+    estimate: NDArray  # (D,)
+    cost: float
+    evaluations: int
+    penalised: int
+    wall_s: float
+    history_evals: NDArray  # cumulative evaluations at each record of the best cost
+    history_cost: NDArray  # best cost so far
+    truth_cost: float = float("nan")  # cost of the true parameters on this run's data (NaN: truth unknown)
+    chi2: float = float("nan")  # noise-weighted residual power per sample at the estimate (~1 for an adequate model)
+    initial_cost: float = float("nan")  # cost at the start point (a damper fit's J before; NaN: not recorded)
+
+    @property
+    def at_penalty(self) -> bool:
+        """The run found no parameter set the model simulates usefully: its best cost is the penalty (or worse),
+        so its estimate is meaningless."""
+        return bool(self.cost >= PENALTY)
+
+    @property
+    def converged(self) -> bool | None:
+        """Found the global minimum's basin: a cost no higher than the truth's on the same data (None: unknown)."""
+        if not np.isfinite(self.truth_cost):
+            return None
+        return bool(self.cost <= self.truth_cost * (1 + 1e-9))
+
+    def save(self, path: Path) -> None:
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, **{k: np.asarray(v) for k, v in self.__dict__.items()})
+
+    @classmethod
+    def load(cls, path: Path) -> RunRecord:
+        with np.load(path) as z:
+            return cls(
+                index=int(z["index"]),
+                estimate=z["estimate"],
+                cost=float(z["cost"]),
+                evaluations=int(z["evaluations"]),
+                penalised=int(z["penalised"]),
+                wall_s=float(z["wall_s"]),
+                history_evals=z["history_evals"],
+                history_cost=z["history_cost"],
+                truth_cost=float(z["truth_cost"]),
+                chi2=float(z["chi2"]),
+                initial_cost=float(z["initial_cost"]) if "initial_cost" in z else float("nan"),
+            )
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Figures of merit of a campaign (SPEC section 4), computed once."""
+
+    names: tuple[str, ...]
+    truth: NDArray | None
+    mean: NDArray  # mean estimate over runs (D,)
+    sd: NDArray  # standard deviation of the estimates over runs (D,)
+    re_percent: NDArray | None  # RE of the mean (D,)
+    nre_percent: float | None  # NRE of the mean (the paper's figure)
+    per_run_re_percent: NDArray | None  # (N, D)
+    per_run_nre_percent: NDArray | None  # (N,)
+    crlb_re_sd_percent: NDArray  # (D,)
+    crlb_nre_rms_percent: float
+    evaluations: NDArray  # (N,)
+    penalised: int
+    wall_s: float
+    converged: int | None = None  # runs whose cost is no higher than the truth's (None: truth unknown)
+    at_penalty: int = 0  # runs that found no usable parameter set (best cost = the penalty): meaningless estimates
+    chi2_median: float = float("nan")  # median over runs of the residual power over the noise power
+    residual_samples: int = 0  # R, the number of weighted residuals behind chi2
+
+    @property
+    def chi2_limit(self) -> float:
+        """Largest chi² per sample an adequate model gives: 1 + 5 sd of a chi² mean over R samples."""
+        return 1.0 + 5.0 * np.sqrt(2.0 / max(self.residual_samples, 1))
+
+    @property
+    def model_inadequate(self) -> bool:
+        """The residual is far above the noise the data implies: the model lacks something (or the noise level
+        set by noise.level is too small)."""
+        return bool(np.isfinite(self.chi2_median) and self.chi2_median > self.chi2_limit)
+
+    @property
+    def per_run_nre_median(self) -> float | None:
+        return None if self.per_run_nre_percent is None else float(np.median(self.per_run_nre_percent))
+
+    @property
+    def per_run_nre_rms(self) -> float | None:
+        return None if self.per_run_nre_percent is None else float(np.sqrt(np.mean(self.per_run_nre_percent**2)))
+
+    @property
+    def nre_over_crlb(self) -> float | None:
+        """Per-run NRE RMS over the bound's NRE RMS: 1.0 is the physical limit."""
+        rms = self.per_run_nre_rms
+        if rms is None or not np.isfinite(self.crlb_nre_rms_percent) or self.crlb_nre_rms_percent <= 0:
+            return None
+        return rms / self.crlb_nre_rms_percent
+
+    @property
+    def re_sd_percent(self) -> NDArray:
+        """Spread of the estimates over runs, relative to the truth (or to the mean when unknown) [%]."""
+        ref = self.truth if self.truth is not None else self.mean
+        return 100.0 * self.sd / np.abs(ref)
+
+
+def summarise(
+    names, truth, records: list[RunRecord], bound: CramerRao, wall_s: float, residual_samples: int = 0
+) -> Summary:
+    """Statistics of a list of runs against the truth (when known) and the Cramér–Rao bound."""
+    est = np.array([r.estimate for r in records])
+    mean, sd = est.mean(axis=0), est.std(axis=0, ddof=1) if len(records) > 1 else np.zeros(est.shape[1])
+    re = nre = per_re = per_nre = None
+    if truth is not None:
+        re = 100.0 * (mean - truth) / truth
+        nre = float(np.linalg.norm(re))
+        per_re = 100.0 * (est - truth) / truth
+        per_nre = np.linalg.norm(per_re, axis=1)
+    return Summary(
+        names=tuple(names),
+        truth=truth,
+        mean=mean,
+        sd=sd,
+        re_percent=re,
+        nre_percent=nre,
+        per_run_re_percent=per_re,
+        per_run_nre_percent=per_nre,
+        crlb_re_sd_percent=bound.re_sd_percent,
+        crlb_nre_rms_percent=bound.nre_rms_percent,
+        evaluations=np.array([r.evaluations for r in records]),
+        penalised=int(sum(r.penalised for r in records)),
+        wall_s=wall_s,
+        converged=None if truth is None else int(sum(bool(r.converged) for r in records)),
+        at_penalty=int(sum(r.at_penalty for r in records)),
+        chi2_median=float(np.median([r.chi2 for r in records])),
+        residual_samples=residual_samples,
+    )
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A finished campaign of any system: the task's description, every run, the bound and the summary, plus what
+    the system concluded after the runs (`findings`: the damper's identified model, held-out J, real-time check
+    and force traces; None for the car)."""
+
+    config: AnyConfig
+    data_file: str | None
+    names: tuple[str, ...]
+    truth: NDArray | None
+    nominal: NDArray
+    lower: NDArray
+    upper: NDArray
+    sigma: dict[str, NDArray]
+    sigma_source: str
+    records: tuple[RunRecord, ...]
+    bound: CramerRao
+    summary: Summary
+    data_sha256: str | None = None  # SHA-256 of the data file's bytes (None: simulated data)
+    system: str = "vehicle"  # which system (systems.SYSTEMS) ran it: vehicle or damper
+    findings: Any = None

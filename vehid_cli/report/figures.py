@@ -1,0 +1,18 @@
+"""The figures of `vehid report --plots`, for any system: the car's campaign figures (`plots.py`) or the
+damper's force traces (`damper_plots.py`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..records import Campaign
+from . import system_of
+from .damper_plots import write_damper_plots
+from .plots import write_campaign_plots
+
+
+def write_plots(campaigns: list[Campaign], files: list[str], out_dir: str | Path) -> list[Path]:
+    """All figures for a set of campaign files of one system; returns the paths written."""
+    if system_of(campaigns, files) == "damper":
+        return write_damper_plots([c.findings for c in campaigns], [Path(f).stem for f in files], out_dir)
+    return write_campaign_plots(campaigns, files, out_dir)

@@ -1,0 +1,120 @@
+"""The seam between a system under test and the campaign machinery: what the car and the damper bench offer.
+
+A `System` is built once per campaign (from a config and, optionally, measured data) and shipped to the
+workers; run r of a campaign is `system.identify_run(r)`, a function of the config, the seed and r only, so
+results are bit-identical whatever the executor. After the runs, `conclude(records)` gives what the system
+adds to the campaign (the damper's identified model, held-out J, real-time check and traces).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config import AnyConfig
+from ..crlb import CramerRao
+from ..experiment import run_streams
+from ..optimizers import get_optimizer
+from ..optimizers.base import Problem
+from ..records import RunRecord
+
+
+@dataclass(frozen=True)
+class Box:
+    """The unknowns and their search box: names, lower and upper bounds, configured values, the truth."""
+
+    names: tuple[str, ...]
+    lower: NDArray
+    upper: NDArray
+    nominal: NDArray  # configured values of the unknowns
+    truth: NDArray | None  # the true values when known
+
+
+class System(ABC):
+    """What a system under test offers a campaign. Subclasses set `name` and implement the hooks."""
+
+    name: ClassVar[str]  # "vehicle" or "damper": the results file's `system` attribute
+    objective: ClassVar[str]  # what `cost` means in the records (f1, f2, wls; J)
+    findings_type: ClassVar[Any] = None  # what `conclude` returns: a class with write_h5(group), read_h5(group)
+
+    config: AnyConfig
+    box: Box
+    data_file: str | None  # the measured run identified from (None: simulated data)
+    sigma: dict[str, NDArray]  # noise standard deviation per channel, per family
+    sigma_source: str  # how sigma was obtained
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.box.names
+
+    @property
+    def runs(self) -> int:
+        """Runs of the campaign: identify.runs on simulated data (each its own noise); one fit on measured data,
+        where every run would identify from the same data."""
+        return self.config.identify.runs if self.data_file is None else 1
+
+    @property
+    def residual_samples(self) -> int:
+        """R: how many weighted residuals the objective gives (behind chi²)."""
+        return 0
+
+    def data_files(self) -> tuple[str, ...]:
+        """Every file the campaign's results depend on (their bytes enter the campaign key)."""
+        return () if self.data_file is None else (self.data_file,)
+
+    @abstractmethod
+    def reference(self, run: int) -> Any:
+        """The data run `run` identifies from: measured, or simulated with the run's own noise."""
+
+    @abstractmethod
+    def problem(self, reference: Any) -> Problem:
+        """The optimizer's view of one run: batched costs (and residuals) over the unknowns' box."""
+
+    def bound(self, at: NDArray | None = None) -> CramerRao:
+        """The Cramér–Rao bound at `at` (default: the truth, or the configured values); NaN where the system has
+        none."""
+        D = len(self.names)
+        if at is None:
+            at = self.box.truth if self.box.truth is not None else self.box.nominal
+        return CramerRao(
+            names=self.names, values=at, fisher=np.full((D, D), np.nan), re_sd_percent=np.full(D, np.nan),
+            nre_rms_percent=float("nan"), identifiable=np.ones(D, dtype=bool), condition=float("nan"),
+        )  # fmt: skip
+
+    def start(self, rng: np.random.Generator) -> NDArray | None:
+        """Where a run's optimizer starts: the configured values (`config`, or `auto` on measured data), else None
+        (the optimizer's own random start from the run's stream)."""
+        mode = self.config.identify.start
+        return self.box.nominal if mode == "config" or (mode == "auto" and self.data_file is not None) else None
+
+    def identify_run(self, index: int) -> RunRecord:
+        """Run `index`: its own data (noise) and its own optimizer stream, within the evaluation budget."""
+        ident = self.config.identify
+        streams = run_streams(ident.seed, index)
+        problem = self.problem(self.reference(index))
+        # Diagnostic, not charged to the budget: the truth's cost on this run's data tells a converged run.
+        truth = self.box.truth
+        truth_cost = float(problem.cost(truth[None, :])[0]) if truth is not None else float("nan")
+        algorithm = ident.algorithm
+        optimizer = get_optimizer(algorithm.name, algorithm.population, algorithm.iterations)
+        x0 = self.start(streams.optimizer)
+        # Parameter sets that make the model blow up overflow on their way to a NaN/Inf cost: the optimizer gives
+        # them the finite penalty and counts them (`penalised`), so NumPy's floating-point warnings are noise.
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            result = optimizer.minimize(problem, streams.optimizer, budget=ident.budget, x0=x0)
+            # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits.
+            _, residuals = problem.residuals(result.x[None, :])
+            chi2 = float(np.mean(residuals**2))
+        return RunRecord(
+            index=index, estimate=result.x, cost=result.cost, evaluations=result.evaluations,
+            penalised=result.penalised, wall_s=result.wall_s, history_evals=result.history_evals,
+            history_cost=result.history_cost, truth_cost=truth_cost, chi2=chi2,
+        )  # fmt: skip
+
+    def conclude(self, records: tuple[RunRecord, ...]) -> Any:
+        """What the system adds to the finished campaign (None: nothing beyond the records)."""
+        return None
