@@ -17,8 +17,12 @@ from typing import Annotated, Any, Literal, Union
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
+from .bench import UNITS
 from .errors import InputError
+from .models.damper import MODELS, default_values
+from .models.effects import BENCH_EFFECTS, LIBRARY, bound_violation
 from .models.fullcar import VEHICLE_PARAMETERS
+from .optimizers import REGISTRY, load_all
 
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -61,8 +65,6 @@ class Vehicle(_Section):
 
     @model_validator(mode="after")
     def _effects(self) -> Vehicle:
-        from .models.effects import LIBRARY, bound_violation
-
         for name, params in (self.effects or {}).items():
             key = f"vehicle.effects.{name}"
             if name not in LIBRARY:
@@ -97,8 +99,6 @@ class Vehicle(_Section):
 
     def effect_values(self) -> dict[str, dict[str, float]]:
         """The declared effects with every parameter resolved (defaults for those not given)."""
-        from .models.effects import LIBRARY
-
         return {name: {**LIBRARY[name].defaults(), **(p or {})} for name, p in (self.effects or {}).items()}
 
     @model_validator(mode="after")
@@ -471,8 +471,6 @@ class DamperData(_Section):
 
     @model_validator(mode="after")
     def _window(self) -> DamperData:
-        from .bench import UNITS
-
         for role, table in UNITS.items():
             unit = getattr(self.units, role)
             if unit not in table:
@@ -548,8 +546,6 @@ class DamperConfig(_Section):
 
     @model_validator(mode="after")
     def _consistent(self) -> DamperConfig:
-        from .models.damper import MODELS
-
         d, ident = self.damper, self.identify
         if d.model not in MODELS:
             hint = _did_you_mean(d.model, MODELS)
@@ -618,8 +614,6 @@ class DamperConfig(_Section):
 
     def _check_effects(self) -> None:
         """Bench effects exist, their parameters exist and lie in their physical bounds."""
-        from .models.effects import BENCH_EFFECTS, LIBRARY, bound_violation
-
         for name, params in self.damper.effects.items():
             if name not in BENCH_EFFECTS:
                 raise _KeyedError(
@@ -641,14 +635,10 @@ class DamperConfig(_Section):
 
     def effect_parameters(self) -> tuple[str, ...]:
         """The declared bench effects' parameters, as identify.unknowns names them (<effect>.<param>)."""
-        from .models.effects import LIBRARY
-
         return tuple(f"{e}.{p.name}" for e in self.damper.effects for p in LIBRARY[e].params)
 
     def parameter_names(self) -> tuple[str, ...]:
         """Every parameter of the configured model, in the kernel's row order, then the effects' parameters."""
-        from .models.damper import MODELS
-
         return MODELS[self.damper.model].layout(self.table_shape) + self.effect_parameters()
 
     @property
@@ -657,9 +647,6 @@ class DamperConfig(_Section):
 
     def values(self) -> dict[str, float]:
         """All parameter values: the configured ones over the neutral defaults (damper_fit.default_values)."""
-        from .models.damper import default_values
-        from .models.effects import LIBRARY
-
         effects = {
             f"{e}.{p.name}": float(given.get(p.name, p.default))
             for e, given in self.damper.effects.items()
@@ -694,8 +681,6 @@ AnyConfig = Union[Config, DamperConfig]  # noqa: UP007
 
 def _check_algorithm(algorithm: Algorithm) -> None:
     """The algorithm exists (the optimizer registry is the one list of names) and its population suffices."""
-    from .optimizers import REGISTRY, load_all
-
     load_all()
     cls = REGISTRY.get(algorithm.name)
     if cls is None:

@@ -31,7 +31,9 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
 
+from . import __version__
 from .errors import InputError
+from .provenance import git_commit
 from .sim.kernel import set_threads
 
 S = TypeVar("S")
@@ -165,9 +167,6 @@ class LocalExecutor(Executor):
 def code_identity() -> dict[str, str]:
     """What a run's numbers depend on besides its inputs: the vehid code and the numerical libraries."""
     from importlib import metadata
-
-    from . import __version__
-    from .provenance import git_commit
 
     out = {"vehid": __version__, "git_commit": git_commit()}
     for name in ("numpy", "scipy", "numba"):

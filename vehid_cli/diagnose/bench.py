@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from ..bench import BenchHistory
 from ..config import DamperConfig
 from ..damper_fit import PENALTY_FACTOR, DamperSpec
+from ..errors import InputError
 from ..experiment import run_streams
 from ..models.effects import LIBRARY
 from ..noise import estimate_noise_sigma
@@ -133,8 +134,6 @@ def diagnose_bench(
     log=None,
 ) -> Diagnosis:
     """Close the loop for the configured damper on the measured run `data_file` (see the module doc)."""
-    from ..errors import InputError
-
     t_start = time.perf_counter()
     say = log or (lambda _msg: None)
     data_file = data_file if data_file is not None else (config.data.file if config.data is not None else None)

@@ -49,7 +49,7 @@ from scipy import stats
 from scipy.interpolate import BSpline
 
 from ..models.fullcar import N_CORNERS, N_DOF
-from ..sim.linear import foh_discretisation
+from ..sim.modal import foh_discretisation
 from ..sim.nonlinear import fullcar_struts
 
 Z95 = 1.959963984540054

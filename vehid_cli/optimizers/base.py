@@ -216,13 +216,3 @@ def register(cls: type[Optimizer]) -> type[Optimizer]:
     """Class decorator: make an algorithm available by its ``name`` (SPEC section 3)."""
     REGISTRY[cls.name] = cls
     return cls
-
-
-def get_optimizer(name: str, population: int = 20, iterations: int = 50, **options: Any) -> Optimizer:
-    """An optimizer by its SPEC name (`ga`, `cpso`, `abc`, `de`, `nelder-mead`, `lsq`, `hybrid`)."""
-    from . import load_all
-
-    load_all()
-    if name not in REGISTRY:
-        raise KeyError(f"unknown algorithm {name!r}; known: {', '.join(sorted(REGISTRY))}")
-    return REGISTRY[name](population=population, iterations=iterations, **options)

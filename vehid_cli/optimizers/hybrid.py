@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from . import abc, cpso, de, ga, nelder_mead  # noqa: F401  (the global phases it may run register themselves)
 from .base import REGISTRY, BudgetExhausted, Optimizer, Run, register
 from .lsq import polish
 
@@ -29,9 +30,6 @@ class Hybrid(Optimizer):
         self.global_fraction = float(options.get("global_fraction", 0.5))
 
     def _initialize(self, run: Run, x0: NDArray | None) -> Any:
-        from . import load_all
-
-        load_all()
         inner = REGISTRY[self.global_algorithm](population=self.population, iterations=self.iterations)
         global_budget = int(self.global_fraction * run.budget)
         state = inner._initialize(run, x0)

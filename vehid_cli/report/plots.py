@@ -10,7 +10,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from ..data import atomic_path  # noqa: E402
-from ..experiment import SimulatedRun  # noqa: E402
+from ..experiment import SimulatedRun, build_experiment  # noqa: E402
+from ..identification import build_task  # noqa: E402
+from . import tables  # noqa: E402
+from .tables import grouped  # noqa: E402
 
 
 def plot_responses(run: SimulatedRun, path: str | Path) -> None:
@@ -111,8 +114,6 @@ def plot_re_boxes(group, path: str | Path) -> None:
 
 def plot_true_vs_estimated(campaign, path: str | Path) -> None:
     """Bounce, pitch and roll of the true car and of the mean estimate (the paper's Fig. 5)."""
-    from ..experiment import build_experiment
-
     exp = build_experiment(campaign.config, road_file=campaign.data_file)
     values = dict(zip(campaign.names, campaign.summary.mean, strict=True))
     est = exp.simulate({k: [v] for k, v in values.items()})
@@ -133,9 +134,6 @@ def plot_true_vs_estimated(campaign, path: str | Path) -> None:
 
 def plot_noisy_vs_clean(campaign, path: str | Path) -> None:
     """The data run 0 identified from, over the clean responses (the paper's Fig. 4)."""
-    from ..experiment import SimulatedRun
-    from ..identification import build_task
-
     task = build_task(campaign.config, campaign.data_file)
     exp = task.experiment
     clean = exp.simulate()
@@ -151,9 +149,6 @@ def plot_noisy_vs_clean(campaign, path: str | Path) -> None:
 
 def write_campaign_plots(campaigns, files, out_dir: str | Path) -> list[Path]:
     """All figures for a set of campaign files; returns the paths written."""
-    from . import tables
-    from .tables import grouped
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []

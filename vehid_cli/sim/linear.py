@@ -21,11 +21,10 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_DOF, FullCarMatrices
-from .modal import modal_foh
+from .modal import foh_discretisation, modal_foh
 
 Integrator = Literal["exact", "exact-reference", "newmark"]
 
@@ -82,22 +81,6 @@ def simulate(mats: FullCarMatrices, road: NDArray, dt: float, integrator: Integr
 def static_equilibrium(mats: FullCarMatrices, y: NDArray) -> NDArray:
     """q (..., 7) with K q = B y: the car at rest on road heights y (..., 4)."""
     return np.linalg.solve(mats.K, (mats.B @ np.asarray(y, dtype=float)[..., :, None]))[..., 0]
-
-
-def foh_discretisation(A: NDArray, Bs: NDArray, dt: float) -> tuple[NDArray, NDArray, NDArray]:
-    """Phi, G1, G2 with s[k+1] = Phi s[k] + G1 u[k] + G2 (u[k+1] - u[k]) for u linear over the step.
-
-    From exp of [[A, B, 0], [0, 0, I/dt], [0, 0, 0]] dt (Van Loan): the input and its constant slope
-    ride along as extra states.
-    """
-    n, m = A.shape[-1], Bs.shape[-1]
-    batch = A.shape[:-2]
-    big = np.zeros(batch + (n + 2 * m, n + 2 * m))
-    big[..., :n, :n] = A * dt
-    big[..., :n, n : n + m] = Bs * dt
-    big[..., n : n + m, n + m :] = np.eye(m)
-    E = scipy.linalg.expm(big)
-    return E[..., :n, :n], E[..., :n, n : n + m], E[..., :n, n + m :]
 
 
 def _exact_foh(mats: FullCarMatrices, road: NDArray, dt: float) -> tuple[NDArray, NDArray, NDArray]:

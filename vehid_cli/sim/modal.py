@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
@@ -182,10 +183,24 @@ def _split(Y: NDArray, batch: tuple[int, ...]) -> Outputs:
     return Y[..., :d], Y[..., d : 2 * d], Y[..., 2 * d : 3 * d], Y[..., 3 * d : 3 * d + 4], Y[..., 3 * d + 4 :]
 
 
+def foh_discretisation(A: NDArray, Bs: NDArray, dt: float) -> tuple[NDArray, NDArray, NDArray]:
+    """Phi, G1, G2 with s[k+1] = Phi s[k] + G1 u[k] + G2 (u[k+1] - u[k]) for u linear over the step.
+
+    From exp of [[A, B, 0], [0, 0, I/dt], [0, 0, 0]] dt (Van Loan): the input and its constant slope
+    ride along as extra states.
+    """
+    n, m = A.shape[-1], Bs.shape[-1]
+    batch = A.shape[:-2]
+    big = np.zeros(batch + (n + 2 * m, n + 2 * m))
+    big[..., :n, :n] = A * dt
+    big[..., :n, n : n + m] = Bs * dt
+    big[..., n : n + m, n + m :] = np.eye(m)
+    E = scipy.linalg.expm(big)
+    return E[..., :n, :n], E[..., :n, n : n + m], E[..., :n, n + m :]
+
+
 def _statespace_outputs(A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDArray, dt: float) -> NDArray:
     """(P, n, 29) outputs of the real state-space recursion for P cars."""
-    from .linear import foh_discretisation  # linear imports this module: import at call time
-
     P, n = A.shape[0], u.shape[1]
     Phi, G1, G2 = foh_discretisation(A, Bs, dt)
     s0 = np.zeros((P, N_STATE))
