@@ -530,7 +530,7 @@ def diagnose(
     """
 
     from .diagnose import diagnose as run_diagnosis
-    from .diagnose.bench import diagnose_bench
+    from .diagnose.damper import diagnose_damper
     from .results import write_json
 
     cfg = load_config(config, set_ or ())
@@ -539,7 +539,7 @@ def diagnose(
     say = lambda msg: err.print(msg, markup=False)  # noqa: E731
     if isinstance(cfg, DamperConfig):
         vfiles = None if not validate else tuple(validate)
-        result = diagnose_bench(cfg, data, vfiles, log=say)
+        result = diagnose_damper(cfg, data, vfiles, log=say)
     else:
         if data is None:
             raise InputError("diagnose needs --data FILE (the measured run to fit)", source=str(config))

@@ -19,7 +19,7 @@ from .bench import BenchHistory
 from .models.damper import MODELS, DamperModel, play
 from .models.effects import bench_effect_rows, bench_effects, bench_lag_state
 from .optimizers import Problem, get_optimizer
-from .sim.bench import BenchRun, refine, simulate_damper
+from .sim.bench import BenchForces, refine, simulate_damper
 from .sim.kernel import integrate_bench
 
 PENALTY_FACTOR = 10.0  # an unstable candidate costs this many times the initial J (at least 10)
@@ -88,7 +88,9 @@ class DamperSpec:
         more = tuple(e for e in effects if e not in self.effects)
         return DamperSpec(self.model, {**self.values, **values}, self.table_shape, self.effects + more)
 
-    def simulate_batch(self, unknowns: Sequence[str], X: NDArray, history: BenchHistory, substeps: int = 1) -> BenchRun:
+    def simulate_batch(
+        self, unknowns: Sequence[str], X: NDArray, history: BenchHistory, substeps: int = 1
+    ) -> BenchForces:
         """Forces of a batch of candidates (`unknowns` = columns of X) on the history, effects included."""
         X = np.atleast_2d(np.asarray(X, dtype=float))
         rows = self.rows(unknowns, X)
@@ -102,7 +104,7 @@ class DamperSpec:
         return self.simulate_batch((), np.zeros((1, 0)), history, substeps).force[0]
 
 
-def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistory, substeps: int) -> BenchRun:
+def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistory, substeps: int) -> BenchForces:
     """The declared model's force without its gas part, then the bench effects around it (lag on the damper
     force, parallel effects added, the gas force k1 (x_b - x0) on the piston's motion through the play)."""
 
@@ -126,7 +128,7 @@ def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistor
         force = integrate_bench(bench_effects, eset.rows, road, dt / substeps, z0)
     force = force[:, ::substeps, 0]
     stable = damper.stable & np.all(np.isfinite(force), axis=1)
-    return BenchRun(t=h.t, force=np.where(stable[:, None], force, np.nan), stable=stable)
+    return BenchForces(t=h.t, force=np.where(stable[:, None], force, np.nan), stable=stable)
 
 
 @dataclass(frozen=True)

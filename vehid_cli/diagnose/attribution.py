@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from ..models.effects import EFFECT_NAMES
-from ..optimizers.base import BudgetExhausted, Problem, Run
+from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import polish
 from ..sim.kernel import available_cores
 
@@ -198,7 +198,7 @@ class Fit:
 def lsq_fit(problem: Problem, x0: NDArray, budget: int, seed: int = 0, tol: float = 1e-12) -> Fit:
     """Trust-region least squares from x0 within `budget` evaluations (the best point seen), to relative
     tolerance `tol`."""
-    run = Run(problem, np.random.default_rng(seed), budget)
+    run = Search(problem, np.random.default_rng(seed), budget)
     try:
         polish(run, x0, tol=tol)
     except BudgetExhausted:

@@ -11,7 +11,7 @@ SN = N/2 food sources (paper: "SN = N/2"). One iteration (Karaboga's reference c
    (Akay & Karaboga; paper ref. [14]), is abandoned and replaced by a uniform random point. At most one
    scout per iteration, as in Karaboga's code.
 
-The best point ever evaluated is remembered by the framework (``Run``), so step "record the best" is implicit.
+The best point ever evaluated is remembered by the framework (``Search``), so step "record the best" is implicit.
 
 Fitness (Eq. 14): ``fit = 1/(1+f)`` for ``f >= 0`` and ``1 + |f|`` for ``f < 0``. The paper prints the two
 cases the wrong way round (it would give a pole at f = -1 and reward larger costs); this is the version of
@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .base import Optimizer, Run, register
+from .base import Optimizer, Search, register
 
 
 def abc_fitness(cost: ArrayLike) -> NDArray:
@@ -71,7 +71,7 @@ class ABC(Optimizer):
         self.sources = max(2, self.population // 2)
         self.limit_option = options.get("limit")
 
-    def _initialize(self, run: Run, x0: NDArray | None) -> _HiveState:
+    def _initialize(self, run: Search, x0: NDArray | None) -> _HiveState:
         x = run.uniform(self.sources)
         if x0 is not None:
             x[0] = x0
@@ -79,7 +79,7 @@ class ABC(Optimizer):
         state.f = run.evaluate(x)
         return state
 
-    def _neighbours(self, run: Run, x: NDArray, chosen: NDArray) -> NDArray:
+    def _neighbours(self, run: Search, x: NDArray, chosen: NDArray) -> NDArray:
         """Eq. 12 candidates for the sources ``chosen`` (indices into x): one random dimension each,
         partner k != i from the same snapshot x, step U(-1, 1) (x_ij - x_kj), clipped into the box."""
         sn, d = x.shape
@@ -102,7 +102,7 @@ class ABC(Optimizer):
             else:
                 state.trial[i] += 1
 
-    def _step(self, run: Run, state: _HiveState) -> None:
+    def _step(self, run: Search, state: _HiveState) -> None:
         sn, d = state.x.shape
         limit = int(self.limit_option) if self.limit_option is not None else sn * d
         # employed bees: one candidate per source, one batch

@@ -2,7 +2,7 @@
 
 An algorithm implements ``_initialize`` (make its first population and evaluate it) and ``_step``
 (advance one iteration); ``minimize`` is the same for all of them. All evaluations go through
-``Run.evaluate``, which takes a whole population at once (shape (P, D)), counts every evaluation,
+``Search.evaluate``, which takes a whole population at once (shape (P, D)), counts every evaluation,
 replaces non-finite costs by a finite penalty, and records the best-cost history.
 """
 
@@ -63,7 +63,7 @@ class BudgetExhausted(Exception):
 
 
 @dataclass
-class Run:
+class Search:
     """The state every algorithm shares: problem, random stream, budget, counters, best so far."""
 
     problem: Problem
@@ -173,7 +173,7 @@ class Optimizer(ABC):
         if lo.shape != hi.shape or lo.ndim != 1 or np.any(~(lo < hi)):
             raise ValueError("bounds must be 1-D with lower < upper")
         problem = Problem(lo, hi, problem.cost, problem.residuals, problem.penalty, problem.names)
-        run = Run(problem=problem, rng=rng, budget=int(budget if budget is not None else self.default_budget()))
+        run = Search(problem=problem, rng=rng, budget=int(budget if budget is not None else self.default_budget()))
         start = time.perf_counter()
         iterations, message = 0, "iterations done"
         try:
@@ -201,11 +201,11 @@ class Optimizer(ABC):
         )
 
     @abstractmethod
-    def _initialize(self, run: Run, x0: NDArray | None) -> Any:
+    def _initialize(self, run: Search, x0: NDArray | None) -> Any:
         """Create and evaluate the first population (seeded with x0 when given); return the state."""
 
     @abstractmethod
-    def _step(self, run: Run, state: Any) -> bool | None:
+    def _step(self, run: Search, state: Any) -> bool | None:
         """One iteration on the population; return False to stop early (converged)."""
 
 

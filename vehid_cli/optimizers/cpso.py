@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .base import Optimizer, Run, register
+from .base import Optimizer, Search, register
 
 
 def constriction_factor(c1: float = 2.05, c2: float = 2.05) -> float:
@@ -65,7 +65,7 @@ class CPSO(Optimizer):
         self.chi = constriction_factor(self.c1, self.c2)
         self.vmax_fraction = float(options.get("vmax_fraction", 1.0))
 
-    def _initialize(self, run: Run, x0: NDArray | None) -> _SwarmState:
+    def _initialize(self, run: Search, x0: NDArray | None) -> _SwarmState:
         lo, hi = run.problem.lower, run.problem.upper
         x = run.uniform(self.population)
         if x0 is not None:
@@ -76,7 +76,7 @@ class CPSO(Optimizer):
         state.fp = run.evaluate(x)
         return state
 
-    def _step(self, run: Run, state: _SwarmState) -> None:
+    def _step(self, run: Search, state: _SwarmState) -> None:
         lo, hi = run.problem.lower, run.problem.upper
         n, d = state.x.shape
         g = state.p[int(np.argmin(state.fp))]

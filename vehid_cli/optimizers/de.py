@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .base import Optimizer, Run, register
+from .base import Optimizer, Search, register
 
 
 @dataclass
@@ -61,13 +61,13 @@ class DE(Optimizer):
         self.CR = float(options.get("CR", 0.9))
         self.dither = bool(options.get("dither", False))
 
-    def _initialize(self, run: Run, x0: NDArray | None) -> _DEState:
+    def _initialize(self, run: Search, x0: NDArray | None) -> _DEState:
         pop = run.uniform(self.population)
         if x0 is not None:
             pop[0] = x0
         return _DEState(pop=pop, score=run.evaluate(pop))
 
-    def _step(self, run: Run, state: _DEState) -> None:
+    def _step(self, run: Search, state: _DEState) -> None:
         lo, hi = run.problem.lower, run.problem.upper
         rng = run.rng
         n, d = state.pop.shape

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .base import Optimizer, Run, register
+from .base import Optimizer, Search, register
 
 
 def rank_scaling(scores: ArrayLike, n_parents: int) -> NDArray:
@@ -85,13 +85,13 @@ class GA(Optimizer):
         if not 0 <= self.elite_count < self.population:
             raise ValueError("elite_count must be in [0, population)")
 
-    def _initialize(self, run: Run, x0: NDArray | None) -> _GAState:
+    def _initialize(self, run: Search, x0: NDArray | None) -> _GAState:
         pop = run.uniform(self.population)
         if x0 is not None:
             pop[0] = x0
         return _GAState(pop=pop, score=run.evaluate(pop))
 
-    def _step(self, run: Run, state: _GAState) -> None:
+    def _step(self, run: Search, state: _GAState) -> None:
         lo, hi = run.problem.lower, run.problem.upper
         rng = run.rng
         n, d = state.pop.shape

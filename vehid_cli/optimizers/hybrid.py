@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import abc, cpso, de, ga, nelder_mead  # noqa: F401  (the global phases it may run register themselves)
-from .base import REGISTRY, BudgetExhausted, Optimizer, Run, register
+from .base import REGISTRY, BudgetExhausted, Optimizer, Search, register
 from .lsq import polish
 
 
@@ -29,7 +29,7 @@ class Hybrid(Optimizer):
         self.global_algorithm = str(options.get("global_algorithm", "de"))
         self.global_fraction = float(options.get("global_fraction", 0.5))
 
-    def _initialize(self, run: Run, x0: NDArray | None) -> Any:
+    def _initialize(self, run: Search, x0: NDArray | None) -> Any:
         inner = REGISTRY[self.global_algorithm](population=self.population, iterations=self.iterations)
         global_budget = int(self.global_fraction * run.budget)
         state = inner._initialize(run, x0)
@@ -41,7 +41,7 @@ class Hybrid(Optimizer):
             pass
         return {"x": run.best_x}
 
-    def _step(self, run: Run, state: Any) -> bool | None:
+    def _step(self, run: Search, state: Any) -> bool | None:
         try:
             state["x"] = polish(run, np.asarray(state["x"]))
         except BudgetExhausted:

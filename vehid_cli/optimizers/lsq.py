@@ -13,12 +13,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from .base import BudgetExhausted, Optimizer, Run, register
+from .base import BudgetExhausted, Optimizer, Search, register
 
 JACOBIAN_STEP = 1e-7  # forward-difference step, as a fraction of each parameter's box width
 
 
-def polish(run: Run, x0: NDArray, max_nfev: int | None = None, tol: float = 1e-12) -> NDArray:
+def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1e-12) -> NDArray:
     """Least-squares polish from x0 using the run's budget, to relative tolerance `tol` of the cost and the
     step; returns the final point (the run tracks the best)."""
     lo, hi = run.problem.lower, run.problem.upper
@@ -54,10 +54,10 @@ class LeastSquares(Optimizer):
 
     name = "lsq"
 
-    def _initialize(self, run: Run, x0: NDArray | None) -> Any:
+    def _initialize(self, run: Search, x0: NDArray | None) -> Any:
         return {"x": run.start(x0)}
 
-    def _step(self, run: Run, state: Any) -> bool | None:
+    def _step(self, run: Search, state: Any) -> bool | None:
         try:
             state["x"] = polish(run, state["x"])
         except BudgetExhausted:

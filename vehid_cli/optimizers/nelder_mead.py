@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .base import Optimizer, Run, register
+from .base import Optimizer, Search, register
 
 
 @dataclass
@@ -80,14 +80,14 @@ class NelderMead(Optimizer):
         """population x iterations as given to the constructor (not the outer iteration cap)."""
         return self._budget
 
-    def _simplex_around(self, run: Run, x: NDArray) -> NDArray:
+    def _simplex_around(self, run: Search, x: NDArray) -> NDArray:
         """The D vertices x + h_j e_j (h_j negative when the positive step would leave the box)."""
         lo, hi = run.problem.lower, run.problem.upper
         h = self.initial_step * (hi - lo)
         h = np.where(x + h > hi, -h, h)
         return np.clip(x + np.diag(h), lo, hi)
 
-    def _initialize(self, run: Run, x0: NDArray | None) -> _SimplexState:
+    def _initialize(self, run: Search, x0: NDArray | None) -> _SimplexState:
         start = run.start(x0)
         x = np.vstack([start, self._simplex_around(run, start)])
         state = _SimplexState(x=x, f=np.full(len(x), np.inf))
@@ -100,15 +100,15 @@ class NelderMead(Optimizer):
         order = np.argsort(state.f, kind="stable")
         state.x, state.f = state.x[order], state.f[order]
 
-    def _collapsed(self, run: Run, state: _SimplexState) -> bool:
+    def _collapsed(self, run: Search, state: _SimplexState) -> bool:
         span = run.problem.upper - run.problem.lower
         return bool(np.max(np.abs(state.x[1:] - state.x[0]) / span) < self.collapse_tol)
 
-    def _point(self, run: Run, x: NDArray) -> tuple[NDArray, float]:
+    def _point(self, run: Search, x: NDArray) -> tuple[NDArray, float]:
         x = np.clip(x, run.problem.lower, run.problem.upper)
         return x, float(run.evaluate(x[None, :])[0])
 
-    def _step(self, run: Run, state: _SimplexState) -> bool | None:
+    def _step(self, run: Search, state: _SimplexState) -> bool | None:
         if self._collapsed(run, state):
             if not self.restart:
                 return False

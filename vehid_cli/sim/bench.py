@@ -81,7 +81,7 @@ def refine(t: NDArray, road: NDArray, substeps: int) -> NDArray:
 
 
 @dataclass(frozen=True)
-class BenchRun:
+class BenchForces:
     """The force of a batch of candidate dampers on one bench history, and whether each stayed finite."""
 
     t: NDArray  # (n,) [s]
@@ -98,7 +98,7 @@ def simulate_damper(
     u: NDArray | None = None,
     substeps: int = 1,
     method: str = "rk4",
-) -> BenchRun:
+) -> BenchForces:
     """Force of P candidates (rows (P, n_par) in `model.layout` order) on the bench history x, v, u.
 
     The kernel integrates at dt / substeps with every input linear between samples; the force is
@@ -129,4 +129,4 @@ def simulate_damper(
     force = forces[:, ::substeps, 0]
     stable = np.all(np.isfinite(force), axis=1)
     force = np.where(stable[:, None], force, np.nan)
-    return BenchRun(t=t, force=force, stable=stable)
+    return BenchForces(t=t, force=force, stable=stable)

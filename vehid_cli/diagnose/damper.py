@@ -122,7 +122,7 @@ def _effects_of(names) -> tuple[str, ...]:
     return tuple(dict.fromkeys(n.partition(".")[0] for n in names if "." in n))
 
 
-def diagnose_bench(
+def diagnose_damper(
     config: DamperConfig,
     data_file: str | Path | None = None,
     validate_files: tuple[str | Path, ...] | None = None,

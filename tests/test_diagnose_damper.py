@@ -16,7 +16,7 @@ from vehid_cli.bench import sine
 from vehid_cli.cli import app
 from vehid_cli.config import load_config
 from vehid_cli.damper_fit import DamperSpec
-from vehid_cli.diagnose.bench import diagnose_bench
+from vehid_cli.diagnose.damper import diagnose_damper
 from vehid_cli.models.damper import default_values
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -106,7 +106,7 @@ def test_damper_config_effects_are_validated(tmp_path):
 def test_the_missing_bench_effect_is_found_and_j_reaches_the_noise(tmp_path, effect, params):
     declared, data = _simulate(tmp_path, effect, {effect: params})
     cfg = load_config(declared)
-    d = diagnose_bench(cfg, data)
+    d = diagnose_damper(cfg, data)
     assert d.quality.ok
     assert d.rounds[0][0].effect == effect
     assert d.selected[:1] == (effect,)
@@ -118,7 +118,7 @@ def test_the_missing_bench_effect_is_found_and_j_reaches_the_noise(tmp_path, eff
 
 def test_no_bench_effect_selects_nothing(tmp_path):
     declared, data = _simulate(tmp_path, "plain", {})
-    d = diagnose_bench(load_config(declared), data)
+    d = diagnose_damper(load_config(declared), data)
     assert d.selected == ()
     assert d.quality.ok
     assert d.verdict.startswith("adequate")
@@ -127,7 +127,7 @@ def test_no_bench_effect_selects_nothing(tmp_path):
 def test_one_stroke_is_too_few_to_claim_anything(tmp_path):
     """Issue 6, item 5: half a cycle of data with hysteresis in it: no effect claimed, and the answer says why."""
     declared, data = _simulate(tmp_path, "short", {"hysteresis": {"alpha": 5e4, "beta": 2e5, "gamma": 2e5}}, cycles=0.6)
-    d = diagnose_bench(load_config(declared), data, candidate_budget=60)
+    d = diagnose_damper(load_config(declared), data, candidate_budget=60)
     assert d.selected == ()
     assert not d.quality.ok
     assert any("too short" in r for r in d.quality.reasons)
@@ -137,7 +137,7 @@ def test_one_stroke_is_too_few_to_claim_anything(tmp_path):
 
 def test_noisy_bench_data_claims_nothing(tmp_path):
     declared, data = _simulate(tmp_path, "noisy", {"hysteresis": {"alpha": 5e4, "beta": 2e5, "gamma": 2e5}}, noise=1.0)
-    d = diagnose_bench(load_config(declared), data, candidate_budget=60)
+    d = diagnose_damper(load_config(declared), data, candidate_budget=60)
     assert d.selected == ()
     assert any("too noisy" in r for r in d.quality.reasons)
 
@@ -171,7 +171,7 @@ def test_real_damper_claims_are_real(config):
     needs = MEASURED / ("friction_damper_brfd" if config == BRFD else "mr_damper_labcontrol")
     if not needs.exists():
         pytest.skip("shared measured data not present")
-    d = diagnose_bench(load_config(config))
+    d = diagnose_damper(load_config(config))
     assert d.selected, d.notes
     before = d.before.validation_per_file
     assert before and len(before) >= 2
