@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from .config import Config
 from .crlb import CramerRao
-from .data import atomic_path
+from .data import atomic_path, remove_stale_temporaries
 from .errors import InputError
 from .executor import Executor, LocalExecutor
 from .experiment import run_streams
@@ -372,14 +372,6 @@ def run_campaign(
 def checkpoint_dir_for(output: Path) -> Path:
     """Where the finished runs of the campaign bound for `output` wait: `<output>.partial/`."""
     return output.with_name(output.name + ".partial")
-
-
-def remove_stale_temporaries(output: Path) -> None:
-    """Delete unfinished atomic writes of `output` (`.NAME.*.tmp`, left by a killed process). Call only while
-    holding `output`'s lock: then no other process is writing it."""
-    for tmp in output.parent.glob(f".{output.name}.*.tmp"):
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
 
 
 def run_campaign_to_file(
