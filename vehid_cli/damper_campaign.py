@@ -26,6 +26,7 @@ from .damper_fit import DamperSpec, RealTime, cost_J, fit, realtime_check
 from .data import atomic_path
 from .errors import InputError
 from .experiment import run_streams
+from .h5io import h5_file
 
 RESULT_KIND = "vehid.damper"
 BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "u", "force": "force"}
@@ -90,12 +91,11 @@ def write_bench_csv(path: str | Path, history: BenchHistory, comments: list[str]
 
 def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, seed: int) -> None:
     """A bench run in HDF5: /t, /x, /v, /u, /force (noisy), /clean_force, with the resolved config."""
-    import h5py
 
     from .provenance import provenance
 
     h = run.history
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
+    with h5_file(path) as h5:
         h5.attrs["kind"] = "vehid.bench"
         h5.attrs["config_yaml"] = cfg.to_yaml()
         h5.attrs["config_sha256"] = cfg.digest()
@@ -401,7 +401,7 @@ def write_result_h5(path: str | Path, res: DamperResult) -> None:
 
     cfg, runs = res.config, res.runs
     strings = h5py.string_dtype()
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
+    with h5_file(path) as h5:
         h5.attrs["kind"] = RESULT_KIND
         h5.attrs["config_yaml"] = cfg.to_yaml()
         h5.attrs["config_sha256"] = cfg.digest()
