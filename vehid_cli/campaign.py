@@ -302,9 +302,15 @@ class Checkpoint:
         record.save(self.directory / f"run-{record.index:05d}.npz")
 
     def remove(self) -> None:
+        """Delete the checkpoint: its runs first, campaign.json last, so that a kill midway leaves one that still
+        opens (stamped, with fewer runs or none), never runs without their stamp."""
         if self.directory.is_dir():
+            stamp = self.directory / "campaign.json"
             for path in self.directory.iterdir():
-                path.unlink()
+                if path != stamp:
+                    path.unlink()
+            with contextlib.suppress(FileNotFoundError):
+                stamp.unlink()
             self.directory.rmdir()
 
 
@@ -366,12 +372,32 @@ def run_campaign(
         records=records,
         bound=bound,
         summary=summary,
+        data_sha256=data_digest(data_file),
     )
 
 
 def checkpoint_dir_for(output: Path) -> Path:
     """Where the finished runs of the campaign bound for `output` wait: `<output>.partial/`."""
     return output.with_name(output.name + ".partial")
+
+
+def finished_campaign(output: Path, config: Config, data_file: str | Path | None = None) -> Campaign | None:
+    """The campaign `output` holds if it is whole (checksum verified) and of this campaign's key: the config (by
+    `campaign_file_digest`, the test a sweep skips by), the data file's bytes and the code version; else None."""
+    from . import __version__
+    from .provenance import git_commit
+    from .results import CAMPAIGN_KIND, campaign_file_digest, check_integrity, open_results, read_campaign_h5
+
+    try:
+        if check_integrity(output) is None or campaign_file_digest(output) != config.digest():
+            return None
+        with open_results(output, CAMPAIGN_KIND, "campaign file") as h5:
+            made = tuple(str(h5.attrs.get(k, "")) for k in ("vehid_version", "git_commit", "data_sha256"))
+        if made != (__version__, git_commit(), data_digest(data_file) or ""):
+            return None
+        return read_campaign_h5(output)
+    except (InputError, OSError):  # missing, damaged or foreign: not finished
+        return None
 
 
 def run_campaign_to_file(
@@ -386,7 +412,9 @@ def run_campaign_to_file(
     attrs: Mapping[str, str] | None = None,
     lock: bool = True,
 ) -> Campaign:
-    """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint.
+    """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint (kept if the write
+    fails: the rerun finishes from it). A checkpoint beside a finished file of this campaign is stale: removed,
+    and that file's campaign returned.
 
     With `lock` (the default) the output's lock is held throughout: `locking.Busy` (an InputError) if another
     process holds it. Pass `lock=False` only when the caller holds it. `attrs` are extra root attributes of the
@@ -398,6 +426,13 @@ def run_campaign_to_file(
     with exclusive(output) if lock else contextlib.nullcontext():
         remove_stale_temporaries(output)
         partial = checkpoint_dir_for(output)
+        if partial.exists():  # a kill during the clean-up after the file was written leaves a stale checkpoint
+            finished = finished_campaign(output, config, data_file)
+            if finished is not None:
+                Checkpoint(partial, "").remove()
+                if log is not None:
+                    log(f"note: {output} is complete for this config; removed the stale checkpoint {partial}")
+                return finished
         campaign = run_campaign(
             config, data_file, jobs=jobs, executor=executor, checkpoint_dir=partial, on_run=on_run, log=log
         )
