@@ -137,6 +137,9 @@ def test_stale_temporaries_of_the_target_are_removed_and_nothing_else(tmp_path):
     others = [".x.csv.bak.abcdefgh.tmp", ".y.csv.123.tmp", "x.csv.tmp", ".x.csv.partial", "x.csv.1.tmp"]
     for name in [stale.name, live.name, *others]:
         (tmp_path / name).write_text("left over")
+    os.symlink(tmp_path / "x.csv.tmp", tmp_path / ".x.csv.link.tmp")  # our naming, but not a file we make
+    os.mkfifo(tmp_path / ".x.csv.fifo.tmp")
+    others += [".x.csv.link.tmp", ".x.csv.fifo.tmp"]
     fd = os.open(live, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)  # as atomic_path holds its temporary

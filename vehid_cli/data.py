@@ -13,6 +13,7 @@ import io
 import math
 import os
 import re
+import stat
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -236,10 +237,12 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
         return removed
     for tmp in candidates:
         try:
-            fd = os.open(tmp, os.O_RDONLY)
+            fd = os.open(tmp, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW)  # a symlink or a FIFO is not ours
         except OSError:
             continue
         try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                continue
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             os.unlink(tmp)  # while holding its lock: a writer that created it meanwhile sees it gone and retries
             removed.append(tmp)
