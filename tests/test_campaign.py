@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, needs_shared
-from vehid_cli.campaign import run_campaign
+from vehid_cli.campaign import run_campaign, run_campaign_to_file
 from vehid_cli.config import load_config
 from vehid_cli.results import read_campaign_h5, write_campaign_h5
 
@@ -312,6 +312,70 @@ def test_failed_campaign_leaves_no_checkpoint_to_block_the_corrected_rerun(tmp_p
 
 def _interrupt_before_any_run(done, total):
     raise KeyboardInterrupt
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """A campaign written by run_campaign_to_file (its checkpoint removed), and its bytes."""
+    target = tmp_path_factory.mktemp("written") / "c.h5"
+    run_campaign_to_file(small_config("identify.runs=2"), target, jobs=1)
+    return target, target.read_bytes()
+
+
+@pytest.mark.parametrize("leftover", [(), ("run-00000.npz",), ("run-00001.npz", ".run-00000.npz.a1b2c3d4.tmp")])
+def test_a_checkpoint_left_beside_its_finished_file_is_removed_not_refused(tmp_path, written, leftover):
+    """A kill inside the checkpoint's clean-up, after the campaign file was written, leaves c.h5.partial/ without
+    campaign.json: the finished, checksummed file of the same config wins, the rerun computes nothing."""
+    target = tmp_path / "c.h5"
+    target.write_bytes(written[1])
+    campaign = read_campaign_h5(target)
+    partial = tmp_path / "c.h5.partial"
+    partial.mkdir()
+    for name in leftover:
+        if name.startswith("run-"):
+            campaign.records[int(name[4:9])].save(partial / name)
+        else:
+            (partial / name).write_bytes(b"half a record")
+    messages, progress = [], []
+    again = run_campaign_to_file(
+        small_config("identify.runs=2"), target, jobs=1, log=messages.append, on_run=lambda d, n: progress.append(d)
+    )
+    assert messages == [f"note: {target} is complete for this config; removed the stale checkpoint {partial}"]
+    assert not partial.exists() and progress == []  # nothing recomputed
+    assert target.read_bytes() == written[1]  # not even rewritten
+    np.testing.assert_array_equal([r.estimate for r in again.records], [r.estimate for r in campaign.records])
+    np.testing.assert_array_equal(again.summary.mean, campaign.summary.mean)
+
+
+def test_a_checkpoint_beside_another_configs_file_is_still_refused(tmp_path, written):
+    """Only a file of the same campaign settles a checkpoint without campaign.json; else the refusal stands."""
+    from vehid_cli.errors import InputError
+
+    target = tmp_path / "c.h5"
+    target.write_bytes(written[1])
+    partial = tmp_path / "c.h5.partial"
+    partial.mkdir()
+    read_campaign_h5(target).records[0].save(partial / "run-00000.npz")
+    with pytest.raises(InputError, match="no readable campaign.json"):
+        run_campaign_to_file(small_config("identify.runs=2", "noise.level=0.2"), target, jobs=1)
+    assert (partial / "run-00000.npz").exists() and target.read_bytes() == written[1]
+
+
+def test_checkpoint_removal_deletes_its_stamp_last(tmp_path, monkeypatch):
+    """So a kill midway leaves a stamped checkpoint (fewer runs), never runs without campaign.json."""
+    from pathlib import Path
+
+    from vehid_cli.campaign import Checkpoint
+
+    partial = tmp_path / "c.h5.partial"
+    partial.mkdir()
+    for name in ("campaign.json", "run-00000.npz", "run-00001.npz", "zz.npz"):
+        (partial / name).write_text("x")
+    order, unlink = [], Path.unlink
+    monkeypatch.setattr(Path, "unlink", lambda self, *a, **k: (order.append(self.name), unlink(self, *a, **k)))
+    Checkpoint(partial, "").remove()
+    assert order[-1] == "campaign.json" and not partial.exists()
+    assert sorted(order) == ["campaign.json", "run-00000.npz", "run-00001.npz", "zz.npz"]
 
 
 def test_json_is_strict_when_a_parameter_is_unidentifiable(tmp_path):

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import errno
+import fcntl
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from tests.conftest import VEHICLE_DATA, needs_shared
-from vehid_cli.data import read_measurement, read_table, time_grid, write_measurement_csv
-from vehid_cli.errors import InputError
+from vehid_cli import data
+from vehid_cli.data import atomic_path, read_measurement, read_table, time_grid, write_bytes, write_measurement_csv
+from vehid_cli.errors import DiskFull, InputError
 
 
 def test_reads_the_shared_bump_run():
@@ -88,3 +94,60 @@ def test_byte_order_mark_is_tolerated(tmp_path):
     path = tmp_path / "bom.csv"
     path.write_bytes(b"\xef\xbb\xbf" + (HEADER + rows([0, 0.001, 0.002])).encode())
     assert read_measurement(path).t.size == 3
+
+
+# ------------------------------------------------------------------------------------------ writing
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EDQUOT], ids=["ENOSPC", "EDQUOT"])
+def test_a_full_disk_is_disk_full_naming_the_file_and_leaves_no_temporary(tmp_path, monkeypatch, code):
+    """Any write through atomic_path (here CSV text, and the bytes of an HDF5 image) that meets a full disk or
+    quota raises DiskFull naming the target; the old content stays and the temporary is removed."""
+    target = tmp_path / "m.csv"
+    target.write_text("old content")
+
+    def full(self, *args, **kwargs):
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(Path, "write_text", full)
+    t = time_grid(0.01, 1e-3)
+    with pytest.raises(DiskFull) as caught:
+        write_measurement_csv(target, t, np.zeros((t.size, 4)))
+    assert str(caught.value) == f"no space left on device writing {target}"
+    assert caught.value.errno == code and isinstance(caught.value, OSError)
+    monkeypatch.undo()
+    monkeypatch.setattr(data, "_write_bytes", lambda fh, b: full(None))
+    with pytest.raises(DiskFull, match="m.csv"):
+        write_bytes(target, b"new content")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv"] and target.read_text() == "old content"
+
+
+def test_other_write_errors_are_not_disk_full(tmp_path):
+    with pytest.raises(PermissionError), atomic_path(tmp_path / "x.json"):
+        raise PermissionError(errno.EACCES, "denied")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_stale_temporaries_of_the_target_are_removed_and_nothing_else(tmp_path):
+    """A killed writer's `.NAME.*.tmp` goes at the next write of NAME; a live writer's (it holds the flock),
+    other targets' temporaries and other files stay."""
+    target = tmp_path / "x.csv"
+    stale = tmp_path / ".x.csv.123.tmp"
+    live = tmp_path / ".x.csv.k3j9x0aa.tmp"
+    others = [".x.csv.bak.abcdefgh.tmp", ".y.csv.123.tmp", "x.csv.tmp", ".x.csv.partial", "x.csv.1.tmp"]
+    for name in [stale.name, live.name, *others]:
+        (tmp_path / name).write_text("left over")
+    os.symlink(tmp_path / "x.csv.tmp", tmp_path / ".x.csv.link.tmp")  # our naming, but not a file we make
+    os.mkfifo(tmp_path / ".x.csv.fifo.tmp")
+    others += [".x.csv.link.tmp", ".x.csv.fifo.tmp"]
+    fd = os.open(live, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # as atomic_path holds its temporary
+        write_bytes(target, b"a,b\n")
+        assert not stale.exists() and live.exists()
+    finally:
+        os.close(fd)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, "x.csv", *others])
+    assert target.read_bytes() == b"a,b\n"
+    write_bytes(target, b"c\n")  # the writer is gone (its lock released): now its temporary is stale
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["x.csv", *others])

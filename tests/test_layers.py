@@ -21,7 +21,7 @@ PACKAGE = ROOT / "vehid_cli"
 # the package (a package's __init__ is the package's name); a prefix ending in "." covers a subpackage.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("__init__", "errors", "provenance", "locking"),  # foundations
-    ("data", "bench", "noise", "optimizers", "optimizers."),  # files, the test bench's motions, noise, optimizers
+    ("data", "h5io", "bench", "noise", "optimizers", "optimizers."),  # files, the bench's motions, noise, optimizers
     ("models", "models."),  # force laws and matrices: own their parameter tables and defaults
     ("sim", "sim."),  # the generic kernel and the car/bench adapters beside it
     ("config",),  # validated configs

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -20,6 +21,7 @@ from typer.testing import CliRunner
 
 from tests.conftest import BASE_CONFIG, ROOT
 from tests.test_campaign import SMALL, assert_same_content, small_config
+from vehid_cli import data as data_module
 from vehid_cli.campaign import run_campaign, run_campaign_to_file
 from vehid_cli.cli import app
 from vehid_cli.errors import InputError
@@ -203,6 +205,84 @@ def test_files_record_their_provenance(one_campaign):
     assert attrs["seed"] == 2015 and attrs["data_sha256"] == "" and len(attrs["config_sha256"]) == 64
     head = one_campaign.read_bytes()[:512]  # the HDF5 user block: the checksum of the rest of the file
     assert head.startswith(b"vehid sha256 ") and check_integrity(one_campaign) == head[13:77].decode()
+
+
+# ------------------------------------------------------------------------------------------ a full disk
+
+SIM = ["simulation.duration=1.5", "simulation.dt=0.002"]
+
+
+def fill_the_disk(monkeypatch) -> list[str]:
+    """Make every HDF5 image write (data.write_bytes) meet a full disk; returns the files it refused."""
+    refused = []
+
+    def full(fh, data):
+        refused.append(fh.name)
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(data_module, "_write_bytes", full)
+    return refused
+
+
+def temporaries(directory: Path) -> list[str]:
+    return sorted(p.name for p in directory.glob(".*.tmp"))
+
+
+def test_simulate_into_a_full_disk_exits_1_naming_the_file_and_leaves_nothing(tmp_path, monkeypatch):
+    target = tmp_path / "x.h5"
+    refused = fill_the_disk(monkeypatch)
+    code, text = invoke("simulate", BASE_CONFIG, *sets(SIM), "-o", target)
+    assert code == 1, text
+    assert text.strip() == f"error: no space left on device writing {target}" and refused, text
+    assert not target.exists() and temporaries(tmp_path) == []
+    monkeypatch.undo()
+    stale = tmp_path / ".x.h5.123.tmp"  # what a killed (or crashed) writer left
+    stale.write_bytes(b"\x89HDF half a file")
+    code, text = invoke("simulate", BASE_CONFIG, *sets(SIM), "-o", target)
+    assert code == 0 and f"wrote {target}" in text, text
+    assert temporaries(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["x.h5"]
+    with h5py.File(target) as h5:
+        assert h5.attrs["kind"] == "vehid.simulation" and h5["noisy/acc"].shape == (750, 4)
+
+
+def test_identify_that_cannot_write_its_file_keeps_every_run_and_the_rerun_finishes_from_them(
+    tmp_path, monkeypatch, one_campaign
+):
+    """The campaign file meets a full disk after all runs were checkpointed: exit 1 with the message, no
+    temporary, the checkpoint kept; the rerun takes every run from it and writes the clean run's campaign."""
+    target = tmp_path / "c.h5"
+    refused = fill_the_disk(monkeypatch)
+    code, text = invoke("identify", BASE_CONFIG, *sets(SMALL), "--runs", 2, "--jobs", 1, "-o", target)
+    assert code == 1, text
+    assert f"error: no space left on device writing {target}" in text and "Traceback" not in text, text
+    assert [Path(r).name.startswith(".c.h5.") for r in refused] == [True]
+    partial = tmp_path / "c.h5.partial"
+    assert sorted(p.name for p in partial.iterdir()) == ["campaign.json", "run-00000.npz", "run-00001.npz"]
+    assert not target.exists() and temporaries(tmp_path) == [] and temporaries(partial) == []
+    monkeypatch.undo()
+    progress = []
+    run_campaign_to_file(small_config("identify.runs=2"), target, jobs=1, on_run=lambda d, n: progress.append((d, n)))
+    assert progress == [(2, 2)]  # nothing recomputed
+    assert not partial.exists() and check_integrity(target) is not None
+    assert_same_content(one_campaign, target)
+
+
+@pytest.mark.skipif(shutil.which("unshare") is None, reason="needs util-linux unshare")
+def test_simulate_on_a_really_full_file_system_exits_1_without_a_crash(tmp_path):
+    """On a 40 kB tmpfs (a user namespace's mount: no root needed where the kernel allows it) HDF5 used to
+    crash the process (exit 139) after h5py's 'Exception ignored' tracebacks."""
+    mnt = tmp_path / "mnt"
+    mnt.mkdir()
+    probe = subprocess.run(["unshare", "-rm", "mount", "-t", "tmpfs", "-o", "size=40k", "none", str(mnt)],
+                           capture_output=True)  # fmt: skip
+    if probe.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs in a user namespace: {probe.stderr.decode().strip()}")
+    target = mnt / "x.h5"
+    script = (f"mount -t tmpfs -o size=40k none {mnt} && {sys.executable} -m vehid_cli simulate {BASE_CONFIG} "
+              f"{' '.join(sets(SIM))} -o {target}; echo status=$?; ls -A {mnt}")  # fmt: skip
+    res = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, cwd=ROOT)
+    assert "status=1\n" in res.stdout and res.stdout.endswith("status=1\n"), (res.stdout, res.stderr)
+    assert res.stderr.strip() == f"error: no space left on device writing {target}", res.stderr
 
 
 # ------------------------------------------------------------------------------------------ locks

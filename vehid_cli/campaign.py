@@ -20,13 +20,21 @@ from pathlib import Path
 
 from . import __version__
 from .config import AnyConfig
-from .data import atomic_path
+from .data import atomic_path, remove_stale_temporaries
 from .errors import InputError
 from .executor import Executor, LocalExecutor
 from .locking import exclusive
 from .provenance import git_commit
 from .records import Campaign, RunRecord, summarise
-from .results import config_difference, write_campaign_h5
+from .results import (
+    CAMPAIGN_KIND,
+    campaign_file_digest,
+    check_integrity,
+    config_difference,
+    open_results,
+    read_campaign_h5,
+    write_campaign_h5,
+)
 from .systems import System, build_system
 
 Log = Callable[[str], None]
@@ -113,9 +121,15 @@ class Checkpoint:
         record.save(self.directory / f"run-{record.index:05d}.npz")
 
     def remove(self) -> None:
+        """Delete the checkpoint: its runs first, campaign.json last, so that a kill midway leaves one that still
+        opens (stamped, with fewer runs or none), never runs without their stamp."""
         if self.directory.is_dir():
+            stamp = self.directory / "campaign.json"
             for path in self.directory.iterdir():
-                path.unlink()
+                if path != stamp:
+                    path.unlink()
+            with contextlib.suppress(FileNotFoundError):
+                stamp.unlink()
             self.directory.rmdir()
 
 
@@ -179,11 +193,16 @@ def run_campaign(
     )  # fmt: skip
 
 
+def configured_data_file(config: AnyConfig, data_file: str | Path | None) -> str | Path | None:
+    """The data file a campaign identifies from: `--data`, else a damper config's data.file (None: simulated)."""
+    if data_file is None and getattr(config, "data", None) is not None and config.data.file is not None:
+        return config.data.file
+    return data_file
+
+
 def check_same_campaign(output: Path, config: AnyConfig, data_file: str | Path | None) -> None:
     """InputError (naming the first differences) if `output` holds a campaign of another config or data file."""
-    if data_file is None and getattr(config, "data", None) is not None and config.data.file is not None:
-        data_file = config.data.file
-    diffs = config_difference(output, config, data_digest(data_file))
+    diffs = config_difference(output, config, data_digest(configured_data_file(config, data_file)))
     if diffs:
         shown = "; ".join(diffs[:3]) + (f"; and {len(diffs) - 3} more" if len(diffs) > 3 else "")
         raise InputError(
@@ -197,12 +216,20 @@ def checkpoint_dir_for(output: Path) -> Path:
     return output.with_name(output.name + ".partial")
 
 
-def remove_stale_temporaries(output: Path) -> None:
-    """Delete unfinished atomic writes of `output` (`.NAME.*.tmp`, left by a killed process). Call only while
-    holding `output`'s lock: then no other process is writing it."""
-    for tmp in output.parent.glob(f".{output.name}.*.tmp"):
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+def finished_campaign(output: Path, config: AnyConfig, data_file: str | Path | None = None) -> Campaign | None:
+    """The campaign `output` holds if it is whole (checksum verified) and of this campaign's key: the config (by
+    `campaign_file_digest`, the test a sweep skips by), the data file's bytes and the code version; else None."""
+    data_file = configured_data_file(config, data_file)
+    try:
+        if check_integrity(output) is None or campaign_file_digest(output) != config.digest():
+            return None
+        with open_results(output, CAMPAIGN_KIND, "campaign file") as h5:
+            made = tuple(str(h5.attrs.get(k, "")) for k in ("vehid_version", "git_commit", "data_sha256"))
+        if made != (__version__, git_commit(), data_digest(data_file) or ""):
+            return None
+        return read_campaign_h5(output)
+    except (InputError, OSError):  # missing, damaged or foreign: not finished
+        return None
 
 
 def run_campaign_to_file(
@@ -218,7 +245,9 @@ def run_campaign_to_file(
     lock: bool = True,
     force: bool = False,
 ) -> Campaign:
-    """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint.
+    """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint (kept if the write
+    fails: the rerun finishes from it). A checkpoint beside a finished file of this campaign is stale: removed,
+    and that file's campaign returned.
 
     With `lock` (the default) the output's lock is held throughout: `locking.Busy` (an InputError) if another
     process holds it. Pass `lock=False` only when the caller holds it. `attrs` are extra root attributes of the
@@ -230,6 +259,13 @@ def run_campaign_to_file(
             check_same_campaign(output, config, data_file)
         remove_stale_temporaries(output)
         partial = checkpoint_dir_for(output)
+        if partial.exists():  # a kill during the clean-up after the file was written leaves a stale checkpoint
+            finished = finished_campaign(output, config, data_file)
+            if finished is not None:
+                Checkpoint(partial, "").remove()
+                if log is not None:
+                    log(f"note: {output} is complete for this config; removed the stale checkpoint {partial}")
+                return finished
         campaign = run_campaign(
             config, data_file, jobs=jobs, executor=executor, checkpoint_dir=partial, on_run=on_run, log=log
         )

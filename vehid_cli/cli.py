@@ -18,7 +18,7 @@ from rich.console import Console
 from . import __version__
 from .config import DamperConfig, load_config
 from .data import check_writable, write_measurement_csv
-from .errors import InputError
+from .errors import DiskFull, InputError
 from .experiment import build_experiment, run_streams, simulate_measurement
 
 app = typer.Typer(
@@ -46,6 +46,9 @@ def _guarded(command):
         except InputError as exc:
             err.print(f"error: {exc}", markup=False)
             raise typer.Exit(2) from None
+        except DiskFull as exc:  # a full disk or quota: the write was undone (nothing partial left), exit 1
+            err.print(f"error: {exc}", markup=False)
+            raise typer.Exit(1) from None
         except (typer.Exit, typer.Abort, KeyboardInterrupt):
             raise
         except Exception as exc:  # noqa: BLE001 - the last line of defence of the CLI
@@ -614,6 +617,8 @@ def plot_diagnosis_files(result, directory: Path, stem: str) -> list[Path]:
 
     try:
         return plot_diagnosis(result, directory, stem)
+    except DiskFull:
+        raise
     except OSError as exc:
         raise InputError(f"cannot write figures: {exc.strerror}", source=str(directory)) from None
 

@@ -7,9 +7,13 @@ Format: CSV with a header row, `#` comment lines allowed, uniform time step. Col
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import io
 import math
 import os
+import re
+import stat
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -18,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError
+from .errors import DiskFull, InputError
 
 ROAD_COLUMNS = tuple(f"road{i}" for i in range(1, 5))
 ACC_COLUMNS = tuple(f"acc{i}" for i in range(1, 5))
@@ -210,26 +214,98 @@ def _fsync(path: Path, directory: bool = False) -> None:
         os.close(fd)
 
 
+FULL_DISK = tuple(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)) if e is not None)
+
+
+def _temporary_name(path: Path) -> re.Pattern:
+    """Our temporaries of `path`: `.NAME.XXXXXXXX.tmp` as `tempfile.mkstemp` names them (no dot inside XXX, so
+    `.NAME.bak.XXXXXXXX.tmp`, a temporary of NAME.bak, is not one of NAME's)."""
+    return re.compile(rf"\.{re.escape(path.name)}\.[A-Za-z0-9_]+\.tmp")
+
+
+def remove_stale_temporaries(path: str | Path) -> list[Path]:
+    """Delete the unfinished atomic writes of `path` a killed process left (`.NAME.*.tmp` beside it); return them.
+
+    A live writer holds an `flock` on its temporary (`atomic_path`), so only abandoned ones are removed, and only
+    files of our own naming."""
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    pattern, removed = _temporary_name(path), []
+    try:
+        candidates = [p for p in parent.iterdir() if pattern.fullmatch(p.name)]
+    except OSError:  # a missing or unreadable directory: nothing of ours to clean (the write reports it)
+        return removed
+    for tmp in candidates:
+        try:
+            fd = os.open(tmp, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW)  # a symlink or a FIFO is not ours
+        except OSError:
+            continue
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                continue
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            os.unlink(tmp)  # while holding its lock: a writer that created it meanwhile sees it gone and retries
+            removed.append(tmp)
+        except OSError:  # BlockingIOError: a live writer's; FileNotFoundError: already gone
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
+def _locked_temporary(path: Path) -> tuple[int, Path]:
+    """A new temporary beside `path`, locked (see `remove_stale_temporaries`): its descriptor and path."""
+    while True:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            if os.stat(tmp).st_ino == os.fstat(fd).st_ino:
+                return fd, Path(tmp)
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # a cleaner took it for a stale one before we locked it: make another
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside `path`; on success rename it into place, on failure remove it.
 
     The temporary file is flushed to the disk before the rename and the directory after it, so after a crash
-    (or a power cut) `path` holds either its old content or the whole new one, never a part of it."""
+    (or a power cut) `path` holds either its old content or the whole new one, never a part of it. Stale
+    temporaries of `path` are removed first; a full disk (or quota) is `DiskFull` naming `path`."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
-    os.close(fd)
-    tmp_path = Path(tmp)
+    remove_stale_temporaries(path)
+    fd = -1
     try:
-        os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private; results get the usual permissions
-        yield tmp_path
-        _fsync(tmp_path)
-        os.replace(tmp_path, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
+        fd, tmp_path = _locked_temporary(path)
+        try:
+            os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private; results get the usual permissions
+            yield tmp_path
+            _fsync(tmp_path)
+            os.replace(tmp_path, path)
+        except BaseException:
+            with contextlib.suppress(FileNotFoundError):
+                tmp_path.unlink()
+            raise
+    except OSError as exc:
+        if exc.errno in FULL_DISK and not isinstance(exc, DiskFull):
+            raise DiskFull(path, exc.errno) from exc
         raise
+    finally:
+        if fd >= 0:
+            os.close(fd)
     _fsync(tmp_path.parent, directory=True)
+
+
+def _write_bytes(fh, data: bytes) -> None:
+    """The one write of `write_bytes` (a test replaces it to fill the disk)."""
+    fh.write(data)
+
+
+def write_bytes(path: str | Path, data: bytes) -> None:
+    """Write `data` to `path` atomically (`atomic_path`, fsynced): the old content or the whole new one."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        _write_bytes(fh, data)
 
 
 def write_measurement_csv(

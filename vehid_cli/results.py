@@ -22,6 +22,7 @@ from .crlb import CramerRao
 from .data import atomic_path
 from .errors import InputError
 from .experiment import SimulatedRun
+from .h5io import h5_file
 from .models.fullcar import DOF_NAMES
 from .provenance import provenance
 from .records import Campaign, RunRecord, summarise
@@ -35,7 +36,7 @@ def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
     resolved config (YAML), its SHA-256, the noise level, the seed and provenance.
     """
     exp = run.experiment
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
+    with h5_file(path) as h5:
         h5.attrs["kind"] = "vehid.simulation"
         h5.attrs["config_yaml"] = exp.config.to_yaml()
         h5.attrs["config_sha256"] = exp.config.digest()
@@ -79,14 +80,20 @@ STAMP = b"vehid sha256 "  # then 64 hex digits of SHA-256(file[USERBLOCK:]) and 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
+def checksum_block(body: bytes) -> bytes:
+    """The user block of a campaign file whose bytes after it are `body`: STAMP, SHA-256(body) in hex, newline,
+    zeros up to USERBLOCK bytes."""
+    return (STAMP + hashlib.sha256(body).hexdigest().encode() + b"\n").ljust(USERBLOCK, b"\0")
+
+
 def stamp_checksum(path: str | Path) -> str:
-    """Write the SHA-256 of everything after the user block into the user block; return it."""
+    """Write the SHA-256 of everything after the user block into the user block of a file on disk; return it."""
     with open(path, "r+b") as fh:
         fh.seek(USERBLOCK)
-        digest = hashlib.sha256(fh.read()).hexdigest()
+        block = checksum_block(fh.read())
         fh.seek(0)
-        fh.write(STAMP + digest.encode() + b"\n")
-    return digest
+        fh.write(block)
+    return block[len(STAMP) : len(STAMP) + 64].decode()
 
 
 def check_integrity(path: str | Path) -> str | None:
@@ -135,10 +142,8 @@ def write_campaign_h5(path: str | Path, campaign, attrs: Mapping[str, str] | Non
     /<system>/...: what the system concluded after the runs (a damper: model_names, model_values, validation/{files,
     J}, realtime attrs, traces/<k>/{t, x, v, measured, model} with attrs name, J)
     """
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w", userblock_size=USERBLOCK) as h5:
-            _write_campaign(h5, campaign, attrs)
-        stamp_checksum(tmp)
+    with h5_file(path, userblock=USERBLOCK, head=checksum_block) as h5:
+        _write_campaign(h5, campaign, attrs)
 
 
 def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) -> None:

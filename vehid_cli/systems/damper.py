@@ -23,6 +23,7 @@ from ..damper_fit import DamperSpec, RealTime, cost_J, fit, j_problem, realtime_
 from ..data import atomic_path
 from ..errors import InputError
 from ..experiment import run_streams
+from ..h5io import h5_file
 from ..noise import estimate_noise_sigma
 from ..optimizers.base import Problem
 from ..provenance import provenance
@@ -91,10 +92,9 @@ def write_bench_csv(path: str | Path, history: BenchHistory, comments: list[str]
 
 def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, seed: int) -> None:
     """A bench run in HDF5: /t, /x, /v, /u, /force (noisy), /clean_force, with the resolved config."""
-    import h5py
 
     h = run.history
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
+    with h5_file(path) as h5:
         h5.attrs["kind"] = "vehid.bench"
         h5.attrs["config_yaml"] = cfg.to_yaml()
         h5.attrs["config_sha256"] = cfg.digest()
