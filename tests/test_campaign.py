@@ -356,8 +356,11 @@ def test_a_checkpoint_beside_another_configs_file_is_still_refused(tmp_path, wri
     partial = tmp_path / "c.h5.partial"
     partial.mkdir()
     read_campaign_h5(target).records[0].save(partial / "run-00000.npz")
-    with pytest.raises(InputError, match="no readable campaign.json"):
-        run_campaign_to_file(small_config("identify.runs=2", "noise.level=0.2"), target, jobs=1)
+    other = small_config("identify.runs=2", "noise.level=0.2")
+    with pytest.raises(InputError, match=r"another config or data \(noise.level: 0.1 in the file, 0.2 now\)"):
+        run_campaign_to_file(other, target, jobs=1)
+    with pytest.raises(InputError, match="no readable campaign.json"):  # --force: the checkpoint is still not ours
+        run_campaign_to_file(other, target, jobs=1, force=True)
     assert (partial / "run-00000.npz").exists() and target.read_bytes() == written[1]
 
 

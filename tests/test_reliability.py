@@ -133,9 +133,11 @@ def test_damaged_checkpoint_records_are_redone_with_a_warning(tmp_path):
     (partial / ".run-00004.npz.x1y2.tmp").write_bytes(b"half a write")  # left by a kill during a save
     messages = []
     resumed = run_campaign(cfg, jobs=1, checkpoint_dir=partial, log=messages.append)
-    damaged = sorted(m.split(":")[1].strip() for m in messages)
+    warnings = [m for m in messages if m.startswith("warning:")]
+    damaged = sorted(m.split(":")[1].strip() for m in warnings)
     assert damaged == [str(partial / f"run-0000{i}.npz") for i in (1, 2, 3)], messages
-    assert all("damaged checkpoint record" in m and "redone" in m for m in messages)
+    assert all("damaged checkpoint record" in m and "redone" in m for m in warnings)
+    assert f"note: resumed 1 of 5 runs from {partial}" in messages  # only run 0 survived whole
     assert not list(partial.glob(".*.tmp"))
     write_campaign_h5(tmp_path / "c.h5", resumed)
     assert_same_content(tmp_path / "whole.h5", tmp_path / "c.h5")
