@@ -8,7 +8,7 @@ simulator (all 2D perturbed cars in one call). Everything is reported relative t
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +80,13 @@ def cramer_rao(
         W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
         W = W.reshape(-1, D)
         F += W.T @ W
+    return bound_from_information(names, values, F)
+
+
+def bound_from_information(names: Sequence[str], values: NDArray, F: NDArray) -> CramerRao:
+    """The bound from the Fisher information F (D, D) of the relative parameters theta_j / values_j."""
+    values = np.asarray(values, dtype=float)
+    D = values.size
     # A parameter the data carries (next to) no information about has an infinite bound: it is not
     # dropped from the inverse (a pseudo-inverse would silently report a tiny bound for it).
     info = np.diag(F)
@@ -110,3 +117,24 @@ def cramer_rao(
         identifiable=identifiable,
         condition=condition,
     )
+
+
+def cramer_rao_outputs(
+    names: Sequence[str],
+    values: NDArray,
+    simulate: Callable[[NDArray], NDArray],
+    sigma: float | NDArray,
+    rel_step: float = 1e-5,
+) -> CramerRao:
+    """The bound of any model observed with white Gaussian noise: `simulate` maps candidates (P, D) to outputs
+    (P, m) (e.g. a damper's force on a bench run), `sigma` is the noise standard deviation (scalar or (m,))."""
+    values = np.asarray(values, dtype=float)
+    D = values.size
+    h = rel_step * np.maximum(np.abs(values), 1e-12)
+    X = np.repeat(values[None, :], 2 * D, axis=0)
+    X[np.arange(D), np.arange(D)] += h
+    X[D + np.arange(D), np.arange(D)] -= h
+    y = np.asarray(simulate(X), dtype=float)
+    S = (y[:D] - y[D:]) / (2 * h[:, None]) * np.abs(values)[:, None]  # (D, m) per relative change
+    W = S / np.asarray(sigma, dtype=float)
+    return bound_from_information(names, values, W @ W.T)

@@ -54,17 +54,22 @@ def _J_train(res: Campaign) -> str:
 
 
 def parameter_table(res: Campaign, file: str) -> Table:
-    """Rich table of one result: per unknown truth, start, estimate (mean over runs), RE, spread."""
+    """Rich table of one result: per unknown truth, start, estimate (mean over runs), RE, the spread over runs (or,
+    for one fit, its 95 % interval from the bound at the estimate) and the Cramér–Rao bound."""
     algorithm = res.config.identify.algorithm.name
     title = f"{label(res, file)} · {res.findings.model} · {source(res)} · {len(res.records)} run(s) · {algorithm}"
     table = Table(title=title, title_justify="left")
-    for col in ("parameter", "truth", "configured", "estimate", "RE %", "sd over runs"):
+    single = len(res.records) == 1
+    spread = "± 95 % (bound)" if single else "sd over runs %"
+    for col in ("parameter", "truth", "configured", "estimate", "RE %", spread, "CRLB sd %"):
         table.add_column(col, justify="left" if col == "parameter" else "right")
-    re = res.summary.re_percent
+    re, b = res.summary.re_percent, res.bound
     for j, name in enumerate(res.names):
         table.add_row(
             name, _g(None if res.truth is None else res.truth[j]), _g(res.nominal[j]), _g(res.summary.mean[j]),
-            _g(None if re is None else re[j], ".3f"), _g(res.summary.sd[j]) if len(res.records) > 1 else "–",
+            _g(None if re is None else re[j], ".3f"),
+            _g(1.96 * b.sd[j], ".3g") if single else _g(res.summary.re_sd_percent[j], ".3f"),
+            _g(b.re_sd_percent[j], ".3f"),
         )  # fmt: skip
     rt = res.findings.realtime
     parts = [f"J train {_J_train(res)}"]

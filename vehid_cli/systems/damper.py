@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from ..bench import BenchHistory, read_bench, sawtooth, sine, triangle, with_force
 from ..config import DamperConfig
+from ..crlb import CramerRao, cramer_rao_outputs
 from ..damper_fit import DamperSpec, RealTime, cost_J, fit, j_problem, realtime_check
 from ..data import atomic_path
 from ..errors import InputError
@@ -357,6 +358,20 @@ class DamperSystem(System):
     def problem(self, reference: BenchHistory) -> Problem:
         box = {n: (lo, hi) for n, lo, hi in zip(self.names, self.box.lower, self.box.upper, strict=True)}
         return j_problem(self.spec, reference, self.names, box, self.config.bench.substeps)[0]
+
+    def bound(self, at: NDArray | None = None) -> CramerRao:
+        """The Cramér–Rao bound of the bench run (run 0's motion) for white force noise of the campaign's sigma, at
+        `at` (default: the truth, or the configured values); NaN when the noise is zero or unknown."""
+        sigma = float(self.sigma["force"][0])
+        if not sigma > 0 or self.config.identify.stages:  # stages fit on several runs: no single-run bound
+            return super().bound(at)
+        if at is None:
+            at = self.box.truth if self.box.truth is not None else self.box.nominal
+        history, substeps = self.reference(0), self.config.bench.substeps
+        with np.errstate(all="ignore"):
+            return cramer_rao_outputs(
+                self.names, at, lambda X: self.spec.simulate_batch(self.names, X, history, substeps).force, sigma
+            )
 
     def start(self, rng: np.random.Generator) -> NDArray | None:
         """A random start in the box (uniform, from the run's optimizer stream), or None for the configured values."""
