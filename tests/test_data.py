@@ -88,3 +88,51 @@ def test_byte_order_mark_is_tolerated(tmp_path):
     path = tmp_path / "bom.csv"
     path.write_bytes(b"\xef\xbb\xbf" + (HEADER + rows([0, 0.001, 0.002])).encode())
     assert read_measurement(path).t.size == 3
+
+
+# ------------------------------------------------------------------------------------------ separators
+
+
+def european(text: str) -> str:
+    """The same table as a European spreadsheet exports it: ';' between columns, ',' as decimal separator."""
+    return text.replace(",", ";").replace(".", ",")
+
+
+def test_semicolon_columns_with_decimal_commas_read_as_the_comma_file(tmp_path):
+    t = time_grid(0.01, 1e-3)
+    rng = np.random.default_rng(1)
+    road, acc = rng.standard_normal((t.size, 4)), rng.standard_normal((t.size, 4)) * 1e3
+    plain = tmp_path / "plain.csv"
+    write_measurement_csv(plain, t, road, acc, comments=["exported"])
+    text = plain.read_text()
+    comma = write(tmp_path, european(text), "eu.csv")
+    assert ";" in comma.read_text() and "0,001;" in comma.read_text()
+    tab = write(tmp_path, text.replace(",", "\t").replace(".", ","), "tab.csv")
+    a, b, c = read_measurement(plain), read_measurement(comma), read_measurement(tab)
+    for m in (b, c):
+        np.testing.assert_array_equal(m.t, a.t)
+        np.testing.assert_array_equal(m.road, a.road)
+        np.testing.assert_array_equal(m.acc, a.acc)
+
+
+def test_semicolon_columns_with_decimal_points_read_too(tmp_path):
+    path = write(tmp_path, "t;x\n0;1.5\n0.5;-2.25e-3\n")
+    table = read_table(path)
+    assert table.column("x").tolist() == [1.5, -2.25e-3]
+
+
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ("t,x,f\n0,1,0,2\n", "line 2 has 4 fields, the header has 3 (t, x, f; separated by ',')"),
+        ("t;x;f\n0;1,234,5;2\n", "column 'x', line 2: expected a number, got '1,234,5'"),
+        ("t;x;f\n0;1.234,5;2\n", "column 'x', line 2: expected a number, got '1.234,5'"),
+    ],
+)
+def test_a_decimal_comma_that_cannot_be_read_is_refused_naming_file_line_and_column(tmp_path, text, fragment):
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as info:
+        read_table(path)
+    message = str(info.value)
+    assert message.startswith(str(path)) and fragment in message, message
+    assert "decimal comma? use '.' as the decimal separator, or ';'-separated columns" in message

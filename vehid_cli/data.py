@@ -57,8 +57,29 @@ class Table:
         return self.columns[name]
 
 
+DELIMITERS = {";": "';'", "\t": "tab", ",": "','"}
+DECIMAL_COMMA_HINT = "decimal comma? use '.' as the decimal separator, or ';'-separated columns"
+
+
+def _delimiter(header: str) -> str:
+    """The field separator, from the header line: ';' (European spreadsheet exports), else tab, else ','."""
+    return next((d for d in DELIMITERS if d in header), ",")
+
+
+def _number(cell: str, decimal_comma: bool) -> float:
+    """A cell as a float; with `decimal_comma`, '1,25' reads as 1.25 (raises ValueError if not a number)."""
+    try:
+        return float(cell)
+    except ValueError:
+        if decimal_comma and cell.count(",") == 1 and "." not in cell:
+            return float(cell.replace(",", "."))
+        raise
+
+
 def read_table(path: str | Path) -> Table:
-    """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column."""
+    """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column.
+
+    Columns are separated by ',', ';' or tabs (from the header line); with ';' or tabs, decimal commas read."""
     source = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a byte-order mark (spreadsheet exports)
@@ -76,7 +97,9 @@ def read_table(path: str | Path) -> Table:
     if not lines:
         raise InputError("empty file: expected a header row and data rows", source=source)
     header_no, header = lines[0]
-    names = [h.strip() for h in header.split(",")]
+    sep = _delimiter(header)
+    decimal_comma = sep != ","
+    names = [h.strip() for h in header.split(sep)]
     if any(not n for n in names):
         raise InputError(f"header (line {header_no}) has an empty column name", source=source)
     dupes = sorted({n for n in names if names.count(n) > 1})
@@ -87,15 +110,21 @@ def read_table(path: str | Path) -> Table:
         raise InputError("no data rows after the header", source=source)
     values = np.empty((len(rows), len(names)))
     for r, (no, line) in enumerate(rows):
-        cells = line.split(",")
+        cells = line.split(sep)
         if len(cells) != len(names):
-            raise InputError(f"line {no} has {len(cells)} fields, the header has {len(names)}", source=source)
+            hint = f"; {DECIMAL_COMMA_HINT}" if sep == "," and len(cells) > len(names) else ""
+            raise InputError(
+                f"line {no} has {len(cells)} fields, the header has {len(names)} ({', '.join(names)}; separated by "
+                f"{DELIMITERS[sep]}){hint}",
+                source=source,
+            )
         for c, cell in enumerate(cells):
             try:
-                values[r, c] = float(cell)
+                values[r, c] = _number(cell, decimal_comma)
             except ValueError:
+                hint = f"; {DECIMAL_COMMA_HINT}" if "," in cell or cell.count(".") > 1 else ""
                 raise InputError(
-                    f"column '{names[c]}', line {no}: expected a number, got '{cell.strip()}'", source=source
+                    f"column '{names[c]}', line {no}: expected a number, got '{cell.strip()}'{hint}", source=source
                 ) from None
     return Table(columns={n: values[:, i] for i, n in enumerate(names)}, source=source)
 
