@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from tests.conftest import VEHICLE_DATA, needs_shared
-from vehid_cli.data import read_measurement, read_table, time_grid, write_measurement_csv
+from vehid_cli.data import (
+    format_rows,
+    read_measurement,
+    read_table,
+    time_grid,
+    write_measurement_csv,
+)
 from vehid_cli.errors import InputError
 
 
@@ -136,3 +142,31 @@ def test_a_decimal_comma_that_cannot_be_read_is_refused_naming_file_line_and_col
     message = str(info.value)
     assert message.startswith(str(path)) and fragment in message, message
     assert "decimal comma? use '.' as the decimal separator, or ';'-separated columns" in message
+
+
+# ------------------------------------------------------------------------------------------ exact, short numbers
+
+
+def test_written_values_are_the_shortest_repr_that_reads_back_exactly(tmp_path):
+    t = time_grid(1.0, 1e-3)  # 3 * 0.001 is 0.0030000000000000001 in %.17g
+    rng = np.random.default_rng(2)
+    road, disp = rng.standard_normal((t.size, 4)) * 1e-3, rng.standard_normal((t.size, 4))
+    path = tmp_path / "m.csv"
+    write_measurement_csv(path, t, road, disp=disp)
+    lines = path.read_text().splitlines()
+    written_t = [line.split(",")[0] for line in lines[1:]]
+    assert written_t == [repr(float(x)) for x in t]
+    assert written_t[3] == "0.003" and written_t[:2] == ["0.0", "0.001"]
+    m = read_measurement(path)
+    np.testing.assert_array_equal(m.t, t)
+    np.testing.assert_array_equal(m.road, road)
+    np.testing.assert_array_equal(m.disp, disp)
+    assert lines[5].split(",")[1:] == [repr(float(x)) for x in road[4]] + [repr(float(x)) for x in disp[4]]
+
+
+def test_format_rows_keeps_specials_and_extremes():
+    values = np.array([[0.1, -0.0, 1e-300, 5e-324, 1.7976931348623157e308, np.nan, np.inf]])
+    text = format_rows(values)
+    assert text == "0.1,-0.0,1e-300,5e-324,1.7976931348623157e+308,nan,inf\n"
+    back = np.array([float(x) for x in text.strip().split(",")])
+    np.testing.assert_array_equal(back, values[0])

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from .bench import BenchHistory, read_bench, sawtooth, sine, triangle, with_force
 from .config import DamperConfig
 from .damper_fit import DamperSpec, RealTime, cost_J, fit, realtime_check
-from .data import atomic_path
+from .data import atomic_path, format_rows
 from .errors import InputError
 from .experiment import run_streams
 
@@ -85,7 +85,7 @@ def write_bench_csv(path: str | Path, history: BenchHistory, comments: list[str]
     with atomic_path(path) as tmp, open(tmp, "w") as fh:
         fh.write(header + "\n" if header else "")
         fh.write("t,x,v,u,force\n")
-        np.savetxt(fh, data, delimiter=",", fmt="%.10g")
+        fh.write(format_rows(data))  # shortest exact repr of each value
 
 
 def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, seed: int) -> None:

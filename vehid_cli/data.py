@@ -221,6 +221,12 @@ def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
     return path
 
 
+def format_rows(table: NDArray) -> str:
+    """CSV data rows, each value the shortest text that reads back to the same double (0.003, not
+    0.0030000000000000001): exact, and never longer than %.17g."""
+    return "".join(",".join(map(repr, row)) + "\n" for row in np.asarray(table, dtype=float).tolist())
+
+
 def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
@@ -269,7 +275,7 @@ def write_measurement_csv(
     disp: NDArray | None = None,
     comments: Sequence[str] = (),
 ) -> None:
-    """Write a vehicle measurement CSV atomically (full double precision, `#` comment header)."""
+    """Write a vehicle measurement CSV atomically (shortest exact repr of every value, `#` comment header)."""
     names, cols = ["t"], [np.asarray(t)[:, None]]
     names += list(ROAD_COLUMNS)
     cols.append(road)
@@ -283,7 +289,7 @@ def write_measurement_csv(
         for part in str(line).splitlines() or [""]:
             buf.write(f"# {part}\n")
     buf.write(",".join(names) + "\n")
-    np.savetxt(buf, table, delimiter=",", fmt="%.17g")
+    buf.write(format_rows(table))
     with atomic_path(path) as tmp:
         tmp.write_text(buf.getvalue(), encoding="utf-8")
 
