@@ -72,12 +72,16 @@ def _campaign_overrides(set_: list[str] | None, runs: int | None, seed: int | No
 
 
 def _progress(verb: str):
-    """A rich progress bar on stderr (only on a terminal: scripts and CI get clean output)."""
+    """A rich progress bar on stderr on a terminal; elsewhere (logs, CI) one plain stderr line per finished step."""
+    if not err.is_terminal:
+        from .progress import PlainProgress
+
+        return PlainProgress(verb, {"sweep": "campaign"}.get(verb, "run"), _warn)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(
         TextColumn(f"[bold]{verb}[/] {{task.description}}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err, transient=True, disable=not err.is_terminal,
+        console=err, transient=True,
     )  # fmt: skip
 
 
