@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
 from tests.conftest import VEHICLE_DATA, needs_shared
 from vehid_cli.data import (
+    check_writable,
+    check_writable_dir,
     format_rows,
     read_measurement,
     read_table,
@@ -170,3 +174,29 @@ def test_format_rows_keeps_specials_and_extremes():
     assert text == "0.1,-0.0,1e-300,5e-324,1.7976931348623157e+308,nan,inf\n"
     back = np.array([float(x) for x in text.strip().split(",")])
     np.testing.assert_array_equal(back, values[0])
+
+
+# ------------------------------------------------------------------------------------------ output directories
+
+
+def test_check_writable_dir_leaves_nothing_and_names_option_and_path(tmp_path):
+    new = tmp_path / "a" / "b"
+    assert check_writable_dir(new, "--plots") == new
+    assert not (tmp_path / "a").exists() and list(tmp_path.iterdir()) == []  # probed, nothing made or left
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(InputError, match=r"^--plots .*/f/sub: cannot create the directory: '.*/f' is a file"):
+        check_writable_dir(tmp_path / "f" / "sub", "--plots")
+    with pytest.raises(InputError, match=r"^-o .*/f: is a file, expected a directory"):
+        check_writable_dir(tmp_path / "f", "-o")
+    if os.geteuid() != 0:  # root writes through chmod
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o500)
+        with pytest.raises(InputError, match=r"ro/new: cannot write in '.*ro' \(to create the directory in\)"):
+            check_writable_dir(ro / "new", "--plots")
+
+
+def test_check_writable_names_a_file_in_the_way(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(InputError, match=r"f/out.json: output directory '.*/f' is a file, not a directory"):
+        check_writable(tmp_path / "f" / "out.json", (".json",))

@@ -213,11 +213,34 @@ def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
         )
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
-        raise InputError(f"output directory '{parent}' does not exist", source=str(path))
+        state = "is a file, not a directory" if parent.exists() else "does not exist"
+        raise InputError(f"output directory '{parent}' {state}", source=str(path))
     if path.is_dir():
         raise InputError("is a directory, expected a file name", source=str(path))
     if not os.access(parent, os.W_OK):
         raise InputError(f"output directory '{parent}' is not writable", source=str(path))
+    return path
+
+
+def check_writable_dir(path: str | Path, option: str | None = None) -> Path:
+    """Check an output directory can be made and written (a probe file in it, or in its nearest existing
+    ancestor: nothing is left behind), before any work. InputError names the option and the path."""
+    path = Path(path)
+    source = f"{option} {path}" if option else str(path)
+    if path.exists() and not path.is_dir():
+        raise InputError("is a file, expected a directory", source=source)
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"cannot create the directory: '{existing}' is a file, not a directory", source=source)
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".vehid-probe-", dir=existing)
+    except OSError as exc:
+        where = "the directory" if existing == path else f"'{existing}' (to create the directory in)"
+        raise InputError(f"cannot write in {where}: {exc.strerror}", source=source) from None
+    os.close(fd)
+    os.unlink(probe)
     return path
 
 
