@@ -58,6 +58,9 @@ def test_simulate_identify_round_trip(tmp_path):
     out, js = tmp_path / "campaign.h5", tmp_path / "campaign.json"
     res = vehid("identify", config, "-o", out, "--json", js)
     assert res.returncode == 0, res.stderr
+    progress = [line.split(" done")[0] for line in res.stderr.splitlines() if " done (" in line]
+    assert [p.split(": ")[-1] for p in progress] == ["run 1/3", "run 2/3", "run 3/3"], res.stderr
+    assert all(p.startswith("identify bingham/") for p in progress), res.stderr  # off a terminal: plain lines
     doc = json.loads(js.read_text())
     assert doc["runs"] == 3 and doc["truth"] == {n: TRUTH[n] for n in ("k1", "c0", "fc")}
     for name, value in doc["mean"].items():
