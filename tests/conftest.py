@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -32,3 +34,25 @@ def needs_shared(path: Path) -> Path:
             pytest.fail(f"independent data not found at {path} (CI must have ../shared beside the repo)")
         pytest.skip(f"independent data not found at {path}")
     return path
+
+
+def vehid(*args, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    """Run `python -m vehid_cli ARGS` as a user does: a real process, captured stdout/stderr, exit code."""
+    return subprocess.run([sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+
+
+def cli(*args, cwd: Path | None = None):
+    """Run the command line in this process (typer's CliRunner: stdout and stderr apart, stderr not a terminal)."""
+    from typer.testing import CliRunner
+
+    from vehid_cli.cli import app
+
+    runner = CliRunner()
+    if cwd is None:
+        return runner.invoke(app, [str(a) for a in args], prog_name="vehid")
+    old = Path.cwd()
+    os.chdir(cwd)
+    try:
+        return runner.invoke(app, [str(a) for a in args], prog_name="vehid")
+    finally:
+        os.chdir(old)

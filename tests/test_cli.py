@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -9,12 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, needs_shared
+from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, cli, needs_shared, vehid
 from vehid_cli.data import read_measurement
-
-
-def vehid(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
 def test_simulate_csv_and_plot(tmp_path):
@@ -129,3 +126,160 @@ def test_missing_config_file(tmp_path):
     res = vehid("simulate", tmp_path / "nope.yaml", "-o", tmp_path / "o.csv")
     assert res.returncode == 2 and "nope.yaml" in res.stderr and "not found" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+# ------------------------------------------------------------------------------------------ start-up and help
+
+
+def test_importing_the_cli_loads_no_heavy_library():
+    """`vehid --help` starts in a fraction of a second: the library (NumPy, pydantic, h5py, SciPy, Numba) is
+    imported inside the commands, not by `import vehid_cli.cli` (which `python -m vehid_cli` does first)."""
+    code = (
+        "import vehid_cli.cli, vehid_cli.__main__, sys; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numpy','pydantic','h5py','scipy','numba')))"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("command", ["", "simulate", "identify", "sweep", "report", "diagnose"])
+def test_dash_h_is_help_and_help_shows_values_not_types(command):
+    res = cli(*([command] if command else []), "-h")
+    assert res.exit_code == 0, res.output
+    assert "Usage: vehid" in res.stdout and "-h, --help" in res.stdout
+    for typer_type in ("<str>", "<int>", "<path>", "<list", "<bool>"):
+        assert typer_type not in res.stdout, res.stdout
+    if command:
+        assert "--set KEY=VALUE" in res.stdout and "CONFIG" in res.stdout or command == "report"
+
+
+def test_help_names_the_allowed_values():
+    identify = cli("identify", "--help").stdout
+    assert "--executor local|dask" in identify and "--runs N" in identify and "-o, --output FILE" in identify
+    sweep = cli("sweep", "--help").stdout
+    assert "--vary KEY=V1,V2" in sweep and "--shard K/N" in sweep and "-o, --output DIR" in sweep
+    report = cli("report", "--help").stdout
+    assert "--format table|md|csv|latex|json" in report and "--plots DIR" in report
+    assert "--plots DIR" in cli("diagnose", "--help").stdout and "--road FILE" in cli("simulate", "-h").stdout
+
+
+# ------------------------------------------------------------------------------------------ errors name options
+
+
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        (["--runs", "0"], "error: --runs: 'identify.runs': must be at least 1, got 0"),
+        (["--seed", "-1"], "error: --seed: 'identify.seed': must be at least 0, got -1"),
+        (["--set", "noise.levle=0.1"],
+         "error: --set noise.levle=0.1: 'noise.levle': unknown key; did you mean 'level'?"),
+        (["--set", "noise.level=0.1", "--set", "identify.algorithm.name=gaa"],
+         "error: --set identify.algorithm.name=gaa: 'identify.algorithm.name': unknown algorithm 'gaa'"),
+    ],
+)  # fmt: skip
+def test_an_override_error_names_the_option_not_the_config_file(tmp_path, args, expected):
+    res = cli("identify", BASE_CONFIG, *args, "-o", tmp_path / "c.h5")
+    assert res.exit_code == 2, res.output
+    assert res.stderr.startswith(expected), res.stderr
+    assert str(BASE_CONFIG) not in res.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_broken_config_file_is_still_blamed_on_the_file(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BASE_CONFIG.read_text() + "\nnoise:\n  levle: 0.1\n")
+    res = cli("identify", bad, "--runs", "2", "--set", "noise.level=0.1", "-o", tmp_path / "c.h5")
+    assert res.exit_code == 2
+    assert res.stderr.startswith(f"error: {bad}: 'noise.levle': unknown key"), res.stderr
+
+
+def test_an_override_error_names_the_vary_value(tmp_path):
+    res = cli("sweep", BASE_CONFIG, "--vary", "noise.level=0.1,abc", "-o", tmp_path / "s")
+    assert res.exit_code == 2
+    assert res.stderr.startswith("error: --vary noise.level=abc: 'noise.level':"), res.stderr
+    assert not (tmp_path / "s").exists()
+
+
+# ------------------------------------------------------------------------------------------ progress, no terminal
+
+TINY = [
+    "simulation.duration=1.5", "simulation.dt=0.002", "identify.algorithm.name=de",
+    "identify.algorithm.population=6", "identify.algorithm.iterations=3",
+]  # fmt: skip
+
+
+def test_without_a_terminal_identify_and_sweep_print_a_line_per_finished_step(tmp_path):
+    sets = [x for s in TINY for x in ("--set", s)]
+    res = cli("identify", BASE_CONFIG, *sets, "--runs", "3", "--jobs", "1", "-o", tmp_path / "c.h5")
+    assert res.exit_code == 0, res.output
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("identify de/f2: run ")]
+    assert [ln.split(" done")[0] for ln in lines] == [f"identify de/f2: run {i}/3" for i in (1, 2, 3)], res.stderr
+    assert all(ln.endswith(" s elapsed)") for ln in lines)
+    assert "run 3/3" not in res.stdout  # progress goes to stderr, results to stdout
+    res = cli(
+        "sweep", BASE_CONFIG, *sets, "--runs", "2", "--jobs", "1", "--vary", "noise.level=0.1,0.2", "-o", tmp_path
+    )
+    assert res.exit_code == 0, res.output
+    lines = [ln.split(" done")[0] for ln in res.stderr.splitlines() if ln.startswith("sweep ")]
+    assert lines == ["sweep level-0.1: campaign 1/2", "sweep level-0.2: campaign 2/2"], res.stderr
+
+
+def test_plain_progress_counts_updates_and_advances():
+    from vehid_cli.progress import PlainProgress
+
+    lines: list[str] = []
+    with PlainProgress("identify", "run", lines.append) as progress:
+        bar = progress.add_task("abc/f1", total=4)
+        progress.update(bar, completed=2)  # two runs finished together: two lines
+        progress.update(bar, description="abc/f2")
+        progress.advance(bar)
+    assert [ln.split(" (")[0] for ln in lines] == [
+        "identify abc/f1: run 1/4 done", "identify abc/f1: run 2/4 done", "identify abc/f2: run 3/4 done"
+    ]  # fmt: skip
+
+
+# ------------------------------------------------------------------------------------------ output targets
+
+
+def read_only_dir(tmp_path):
+    """A directory this user cannot write in (None as root, where chmod does not restrict)."""
+    if os.geteuid() == 0:
+        return None
+    d = tmp_path / "ro"
+    d.mkdir()
+    d.chmod(0o500)
+    return d
+
+
+def blocked_targets(tmp_path):
+    """Paths no user can make a directory at: under a regular file; and inside a read-only directory."""
+    (tmp_path / "somefile").write_text("x")
+    targets = [tmp_path / "somefile" / "sub"]
+    ro = read_only_dir(tmp_path)
+    return targets + ([ro / "sub"] if ro else [])
+
+
+def test_sweep_and_diagnose_check_their_directories_before_any_work(tmp_path):
+    for target in blocked_targets(tmp_path):
+        res = cli("sweep", BASE_CONFIG, "--vary", "noise.level=0.1,0.2", "-o", target)
+        assert res.exit_code == 2, res.output
+        assert res.stderr.startswith(f"error: -o {target}: cannot "), res.stderr
+        data = tmp_path / "data.csv"
+        data.write_text("t,road1\n")  # never read: the check comes first
+        res = cli("diagnose", BASE_CONFIG, "--data", data, "--plots", target)
+        assert res.exit_code == 2, res.output
+        assert res.stderr.startswith(f"error: --plots {target}: cannot "), res.stderr
+        assert "internal error" not in res.output
+
+
+def test_identify_default_output_directory_is_checked(tmp_path):
+    (tmp_path / "runs").write_text("a file where the default output directory goes")
+    res = cli("identify", BASE_CONFIG, "--runs", "1", cwd=tmp_path)
+    assert res.exit_code == 2, res.output
+    assert res.stderr.startswith("error: the default output directory runs: is a file, expected a directory")
+    ro = read_only_dir(tmp_path)
+    if ro is not None:
+        res = cli("identify", BASE_CONFIG, "--runs", "1", cwd=ro)
+        assert res.exit_code == 2, res.output
+        assert "the default output directory runs" in res.stderr and "Permission denied" in res.stderr

@@ -146,3 +146,25 @@ def test_malformed_set(tmp_path):
         load_config(BASE_CONFIG, ["vehicle.m"])
     with pytest.raises(InputError, match="is a value, not a section"):
         load_config(BASE_CONFIG, ["sensors.kind=acc"])
+
+
+def test_an_override_that_breaks_a_valid_config_is_named_by_its_option():
+    from vehid_cli.config import Override
+
+    with pytest.raises(InputError) as info:
+        load_config(BASE_CONFIG, ["noise.level=0.2", Override("identify.runs=0", "--runs")])
+    assert str(info.value) == "--runs: 'identify.runs': must be at least 1, got 0"
+    with pytest.raises(InputError) as info:
+        load_config(BASE_CONFIG, ["noise.levle=0.1", Override("identify.runs=3", "--runs")])
+    assert str(info.value).startswith("--set noise.levle=0.1: 'noise.levle': unknown key; did you mean 'level'?")
+    # a2=null alone is invalid, wheelbase repairs it, a1 breaks it again: the last one is named
+    sets = ["vehicle.a2=null", "vehicle.wheelbase=2.6", "vehicle.a1=2.7"]
+    with pytest.raises(InputError, match=r"^--set vehicle.a1=2.7: 'vehicle.a1': .*outside the wheelbase"):
+        load_config(BASE_CONFIG, sets)
+
+
+def test_an_invalid_config_file_is_named_even_with_overrides(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BASE_CONFIG.read_text() + "\nnoise:\n  levle: 0.1\n")
+    with pytest.raises(InputError, match=rf"^{bad}: 'noise.levle': unknown key"):
+        load_config(bad, ["identify.runs=2"])

@@ -58,6 +58,9 @@ def test_simulate_identify_round_trip(tmp_path):
     out, js = tmp_path / "campaign.h5", tmp_path / "campaign.json"
     res = vehid("identify", config, "-o", out, "--json", js)
     assert res.returncode == 0, res.stderr
+    progress = [line.split(" done")[0] for line in res.stderr.splitlines() if " done (" in line]
+    assert [p.split(": ")[-1] for p in progress] == ["run 1/3", "run 2/3", "run 3/3"], res.stderr
+    assert all(p.startswith("identify bingham/") for p in progress), res.stderr  # off a terminal: plain lines
     doc = json.loads(js.read_text())
     assert doc["runs"] == 3 and doc["truth"] == {n: TRUTH[n] for n in ("k1", "c0", "fc")}
     for name, value in doc["mean"].items():
@@ -217,3 +220,24 @@ def test_step_by_step_from_the_cli(tmp_path):
     doc = json.loads((tmp_path / "fm.json").read_text())
     for name in ("k1", "F_1_1", "F_5_2"):
         assert abs(doc["re_percent"][name]) < 1.0, (name, doc["re_percent"][name])
+
+
+def test_bench_csv_holds_the_shortest_exact_repr(tmp_path):
+    """Was %.10g: lossy for the force and x, and a grid time like 0.006 only by luck of rounding."""
+    from vehid_cli.damper_campaign import write_bench_csv
+
+    from vehid_cli.bench import BenchHistory
+    from vehid_cli.data import read_table
+
+    rng = np.random.default_rng(3)
+    t = np.arange(50) * 0.002
+    x, v, force = (rng.standard_normal(50) for _ in range(3))
+    path = tmp_path / "bench.csv"
+    write_bench_csv(path, BenchHistory(t=t, x=x, v=v, u=np.zeros(50), force=force), ["a comment"])
+    lines = path.read_text().splitlines()
+    assert lines[:2] == ["# a comment", "t,x,v,u,force"]
+    assert [line.split(",")[0] for line in lines[2:]] == [repr(float(s)) for s in t]
+    assert lines[5].split(",")[0] == "0.006"
+    table = read_table(path)
+    for name, values in (("t", t), ("x", x), ("v", v), ("force", force)):
+        np.testing.assert_array_equal(table.column(name), values)

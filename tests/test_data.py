@@ -2,18 +2,35 @@
 
 from __future__ import annotations
 
+<<<<<<< HEAD
 import errno
 import fcntl
 import os
 from pathlib import Path
+=======
+import os
+>>>>>>> cli-papercuts
 
 import numpy as np
 import pytest
 
 from tests.conftest import VEHICLE_DATA, needs_shared
+<<<<<<< HEAD
 from vehid_cli import data
 from vehid_cli.data import atomic_path, read_measurement, read_table, time_grid, write_bytes, write_measurement_csv
 from vehid_cli.errors import DiskFull, InputError
+=======
+from vehid_cli.data import (
+    check_writable,
+    check_writable_dir,
+    format_rows,
+    read_measurement,
+    read_table,
+    time_grid,
+    write_measurement_csv,
+)
+from vehid_cli.errors import InputError
+>>>>>>> cli-papercuts
 
 
 def test_reads_the_shared_bump_run():
@@ -96,6 +113,7 @@ def test_byte_order_mark_is_tolerated(tmp_path):
     assert read_measurement(path).t.size == 3
 
 
+<<<<<<< HEAD
 # ------------------------------------------------------------------------------------------ writing
 
 
@@ -151,3 +169,105 @@ def test_stale_temporaries_of_the_target_are_removed_and_nothing_else(tmp_path):
     assert target.read_bytes() == b"a,b\n"
     write_bytes(target, b"c\n")  # the writer is gone (its lock released): now its temporary is stale
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["x.csv", *others])
+=======
+# ------------------------------------------------------------------------------------------ separators
+
+
+def european(text: str) -> str:
+    """The same table as a European spreadsheet exports it: ';' between columns, ',' as decimal separator."""
+    return text.replace(",", ";").replace(".", ",")
+
+
+def test_semicolon_columns_with_decimal_commas_read_as_the_comma_file(tmp_path):
+    t = time_grid(0.01, 1e-3)
+    rng = np.random.default_rng(1)
+    road, acc = rng.standard_normal((t.size, 4)), rng.standard_normal((t.size, 4)) * 1e3
+    plain = tmp_path / "plain.csv"
+    write_measurement_csv(plain, t, road, acc, comments=["exported"])
+    text = plain.read_text()
+    comma = write(tmp_path, european(text), "eu.csv")
+    assert ";" in comma.read_text() and "0,001;" in comma.read_text()
+    tab = write(tmp_path, text.replace(",", "\t").replace(".", ","), "tab.csv")
+    a, b, c = read_measurement(plain), read_measurement(comma), read_measurement(tab)
+    for m in (b, c):
+        np.testing.assert_array_equal(m.t, a.t)
+        np.testing.assert_array_equal(m.road, a.road)
+        np.testing.assert_array_equal(m.acc, a.acc)
+
+
+def test_semicolon_columns_with_decimal_points_read_too(tmp_path):
+    path = write(tmp_path, "t;x\n0;1.5\n0.5;-2.25e-3\n")
+    table = read_table(path)
+    assert table.column("x").tolist() == [1.5, -2.25e-3]
+
+
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ("t,x,f\n0,1,0,2\n", "line 2 has 4 fields, the header has 3 (t, x, f; separated by ',')"),
+        ("t;x;f\n0;1,234,5;2\n", "column 'x', line 2: expected a number, got '1,234,5'"),
+        ("t;x;f\n0;1.234,5;2\n", "column 'x', line 2: expected a number, got '1.234,5'"),
+    ],
+)
+def test_a_decimal_comma_that_cannot_be_read_is_refused_naming_file_line_and_column(tmp_path, text, fragment):
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as info:
+        read_table(path)
+    message = str(info.value)
+    assert message.startswith(str(path)) and fragment in message, message
+    assert "decimal comma? use '.' as the decimal separator, or ';'-separated columns" in message
+
+
+# ------------------------------------------------------------------------------------------ exact, short numbers
+
+
+def test_written_values_are_the_shortest_repr_that_reads_back_exactly(tmp_path):
+    t = time_grid(1.0, 1e-3)  # 3 * 0.001 is 0.0030000000000000001 in %.17g
+    rng = np.random.default_rng(2)
+    road, disp = rng.standard_normal((t.size, 4)) * 1e-3, rng.standard_normal((t.size, 4))
+    path = tmp_path / "m.csv"
+    write_measurement_csv(path, t, road, disp=disp)
+    lines = path.read_text().splitlines()
+    written_t = [line.split(",")[0] for line in lines[1:]]
+    assert written_t == [repr(float(x)) for x in t]
+    assert written_t[3] == "0.003" and written_t[:2] == ["0.0", "0.001"]
+    m = read_measurement(path)
+    np.testing.assert_array_equal(m.t, t)
+    np.testing.assert_array_equal(m.road, road)
+    np.testing.assert_array_equal(m.disp, disp)
+    assert lines[5].split(",")[1:] == [repr(float(x)) for x in road[4]] + [repr(float(x)) for x in disp[4]]
+
+
+def test_format_rows_keeps_specials_and_extremes():
+    values = np.array([[0.1, -0.0, 1e-300, 5e-324, 1.7976931348623157e308, np.nan, np.inf]])
+    text = format_rows(values)
+    assert text == "0.1,-0.0,1e-300,5e-324,1.7976931348623157e+308,nan,inf\n"
+    back = np.array([float(x) for x in text.strip().split(",")])
+    np.testing.assert_array_equal(back, values[0])
+
+
+# ------------------------------------------------------------------------------------------ output directories
+
+
+def test_check_writable_dir_leaves_nothing_and_names_option_and_path(tmp_path):
+    new = tmp_path / "a" / "b"
+    assert check_writable_dir(new, "--plots") == new
+    assert not (tmp_path / "a").exists() and list(tmp_path.iterdir()) == []  # probed, nothing made or left
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(InputError, match=r"^--plots .*/f/sub: cannot create the directory: '.*/f' is a file"):
+        check_writable_dir(tmp_path / "f" / "sub", "--plots")
+    with pytest.raises(InputError, match=r"^-o .*/f: is a file, expected a directory"):
+        check_writable_dir(tmp_path / "f", "-o")
+    if os.geteuid() != 0:  # root writes through chmod
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o500)
+        with pytest.raises(InputError, match=r"ro/new: cannot write in '.*ro' \(to create the directory in\)"):
+            check_writable_dir(ro / "new", "--plots")
+
+
+def test_check_writable_names_a_file_in_the_way(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(InputError, match=r"f/out.json: output directory '.*/f' is a file, not a directory"):
+        check_writable(tmp_path / "f" / "out.json", (".json",))
+>>>>>>> cli-papercuts

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.conftest import BASE_CONFIG, ROOT
+from tests.conftest import BASE_CONFIG, ROOT, cli
 from vehid_cli.campaign import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.report import load_published, render
@@ -125,3 +125,52 @@ def test_table_format_writes_to_a_file_and_directories_skip_other_h5(campaign_di
         assert text.count("NRE of mean") == 2  # the two campaigns; the simulation file is not one
     finally:
         sim.unlink()
+
+
+# ------------------------------------------------------------------------------------------ --format and -o
+
+
+def test_the_cli_knows_the_report_formats():
+    from vehid_cli.cli import REPORT_FORMATS, REPORT_SUFFIXES
+    from vehid_cli.report import FORMATS
+
+    assert REPORT_FORMATS == FORMATS and set(REPORT_SUFFIXES.values()) == set(FORMATS)
+
+
+@pytest.mark.parametrize(
+    "name, fmt, check",
+    [
+        ("r.latex", None, lambda text: "\\toprule" in text),
+        ("r.tex", "latex", lambda text: "\\toprule" in text),
+        ("r.md", None, lambda text: "|---|" in text and "\\toprule" not in text),
+        ("r.json", None, lambda text: len(json.loads(text)) == 2),
+        ("r.csv", None, lambda text: next(csv.reader(io.StringIO(text)))[: len(CSV_COLUMNS)] == list(CSV_COLUMNS)),
+        ("r.txt", None, lambda text: text.count("NRE of mean") == 2),
+    ],
+)
+def test_report_format_follows_the_output_suffix(campaign_dir, tmp_path, name, fmt, check):
+    out = tmp_path / name
+    res = cli("report", campaign_dir, "-o", out, *(["--format", fmt] if fmt else []))
+    assert res.exit_code == 0, res.output
+    assert check(out.read_text()), out.read_text()[:300]
+
+
+def test_report_format_and_suffix_that_disagree_are_refused(campaign_dir, tmp_path):
+    res = cli("report", campaign_dir, "--format", "md", "-o", tmp_path / "x.csv")
+    assert res.exit_code == 2
+    assert "--format md disagrees with -o" in res.stderr and "x.csv" in res.stderr and "as csv" in res.stderr
+    res = cli("report", campaign_dir, "-o", tmp_path / "x.html")
+    assert res.exit_code == 2
+    assert "x.html" in res.stderr and "suffix '.html'" in res.stderr and ".tex (latex)" in res.stderr
+    res = cli("report", campaign_dir, "--format", "html")
+    assert res.stderr == "error: --format must be one of table, md, csv, latex, json, got 'html'\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_report_plots_directory_is_checked_before_any_work(campaign_dir, tmp_path):
+    (tmp_path / "somefile").write_text("x")
+    target = tmp_path / "somefile" / "figs"
+    res = cli("report", campaign_dir, "--plots", target)
+    assert res.exit_code == 2, res.output
+    assert res.stderr.startswith(f"error: --plots {target}: cannot create the directory"), res.stderr
+    assert "NRE of mean" not in res.stdout  # refused before the tables

@@ -9,31 +9,71 @@ from __future__ import annotations
 import functools
 import os
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 from rich.console import Console
 
 from . import __version__
-from .config import DamperConfig, load_config
-from .data import check_writable, write_measurement_csv
 from .errors import DiskFull, InputError
-from .experiment import build_experiment, run_streams, simulate_measurement
+
+if TYPE_CHECKING:  # the library is imported inside the commands: `vehid --help` starts in a fraction of a second
+    from .config import Config, DamperConfig
 
 app = typer.Typer(
     add_completion=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,
     help="vehid: vehicle and suspension parameter identification.",
 )
+
+
+def _argument_type_hidden(display_type_rich):
+    """Help shows an argument by its metavar alone (CONFIG, PATH...), without typer's <path> or <list[Path]>."""
+
+    def display(self, ctx):
+        return None if self.metavar else display_type_rich(self, ctx)
+
+    return display
+
+
+if hasattr(typer.core.TyperArgument, "display_type_rich"):  # typer >= 0.16; the help test guards the output
+    typer.core.TyperArgument.display_type_rich = _argument_type_hidden(typer.core.TyperArgument.display_type_rich)
 out = Console(soft_wrap=True)
 err = Console(stderr=True, highlight=False, soft_wrap=True)
 
+
 SetOption = Annotated[
     Optional[list[str]],  # noqa: UP045 - typer needs Optional here
-    typer.Option("--set", help="Override a config value: dotted.key=value (repeatable).", show_default=False),
+    typer.Option(
+        "--set", metavar="KEY=VALUE", help="Override a config value: dotted.key=value (repeatable).", show_default=False
+    ),
 ]
+
+
+def load_config(path: Path, overrides: Sequence[str] = ()) -> Config | DamperConfig:
+    """config.load_config, imported when a command runs (not when the CLI starts)."""
+    from .config import load_config as load
+
+    return load(path, overrides)
+
+
+def check_writable(path: Path, suffixes: Sequence[str]) -> Path:
+    """data.check_writable, imported when a command runs."""
+    from .data import check_writable as check
+
+    return check(path, suffixes)
+
+
+def _is_damper(cfg) -> bool:
+    """A damper config (system: damper), without importing the config module at start-up."""
+    from .config import DamperConfig
+
+    return isinstance(cfg, DamperConfig)
 
 
 def _guarded(command):
@@ -64,30 +104,36 @@ def _guarded(command):
 
 def _campaign_overrides(set_: list[str] | None, runs: int | None, seed: int | None, jobs: int | None) -> list[str]:
     """--set lines plus the --runs/--seed shortcuts (kept in the resolved config, for provenance)."""
+    from .config import Override
+
     overrides = list(set_ or ())
     if runs is not None:
-        overrides.append(f"identify.runs={runs}")
+        overrides.append(Override(f"identify.runs={runs}", "--runs"))
     if seed is not None:
-        overrides.append(f"identify.seed={seed}")
+        overrides.append(Override(f"identify.seed={seed}", "--seed"))
     if jobs is not None and jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {jobs}")
     return overrides
 
 
 def _progress(verb: str):
-    """A rich progress bar on stderr (only on a terminal: scripts and CI get clean output)."""
+    """A rich progress bar on stderr on a terminal; elsewhere (logs, CI) one plain stderr line per finished step."""
+    if not err.is_terminal:
+        from .progress import PlainProgress
+
+        return PlainProgress(verb, {"sweep": "campaign"}.get(verb, "run"), _warn)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(
         TextColumn(f"[bold]{verb}[/] {{task.description}}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err, transient=True, disable=not err.is_terminal,
+        console=err, transient=True,
     )  # fmt: skip
 
 
 def _results_target(config: Path, cfg, output: Path | None, json_out: Path | None) -> Path:
     """The results file (default runs/<config>-<hash>.h5), checked writable with the --json file before any work."""
     if output is None:
-        Path("runs").mkdir(exist_ok=True)
+        check_output_dir(Path("runs"), "the default output directory").mkdir(exist_ok=True)
         output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
     target = check_writable(output, (".h5", ".hdf5"))
     if json_out is not None:
@@ -98,12 +144,16 @@ def _results_target(config: Path, cfg, output: Path | None, json_out: Path | Non
 ExecutorOption = Annotated[
     str,
     typer.Option(
-        "--executor", help="Where the runs execute: local (this machine; --jobs processes) or dask (a cluster)."
+        "--executor",
+        metavar="local|dask",
+        help="Where the runs execute: local (this machine; --jobs processes) or dask (a cluster).",
     ),
 ]
 SchedulerOption = Annotated[
     Optional[str],  # noqa: UP045 - typer needs Optional here
-    typer.Option("--scheduler", help="Dask scheduler address, tcp://HOST:PORT (with --executor dask)."),
+    typer.Option(
+        "--scheduler", metavar="ADDRESS", help="Dask scheduler address, tcp://HOST:PORT (with --executor dask)."
+    ),
 ]
 
 
@@ -189,16 +239,25 @@ def main(
 @app.command()
 @_guarded
 def simulate(
-    config: Annotated[Path, typer.Argument(help="Experiment config (YAML).", show_default=False)],
+    config: Annotated[Path, typer.Argument(metavar="CONFIG", help="Experiment config (YAML).", show_default=False)],
     output: Annotated[
-        Path, typer.Option("-o", "--output", help="Output file: .csv (measurement format) or .h5.", show_default=False)
+        Path,
+        typer.Option(
+            "-o", "--output", metavar="FILE", help="Output file: .csv (measurement format) or .h5.", show_default=False
+        ),
     ],
     road: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("--road", help="Take road1..road4 and the time grid from this measurement file."),
+        typer.Option("--road", metavar="FILE", help="Take road1..road4 and the time grid from this measurement file."),
     ] = None,
-    plot: Annotated[Optional[Path], typer.Option("--plot", help="Also draw the responses to this PNG.")] = None,  # noqa: UP045
-    seed: Annotated[Optional[int], typer.Option("--seed", help="Seed of the noise (default identify.seed).")] = None,  # noqa: UP045
+    plot: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--plot", metavar="FILE", help="Also draw the responses to this PNG."),
+    ] = None,
+    seed: Annotated[
+        Optional[int],  # noqa: UP045
+        typer.Option("--seed", metavar="N", help="Seed of the noise (default identify.seed)."),
+    ] = None,
     set_: SetOption = None,
 ) -> None:
     """Simulate the configured car on its road and write a vehicle measurement file.
@@ -206,6 +265,9 @@ def simulate(
     CSV holds the noisy responses (Eq. 15; --set noise.level=0 for clean ones); HDF5 holds clean and
     noisy. The noise is the noise stream of run 0 of the campaign with the same seed.
     """
+    from .data import write_measurement_csv
+    from .experiment import build_experiment, run_streams, simulate_measurement
+
     target = check_writable(output, (".csv", ".h5", ".hdf5"))
     if plot is not None:
         check_writable(plot, (".png",))
@@ -213,7 +275,7 @@ def simulate(
         raise InputError(f"--seed must be a non-negative integer, got {seed}")
     cfg = load_config(config, set_ or ())
     seed = cfg.identify.seed if seed is None else seed
-    if isinstance(cfg, DamperConfig):
+    if _is_damper(cfg):
         if road is not None:
             raise InputError("--road is for vehicle configs; a damper config takes its motion from 'bench'")
         _simulate_damper(cfg, config, target, plot, seed)
@@ -243,6 +305,7 @@ def simulate(
 
 def _simulate_damper(cfg: DamperConfig, config: Path, target: Path, plot: Path | None, seed: int) -> None:
     """`vehid simulate` for a damper: the configured bench run, force noise from run 0's noise stream."""
+    from .experiment import run_streams
     from .systems.damper import simulate_bench, write_bench_csv, write_bench_h5
 
     run = simulate_bench(cfg, run_streams(seed, 0).noise)
@@ -271,19 +334,25 @@ def _simulate_damper(cfg: DamperConfig, config: Path, target: Path, plot: Path |
 @app.command()
 @_guarded
 def identify(
-    config: Annotated[Path, typer.Argument(help="Experiment config (YAML).", show_default=False)],
+    config: Annotated[Path, typer.Argument(metavar="CONFIG", help="Experiment config (YAML).", show_default=False)],
     data: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("--data", help="Identify from this measurement file instead of simulated data."),
+        typer.Option("--data", metavar="FILE", help="Identify from this measurement file instead of simulated data."),
     ] = None,
-    runs: Annotated[Optional[int], typer.Option("--runs", help="Number of runs (identify.runs).")] = None,  # noqa: UP045
-    seed: Annotated[Optional[int], typer.Option("--seed", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
-    jobs: Annotated[Optional[int], typer.Option("--jobs", help="Worker processes (default: all cores).")] = None,  # noqa: UP045
+    runs: Annotated[Optional[int], typer.Option("--runs", metavar="N", help="Number of runs (identify.runs).")] = None,  # noqa: UP045
+    seed: Annotated[Optional[int], typer.Option("--seed", metavar="N", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
+    jobs: Annotated[
+        Optional[int],  # noqa: UP045
+        typer.Option("--jobs", metavar="N", help="Worker processes (default: all cores)."),
+    ] = None,
     output: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("-o", "--output", help="Campaign file (.h5); default runs/<config>-<hash>.h5."),
+        typer.Option("-o", "--output", metavar="FILE", help="Campaign file (.h5); default runs/<config>-<hash>.h5."),
     ] = None,
-    json_out: Annotated[Optional[Path], typer.Option("--json", help="Also write the SPEC JSON summary here.")] = None,  # noqa: UP045
+    json_out: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--json", metavar="FILE", help="Also write the SPEC JSON summary here."),
+    ] = None,
     set_: SetOption = None,
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
@@ -312,7 +381,8 @@ def identify(
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
         _progress("identify") as progress,
     ):
-        bar = progress.add_task(f"{cfg.identify.algorithm.name}", total=None)
+        objective = getattr(cfg.identify, "objective", "J")  # the damper's cost is J (Eq. 7)
+        bar = progress.add_task(f"{cfg.identify.algorithm.name}/{objective}", total=None)
         campaign = run_campaign_to_file(
             cfg, target, data, executor=pool, log=_warn, force=force,
             on_run=lambda d, n: progress.update(bar, completed=d, total=n),
@@ -329,16 +399,32 @@ def identify(
 @app.command()
 @_guarded
 def sweep(
-    config: Annotated[Path, typer.Argument(help="Base experiment config (YAML).", show_default=False)],
-    vary: Annotated[list[str], typer.Option("--vary", help="dotted.key=v1,v2,... (repeatable): the product is swept.")],
+    config: Annotated[
+        Path, typer.Argument(metavar="CONFIG", help="Base experiment config (YAML).", show_default=False)
+    ],
+    vary: Annotated[
+        list[str],
+        typer.Option("--vary", metavar="KEY=V1,V2", help="dotted.key=v1,v2,... (repeatable): the product is swept."),
+    ],
     output: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("-o", "--output", help="Directory of campaign files (default runs/sweep-<config>)."),
+        typer.Option(
+            "-o", "--output", metavar="DIR", help="Directory of campaign files (default runs/sweep-<config>)."
+        ),
     ] = None,
-    shard: Annotated[Optional[str], typer.Option("--shard", help="K/N: run only this share, for job arrays.")] = None,  # noqa: UP045
-    runs: Annotated[Optional[int], typer.Option("--runs", help="Runs per campaign (identify.runs).")] = None,  # noqa: UP045
-    seed: Annotated[Optional[int], typer.Option("--seed", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
-    jobs: Annotated[Optional[int], typer.Option("--jobs", help="Worker processes (default: all cores).")] = None,  # noqa: UP045
+    shard: Annotated[
+        Optional[str],  # noqa: UP045
+        typer.Option("--shard", metavar="K/N", help="K/N: run only this share, for job arrays."),
+    ] = None,
+    runs: Annotated[
+        Optional[int],  # noqa: UP045
+        typer.Option("--runs", metavar="N", help="Runs per campaign (identify.runs)."),
+    ] = None,
+    seed: Annotated[Optional[int], typer.Option("--seed", metavar="N", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
+    jobs: Annotated[
+        Optional[int],  # noqa: UP045
+        typer.Option("--jobs", metavar="N", help="Worker processes (default: all cores)."),
+    ] = None,
     set_: SetOption = None,
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
@@ -364,8 +450,7 @@ def sweep(
     k, n = parse_shard(shard)
     variations = parse_vary(vary)
     out_dir = output if output is not None else Path("runs") / f"sweep-{Path(config).stem}"
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError("sweep output must be a directory", source=str(out_dir))
+    check_output_dir(out_dir, "-o")
     planned = plan_sweep(config, overrides, variations, out_dir)
     if not force:
         check_no_other_campaigns(planned)
@@ -420,21 +505,66 @@ def sweep(
         )
 
 
+REPORT_FORMATS = ("table", "md", "csv", "latex", "json")  # report.FORMATS (tested equal), not imported at start-up
+REPORT_SUFFIXES = {".md": "md", ".csv": "csv", ".tex": "latex", ".latex": "latex", ".json": "json", ".txt": "table"}
+
+
+def _report_format(fmt: str | None, output: Path | None) -> str:
+    """--format, else the one -o's suffix implies, else table; -o is checked writable. Exit 2 if they disagree."""
+    if fmt is not None and fmt not in REPORT_FORMATS:
+        raise InputError(f"--format must be one of {', '.join(REPORT_FORMATS)}, got '{fmt}'")
+    if output is None:
+        return fmt or "table"
+    suffix = output.suffix.lower()
+    implied = REPORT_SUFFIXES.get(suffix)
+    known = ", ".join(f"{k} ({v})" for k, v in REPORT_SUFFIXES.items())
+    if implied is None:
+        raise InputError(
+            f"-o: cannot tell the report format from the suffix '{suffix}'; use one of {known}", source=str(output)
+        )
+    if fmt is not None and fmt != implied:
+        raise InputError(
+            f"--format {fmt} disagrees with -o {output} (a '{suffix}' file is written as {implied}); "
+            f"give one of them, or a matching pair: {known}"
+        )
+    check_writable(output, tuple(REPORT_SUFFIXES))
+    return implied
+
+
+def check_output_dir(path: Path, option: str) -> Path:
+    """data.check_writable_dir for an option's directory: created if needed and probed, before any work."""
+    from .data import check_writable_dir
+
+    return check_writable_dir(path, option)
+
+
 @app.command()
 @_guarded
 def report(
     paths: Annotated[
-        list[Path], typer.Argument(help="Campaign files (.h5) or directories of them.", show_default=False)
+        list[Path],
+        typer.Argument(metavar="PATH", help="Campaign files (.h5) or directories of them.", show_default=False),
     ],
-    fmt: Annotated[str, typer.Option("--format", help="table, md, csv, latex or json.")] = "table",
+    fmt: Annotated[
+        Optional[str],  # noqa: UP045
+        typer.Option(
+            "--format",
+            metavar="|".join(REPORT_FORMATS),
+            help="Default: from -o's suffix (.md, .csv, .tex/.latex, .json, .txt), else table.",
+            show_default=False,
+        ),
+    ] = None,
     output: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("-o", "--output", help="Write the report to this file instead of the terminal."),
+        typer.Option("-o", "--output", metavar="FILE", help="Write the report to this file instead of the terminal."),
     ] = None,
-    plots: Annotated[Optional[Path], typer.Option("--plots", help="Write PNG figures into this directory.")] = None,  # noqa: UP045
+    plots: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--plots", metavar="DIR", help="Write PNG figures into this directory."),
+    ] = None,
     published: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("--published", help="YAML of published values to set beside ours (md, latex)."),
+        typer.Option("--published", metavar="FILE", help="YAML of published values to set beside ours (md, latex)."),
     ] = None,
     allow_mixed: Annotated[
         bool,
@@ -449,15 +579,12 @@ def report(
     of different experiments (config keys other than the method keys and a sweep's varied keys), data files
     or code versions are refused unless --allow-mixed is given.
     """
-    from .report import FORMATS, collect, load_published, render, rich_tables, sweep_notes
+    from .report import collect, load_published, render, rich_tables, sweep_notes
     from .report.compare import check_comparable
 
-    if fmt not in FORMATS:
-        raise InputError(f"--format must be one of {', '.join(FORMATS)}, got '{fmt}'")
-    if output is not None:
-        check_writable(output, (".md", ".csv", ".tex", ".json", ".txt"))
-    if plots is not None and plots.exists() and not plots.is_dir():
-        raise InputError("--plots must name a directory", source=str(plots))
+    fmt = _report_format(fmt, output)
+    if plots is not None:
+        check_output_dir(plots, "--plots")
     campaigns, files = collect(paths)
     for note in sweep_notes(paths):
         _warn(f"warning: {note}")
@@ -505,19 +632,32 @@ def _emit(text: str | None, output: Path | None) -> None:
 @app.command()
 @_guarded
 def diagnose(
-    config: Annotated[Path, typer.Argument(help="Experiment config (YAML): the declared model.", show_default=False)],
+    config: Annotated[
+        Path, typer.Argument(metavar="CONFIG", help="Experiment config (YAML): the declared model.", show_default=False)
+    ],
     data: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("--data", help="Measurement file to fit and diagnose (a damper config may name it in data.file)."),
+        typer.Option(
+            "--data",
+            metavar="FILE",
+            help="Measurement file to fit and diagnose (a damper config may name it in data.file).",
+        ),
     ] = None,
     validate: Annotated[
         Optional[list[Path]],  # noqa: UP045
-        typer.Option("--validate", help="A run to judge the augmented model on (repeatable; else held-out data)."),
+        typer.Option(
+            "--validate", metavar="FILE", help="A run to judge the augmented model on (repeatable; else held-out data)."
+        ),
     ] = None,
-    json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the SPEC section 5 JSON here.")] = None,  # noqa: UP045
+    json_out: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--json", metavar="FILE", help="Write the SPEC section 5 JSON here."),
+    ] = None,
     plots: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("--plots", help="Write figures here: residual before/after, fingerprint, spectrum."),
+        typer.Option(
+            "--plots", metavar="DIR", help="Write figures here: residual before/after, fingerprint, spectrum."
+        ),
     ] = None,
     set_: SetOption = None,
 ) -> None:
@@ -539,8 +679,10 @@ def diagnose(
     cfg = load_config(config, set_ or ())
     if json_out is not None:
         check_writable(json_out, (".json",))
+    if plots is not None:
+        check_output_dir(plots, "--plots")
     say = lambda msg: err.print(msg, markup=False)  # noqa: E731
-    if isinstance(cfg, DamperConfig):
+    if _is_damper(cfg):
         vfiles = None if not validate else tuple(validate)
         result = diagnose_damper(cfg, data, vfiles, log=say)
     else:

@@ -728,8 +728,11 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
         raw = {}
     if not isinstance(raw, dict):
         raise InputError(f"expected a mapping of sections at the top level, got {type(raw).__name__}", source=source)
-    raw = apply_overrides(raw, overrides, source=source)
-    cfg = config_from_dict(raw, source=source)
+    try:
+        cfg = config_from_dict(apply_overrides(raw, overrides, source=source), source=source)
+    except InputError as exc:
+        _blame_override(raw, overrides, exc, source)
+        raise
     if isinstance(cfg, DamperConfig):
         return _resolve_damper_paths(cfg, path)
     if cfg.road.file is not None and not Path(cfg.road.file).is_absolute():
@@ -772,6 +775,31 @@ def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config | 
         raise InputError(str(exc), source=source, key=exc.key) from None
     cfg._source = source
     return cfg
+
+
+class Override(str):
+    """A `dotted.key=value` override that remembers the option it came from (`--runs`), for error messages;
+    a plain string is a `--set` line."""
+
+    option: str | None = None
+
+    def __new__(cls, text: str, option: str | None = None):
+        self = super().__new__(cls, text)
+        self.option = option
+        return self
+
+
+def _blame_override(raw: dict[str, Any], overrides: typing.Sequence[str], error: InputError, source: str) -> None:
+    """When the overrides break a valid config, raise `error` naming the option of the override after the last
+    valid state (`--set noise.levle=0.1: ...`); return when no state validates (the file's error stands)."""
+    for i in reversed(range(len(overrides))):
+        try:
+            config_from_dict(apply_overrides(raw, overrides[:i], source=source), source=source)
+        except InputError:
+            continue
+        item = overrides[i]
+        option = getattr(item, "option", None) or f"--set {item}"
+        raise InputError(error.detail, source=option, key=error.key) from None
 
 
 def apply_overrides(raw: dict[str, Any], overrides: typing.Sequence[str], source: str = "<config>") -> dict[str, Any]:
@@ -844,6 +872,9 @@ def _unwrap_model(annotation: Any) -> Any:
     return annotation
 
 
+BOUND_WORDS = {"ge": "at least", "gt": "greater than", "le": "at most", "lt": "less than"}
+
+
 def _explain(exc: ValidationError, root: type[BaseModel] | None = None) -> str:
     """Turn pydantic's errors into one paragraph: each names its dotted key and what was expected."""
     lines = []
@@ -868,6 +899,10 @@ def _explain(exc: ValidationError, root: type[BaseModel] | None = None) -> str:
         else:
             msg = err["msg"].removeprefix("Value error, ")
             msg = msg.replace("Input should be", "expected")
+            bound = {k: v for k, v in (err.get("ctx") or {}).items() if k in BOUND_WORDS}
+            if kind in ("greater_than_equal", "greater_than", "less_than_equal", "less_than") and bound:
+                ((name, limit),) = bound.items()
+                msg = f"must be {BOUND_WORDS[name]} {limit}"
             shown = "" if kind.startswith("value_error") or kind.startswith("assertion") else f", got {err['input']!r}"
             if key:
                 lines.append(f"'{key}': {msg}{shown}")

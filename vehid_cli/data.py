@@ -61,8 +61,29 @@ class Table:
         return self.columns[name]
 
 
+DELIMITERS = {";": "';'", "\t": "tab", ",": "','"}
+DECIMAL_COMMA_HINT = "decimal comma? use '.' as the decimal separator, or ';'-separated columns"
+
+
+def _delimiter(header: str) -> str:
+    """The field separator, from the header line: ';' (European spreadsheet exports), else tab, else ','."""
+    return next((d for d in DELIMITERS if d in header), ",")
+
+
+def _number(cell: str, decimal_comma: bool) -> float:
+    """A cell as a float; with `decimal_comma`, '1,25' reads as 1.25 (raises ValueError if not a number)."""
+    try:
+        return float(cell)
+    except ValueError:
+        if decimal_comma and cell.count(",") == 1 and "." not in cell:
+            return float(cell.replace(",", "."))
+        raise
+
+
 def read_table(path: str | Path) -> Table:
-    """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column."""
+    """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column.
+
+    Columns are separated by ',', ';' or tabs (from the header line); with ';' or tabs, decimal commas read."""
     source = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a byte-order mark (spreadsheet exports)
@@ -80,7 +101,9 @@ def read_table(path: str | Path) -> Table:
     if not lines:
         raise InputError("empty file: expected a header row and data rows", source=source)
     header_no, header = lines[0]
-    names = [h.strip() for h in header.split(",")]
+    sep = _delimiter(header)
+    decimal_comma = sep != ","
+    names = [h.strip() for h in header.split(sep)]
     if any(not n for n in names):
         raise InputError(f"header (line {header_no}) has an empty column name", source=source)
     dupes = sorted({n for n in names if names.count(n) > 1})
@@ -91,15 +114,21 @@ def read_table(path: str | Path) -> Table:
         raise InputError("no data rows after the header", source=source)
     values = np.empty((len(rows), len(names)))
     for r, (no, line) in enumerate(rows):
-        cells = line.split(",")
+        cells = line.split(sep)
         if len(cells) != len(names):
-            raise InputError(f"line {no} has {len(cells)} fields, the header has {len(names)}", source=source)
+            hint = f"; {DECIMAL_COMMA_HINT}" if sep == "," and len(cells) > len(names) else ""
+            raise InputError(
+                f"line {no} has {len(cells)} fields, the header has {len(names)} ({', '.join(names)}; separated by "
+                f"{DELIMITERS[sep]}){hint}",
+                source=source,
+            )
         for c, cell in enumerate(cells):
             try:
-                values[r, c] = float(cell)
+                values[r, c] = _number(cell, decimal_comma)
             except ValueError:
+                hint = f"; {DECIMAL_COMMA_HINT}" if "," in cell or cell.count(".") > 1 else ""
                 raise InputError(
-                    f"column '{names[c]}', line {no}: expected a number, got '{cell.strip()}'", source=source
+                    f"column '{names[c]}', line {no}: expected a number, got '{cell.strip()}'{hint}", source=source
                 ) from None
     return Table(columns={n: values[:, i] for i, n in enumerate(names)}, source=source)
 
@@ -188,12 +217,41 @@ def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
         )
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
-        raise InputError(f"output directory '{parent}' does not exist", source=str(path))
+        state = "is a file, not a directory" if parent.exists() else "does not exist"
+        raise InputError(f"output directory '{parent}' {state}", source=str(path))
     if path.is_dir():
         raise InputError("is a directory, expected a file name", source=str(path))
     if not os.access(parent, os.W_OK):
         raise InputError(f"output directory '{parent}' is not writable", source=str(path))
     return path
+
+
+def check_writable_dir(path: str | Path, option: str | None = None) -> Path:
+    """Check an output directory can be made and written (a probe file in it, or in its nearest existing
+    ancestor: nothing is left behind), before any work. InputError names the option and the path."""
+    path = Path(path)
+    source = f"{option} {path}" if option else str(path)
+    if path.exists() and not path.is_dir():
+        raise InputError("is a file, expected a directory", source=source)
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"cannot create the directory: '{existing}' is a file, not a directory", source=source)
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".vehid-probe-", dir=existing)
+    except OSError as exc:
+        where = "the directory" if existing == path else f"'{existing}' (to create the directory in)"
+        raise InputError(f"cannot write in {where}: {exc.strerror}", source=source) from None
+    os.close(fd)
+    os.unlink(probe)
+    return path
+
+
+def format_rows(table: NDArray) -> str:
+    """CSV data rows, each value the shortest text that reads back to the same double (0.003, not
+    0.0030000000000000001): exact, and never longer than %.17g."""
+    return "".join(",".join(map(repr, row)) + "\n" for row in np.asarray(table, dtype=float).tolist())
 
 
 def _umask() -> int:
@@ -316,7 +374,7 @@ def write_measurement_csv(
     disp: NDArray | None = None,
     comments: Sequence[str] = (),
 ) -> None:
-    """Write a vehicle measurement CSV atomically (full double precision, `#` comment header)."""
+    """Write a vehicle measurement CSV atomically (shortest exact repr of every value, `#` comment header)."""
     names, cols = ["t"], [np.asarray(t)[:, None]]
     names += list(ROAD_COLUMNS)
     cols.append(road)
@@ -330,7 +388,7 @@ def write_measurement_csv(
         for part in str(line).splitlines() or [""]:
             buf.write(f"# {part}\n")
     buf.write(",".join(names) + "\n")
-    np.savetxt(buf, table, delimiter=",", fmt="%.17g")
+    buf.write(format_rows(table))
     with atomic_path(path) as tmp:
         tmp.write_text(buf.getvalue(), encoding="utf-8")
 

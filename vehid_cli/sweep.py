@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import AnyConfig, load_config
+from .config import AnyConfig, Override, load_config
 from .data import atomic_path
 from .errors import InputError
 from .locking import Busy, exclusive
@@ -101,7 +101,8 @@ def plan_sweep(config_path: str | Path, base_overrides: Sequence[str], variation
     planned = []
     for index, combo in enumerate(itertools.product(*(v.values for v in variations))):
         overrides = tuple(f"{v.key}={value}" for v, value in zip(variations, combo, strict=True))
-        config = load_config(config_path, list(base_overrides) + list(overrides))
+        named = [Override(o, f"--vary {o}") for o in overrides]  # an error names the --vary value
+        config = load_config(config_path, list(base_overrides) + named)
         name = "_".join(_slug(v.key, value) for v, value in zip(variations, combo, strict=True))
         planned.append(PlannedCampaign(index, overrides, config, out_dir / f"{name}.h5"))
     names = [p.path.name for p in planned]
