@@ -2,35 +2,28 @@
 
 from __future__ import annotations
 
-<<<<<<< HEAD
 import errno
 import fcntl
 import os
 from pathlib import Path
-=======
-import os
->>>>>>> cli-papercuts
 
 import numpy as np
 import pytest
 
 from tests.conftest import VEHICLE_DATA, needs_shared
-<<<<<<< HEAD
 from vehid_cli import data
-from vehid_cli.data import atomic_path, read_measurement, read_table, time_grid, write_bytes, write_measurement_csv
-from vehid_cli.errors import DiskFull, InputError
-=======
 from vehid_cli.data import (
+    atomic_path,
     check_writable,
     check_writable_dir,
     format_rows,
     read_measurement,
     read_table,
     time_grid,
+    write_bytes,
     write_measurement_csv,
 )
-from vehid_cli.errors import InputError
->>>>>>> cli-papercuts
+from vehid_cli.errors import DiskFull, InputError
 
 
 def test_reads_the_shared_bump_run():
@@ -113,7 +106,6 @@ def test_byte_order_mark_is_tolerated(tmp_path):
     assert read_measurement(path).t.size == 3
 
 
-<<<<<<< HEAD
 # ------------------------------------------------------------------------------------------ writing
 
 
@@ -169,7 +161,8 @@ def test_stale_temporaries_of_the_target_are_removed_and_nothing_else(tmp_path):
     assert target.read_bytes() == b"a,b\n"
     write_bytes(target, b"c\n")  # the writer is gone (its lock released): now its temporary is stale
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["x.csv", *others])
-=======
+
+
 # ------------------------------------------------------------------------------------------ separators
 
 
@@ -270,4 +263,3 @@ def test_check_writable_names_a_file_in_the_way(tmp_path):
     (tmp_path / "f").write_text("x")
     with pytest.raises(InputError, match=r"f/out.json: output directory '.*/f' is a file, not a directory"):
         check_writable(tmp_path / "f" / "out.json", (".json",))
->>>>>>> cli-papercuts
