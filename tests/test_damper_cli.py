@@ -60,7 +60,7 @@ def test_simulate_identify_round_trip(tmp_path):
     assert res.returncode == 0, res.stderr
     progress = [line.split(" done")[0] for line in res.stderr.splitlines() if " done (" in line]
     assert [p.split(": ")[-1] for p in progress] == ["run 1/3", "run 2/3", "run 3/3"], res.stderr
-    assert all(p.startswith("identify bingham/") for p in progress), res.stderr  # off a terminal: plain lines
+    assert all(p.startswith("identify nelder-mead/J: ") for p in progress), res.stderr  # off a terminal: plain lines
     doc = json.loads(js.read_text())
     assert doc["runs"] == 3 and doc["truth"] == {n: TRUTH[n] for n in ("k1", "c0", "fc")}
     for name, value in doc["mean"].items():
@@ -224,7 +224,7 @@ def test_step_by_step_from_the_cli(tmp_path):
 
 def test_bench_csv_holds_the_shortest_exact_repr(tmp_path):
     """Was %.10g: lossy for the force and x, and a grid time like 0.006 only by luck of rounding."""
-    from vehid_cli.damper_campaign import write_bench_csv
+    from vehid_cli.systems.damper import write_bench_csv
 
     from vehid_cli.bench import BenchHistory
     from vehid_cli.data import read_table

@@ -21,7 +21,7 @@ from ..bench import BenchHistory, read_bench, sawtooth, sine, triangle, with_for
 from ..config import DamperConfig
 from ..crlb import CramerRao, cramer_rao_outputs
 from ..damper_fit import DamperSpec, RealTime, cost_J, fit, j_problem, realtime_check
-from ..data import atomic_path
+from ..data import atomic_path, format_rows
 from ..errors import InputError
 from ..experiment import run_streams
 from ..h5io import h5_file
@@ -88,7 +88,7 @@ def write_bench_csv(path: str | Path, history: BenchHistory, comments: list[str]
     with atomic_path(path) as tmp, open(tmp, "w") as fh:
         fh.write(header + "\n" if header else "")
         fh.write("t,x,v,u,force\n")
-        np.savetxt(fh, data, delimiter=",", fmt="%.10g")
+        fh.write(format_rows(data))
 
 
 def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, seed: int) -> None:
