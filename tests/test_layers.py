@@ -24,7 +24,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("data", "h5io", "bench", "noise", "optimizers", "optimizers."),  # files, the bench's motions, noise, optimizers
     ("models", "models."),  # force laws and matrices: own their parameter tables and defaults
     ("sim", "sim."),  # the generic kernel and the car/bench adapters beside it
-    ("config",),  # validated configs
+    ("config", "config."),  # validated configs: one module per system around a shared identify
     ("road", "experiment", "objectives", "crlb", "identification", "damper_fit"),  # a config made concrete
     ("records",),  # run records, summaries, campaigns: plain data
     ("systems", "systems."),  # the seam: the car and the damper bench

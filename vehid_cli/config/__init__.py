@@ -1,0 +1,233 @@
+"""Experiment configuration: YAML -> validated, frozen pydantic models, with `--set` overrides.
+
+One module per system around a shared `identify` vocabulary (`common.py`): `vehicle.py` (the full car) and
+`damper.py` (a damper on a test bench). Every problem a user can make in a config is reported as an
+:class:`InputError` that names the file (or the option) and the dotted key, with a did-you-mean for unknown keys
+(exit status 2 on the command line).
+"""
+
+from __future__ import annotations
+
+import json
+import types
+import typing
+from pathlib import Path
+from typing import Any, Union
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from ..errors import InputError
+from .common import (
+    Algorithm,
+    IdentifyCommon,
+    Start,
+    SystemConfig,
+    _did_you_mean,
+    _KeyedError,
+    flatten,
+    scaled_bounds,
+)
+from .damper import (
+    DAMPER_STRUCTURAL,
+    BenchSection,
+    DamperConfig,
+    DamperData,
+    DamperIdentify,
+    DamperNoise,
+    DamperSection,
+    DamperStage,
+    DataColumns,
+    DataUnits,
+    _resolve_damper_paths,
+)
+from .vehicle import Bump, Config, Identify, Noise, RandomRoad, Road, Simulation, Vehicle
+
+AnyConfig = Union[Config, DamperConfig]  # noqa: UP007
+
+
+# ------------------------------------------------------------------------------------------ loading
+
+
+def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Config | DamperConfig:
+    """Read a YAML config, apply `--set dotted.key=value` overrides, validate. Raises InputError."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("config file not found", source=source) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a YAML config file", source=source) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read config file ({exc.__class__.__name__}: {exc})", source=source) from None
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise InputError(f"not valid YAML{where}: {problem}", source=source) from None
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise InputError(f"expected a mapping of sections at the top level, got {type(raw).__name__}", source=source)
+    try:
+        cfg = config_from_dict(apply_overrides(raw, overrides, source=source), source=source)
+    except InputError as exc:
+        _blame_override(raw, overrides, exc, source)
+        raise
+    if isinstance(cfg, DamperConfig):
+        return _resolve_damper_paths(cfg, path)
+    if cfg.road.file is not None and not Path(cfg.road.file).is_absolute():
+        resolved = (path.parent / cfg.road.file).as_posix()
+        cfg = cfg.model_copy(update={"road": cfg.road.model_copy(update={"file": resolved})})
+        cfg._source = source
+    return cfg
+
+
+def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config | DamperConfig:
+    """Validate a plain dict (e.g. parsed YAML) into a Config, or a DamperConfig when `system: damper`.
+    Raises InputError naming the key."""
+    root = DamperConfig if isinstance(raw, dict) and raw.get("system") == "damper" else Config
+    try:
+        cfg = root.model_validate(raw)
+    except ValidationError as exc:
+        raise InputError(_explain(exc, root), source=source) from None
+    except _KeyedError as exc:  # raised from a validator outside pydantic's wrapping
+        raise InputError(str(exc), source=source, key=exc.key) from None
+    cfg._source = source
+    return cfg
+
+
+class Override(str):
+    """A `dotted.key=value` override that remembers the option it came from (`--runs`), for error messages;
+    a plain string is a `--set` line."""
+
+    option: str | None = None
+
+    def __new__(cls, text: str, option: str | None = None):
+        self = super().__new__(cls, text)
+        self.option = option
+        return self
+
+
+def _blame_override(raw: dict[str, Any], overrides: typing.Sequence[str], error: InputError, source: str) -> None:
+    """When the overrides break a valid config, raise `error` naming the option of the override after the last
+    valid state (`--set noise.levle=0.1: ...`); return when no state validates (the file's error stands)."""
+    for i in reversed(range(len(overrides))):
+        try:
+            config_from_dict(apply_overrides(raw, overrides[:i], source=source), source=source)
+        except InputError:
+            continue
+        item = overrides[i]
+        option = getattr(item, "option", None) or f"--set {item}"
+        raise InputError(error.detail, source=option, key=error.key) from None
+
+
+def apply_overrides(raw: dict[str, Any], overrides: typing.Sequence[str], source: str = "<config>") -> dict[str, Any]:
+    """Return a copy of `raw` with each `dotted.key=value` applied; values are parsed as YAML scalars/lists."""
+    out = json.loads(json.dumps(raw, default=str))  # deep copy of plain data
+    for item in overrides:
+        if "=" not in item:
+            raise InputError(f"--set expects dotted.key=value, got '{item}'", source=source)
+        key, _, text = item.partition("=")
+        key = key.strip()
+        parts = key.split(".")
+        if not key or any(not p for p in parts):
+            raise InputError(f"--set expects dotted.key=value, got '{item}'", source=source)
+        try:
+            value = yaml.safe_load(text) if text.strip() else None
+        except yaml.YAMLError:
+            raise InputError(f"--set {key}: cannot parse value '{text}'", source=source) from None
+        node = out
+        for depth, part in enumerate(parts[:-1]):
+            child = node.get(part)
+            if child is None:
+                child = node[part] = {}
+            if not isinstance(child, dict):
+                where = ".".join(parts[: depth + 1])
+                raise InputError(f"--set {key}: '{where}' is a value, not a section", source=source)
+            node = child
+        node[parts[-1]] = value
+    return out
+
+
+# ------------------------------------------------------------------------------------------ errors
+
+
+def _described_as(word: str, model: type[BaseModel] | None) -> str:
+    """Suggest the first field whose description mentions `word` (e.g. 'mass' -> 'm')."""
+    if model is None or len(word) < 3:
+        return ""
+    for name, field in model.model_fields.items():
+        text = (field.description or "").lower().replace("(", " ").replace(")", " ")
+        if word.lower().replace("_", " ") in text:
+            return f"; did you mean '{name}' ({field.description})?"
+    return ""
+
+
+def _model_at(loc: tuple, root: type[BaseModel] | None = None) -> type[BaseModel] | None:
+    """The pydantic model class that validates the mapping at `loc` inside a Config (None if not a model)."""
+    model: Any = Config if root is None else root
+    for part in loc:
+        if not (isinstance(model, type) and issubclass(model, BaseModel)) or part not in model.model_fields:
+            return None
+        model = _unwrap_model(model.model_fields[part].annotation)
+    return model if isinstance(model, type) and issubclass(model, BaseModel) else None
+
+
+def _unwrap_model(annotation: Any) -> Any:
+    origin = typing.get_origin(annotation)
+    if origin in (Union, types.UnionType):
+        for arg in typing.get_args(annotation):
+            if isinstance(arg, type) and issubclass(arg, BaseModel):
+                return arg
+    return annotation
+
+
+BOUND_WORDS = {"ge": "at least", "gt": "greater than", "le": "at most", "lt": "less than"}
+
+
+def _explain(exc: ValidationError, root: type[BaseModel] | None = None) -> str:
+    """Turn pydantic's errors into one paragraph: each names its dotted key and what was expected."""
+    lines = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(p for p in err["loc"])
+        key = ".".join(str(p) for p in loc)
+        kind = err["type"]
+        ctx_error = (err.get("ctx") or {}).get("error")
+        if isinstance(ctx_error, _KeyedError):
+            lines.append(f"'{ctx_error.key}': {ctx_error}")
+            continue
+        if kind == "extra_forbidden":
+            parent = _model_at(loc[:-1], root)
+            known = [f.alias or n for n, f in parent.model_fields.items()] if parent else []
+            hint = _did_you_mean(str(loc[-1]), known) or _described_as(str(loc[-1]), parent)
+            listing = f" (known keys: {', '.join(known)})" if known and not hint else ""
+            lines.append(f"'{key}': unknown key{hint}{listing}")
+        elif kind == "missing":
+            lines.append(f"'{key}': required key is missing")
+        elif kind == "literal_error":
+            lines.append(f"'{key}': {err['msg'].replace('Input should be', 'expected')}, got {err['input']!r}")
+        else:
+            msg = err["msg"].removeprefix("Value error, ")
+            msg = msg.replace("Input should be", "expected")
+            bound = {k: v for k, v in (err.get("ctx") or {}).items() if k in BOUND_WORDS}
+            if kind in ("greater_than_equal", "greater_than", "less_than_equal", "less_than") and bound:
+                ((name, limit),) = bound.items()
+                msg = f"must be {BOUND_WORDS[name]} {limit}"
+            shown = "" if kind.startswith("value_error") or kind.startswith("assertion") else f", got {err['input']!r}"
+            if key:
+                lines.append(f"'{key}': {msg}{shown}")
+            else:
+                lines.append(f"{msg}{shown}")
+    return "; ".join(lines)
+
+
+__all__ = [
+    "DAMPER_STRUCTURAL", "Algorithm", "AnyConfig", "BenchSection", "Bump", "Config", "DamperConfig", "DamperData",
+    "DamperIdentify", "DamperNoise", "DamperSection", "DamperStage", "DataColumns", "DataUnits", "Identify",
+    "IdentifyCommon", "Noise", "Override", "RandomRoad", "Road", "Simulation", "Start", "SystemConfig", "Vehicle",
+    "apply_overrides", "config_from_dict", "flatten", "load_config", "scaled_bounds",
+]  # fmt: skip

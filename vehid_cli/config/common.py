@@ -1,0 +1,179 @@
+"""What every system's config shares: the base of every section, value types, the algorithm, and one `identify`
+vocabulary (unknowns, search box, algorithm, runs, seed, the evaluation budget, start, truth) with the checks
+that mean the same for the car and the damper."""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import typing
+from collections.abc import Mapping
+from typing import Annotated, Literal
+
+import yaml
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
+
+from ..optimizers import REGISTRY, load_all
+
+Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Section(BaseModel):
+    """Base of every config section: unknown keys are errors, values are immutable, ints become floats."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=False)
+
+
+class _KeyedError(ValueError):
+    """A validation error attached to a dotted key other than the one pydantic is validating."""
+
+    def __init__(self, key: str, message: str):
+        super().__init__(message)
+        self.key = key
+
+
+def _did_you_mean(word: str, choices: typing.Iterable[str]) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.5)
+    if not close:
+        lowered = {c.lower(): c for c in choices}
+        if word.lower() in lowered:
+            close = [lowered[word.lower()]]
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+class Algorithm(_Section):
+    """Identification algorithm and its budget."""
+
+    name: str = Field("abc", description="an optimizer of vehid_cli/optimizers (SPEC section 3 names)")
+    population: Annotated[int, Field(ge=2)] = 20
+    iterations: Annotated[int, Field(ge=1)] = 50
+
+
+def _start_alias(value: object) -> object:
+    """`nominal` is the old name of `config` (vehicle configs before the vocabulary was shared)."""
+    return "config" if value == "nominal" else value
+
+
+Start = Annotated[Literal["auto", "random", "config"], BeforeValidator(_start_alias)]  # one vocabulary for all systems
+
+
+def _start_alias(value: object) -> object:
+    """`nominal` is the old name of `config` (vehicle configs before the vocabulary was shared)."""
+    return "config" if value == "nominal" else value
+
+
+Start = Annotated[Literal["auto", "random", "config"], BeforeValidator(_start_alias)]  # one vocabulary for all systems
+
+
+def _check_algorithm(algorithm: Algorithm) -> None:
+    """The algorithm exists (the optimizer registry is the one list of names) and its population suffices."""
+    load_all()
+    cls = REGISTRY.get(algorithm.name)
+    if cls is None:
+        hint = _did_you_mean(algorithm.name, REGISTRY)
+        known = "" if hint else f" (known: {', '.join(sorted(REGISTRY))})"
+        raise _KeyedError("identify.algorithm.name", f"unknown algorithm '{algorithm.name}'{hint}{known}")
+    if algorithm.population < cls.min_population:
+        raise _KeyedError(
+            "identify.algorithm.population",
+            f"{algorithm.name} needs a population of at least {cls.min_population}, got {algorithm.population}",
+        )
+
+
+class IdentifyCommon(_Section):
+    """The identify keys every system shares, with one meaning each. Systems set their own defaults."""
+
+    unknowns: Annotated[tuple[str, ...], Field(min_length=1)]
+    bounds: tuple[Pos, Pos] = Field((0.7, 1.3), description="search range as factors of the configured values")
+    limits: dict[str, tuple[Finite, Finite]] = Field(
+        default_factory=dict, description="absolute search range per unknown [SI], overriding 'bounds'"
+    )
+    algorithm: Algorithm = Algorithm()
+    runs: Annotated[int, Field(ge=1)] = 30
+    seed: Annotated[int, Field(ge=0)] = 2015
+    budget: Annotated[int, Field(ge=1)] | None = Field(
+        None,
+        description="model evaluations per run (per stage for a staged damper fit), honoured exactly; default "
+        "population x iterations",
+    )
+    start: Start = Field(
+        "random",
+        description="where a run starts: random (a random start from the run's stream), config (the configured "
+        "values), auto (random for simulated data, config for measured data)",
+    )
+    truth: Literal["auto", "config", "none"] = Field(
+        "auto", description="are the configured values the truth? auto: yes for simulated data, no for measured data"
+    )
+
+    def check_names(self) -> None:
+        """Each unknown once, a known algorithm with a large enough population, limits for unknowns only, the
+        bounds' factors in order."""
+        seen: set[str] = set()
+        for name in self.unknowns:
+            if name in seen:
+                raise _KeyedError("identify.unknowns", f"'{name}' is listed twice")
+            seen.add(name)
+        _check_algorithm(self.algorithm)
+        for name in self.limits:
+            if name not in self.unknowns:
+                raise _KeyedError(
+                    f"identify.limits.{name}", f"'{name}' is not one of the unknowns {list(self.unknowns)}"
+                )
+        lo_f, hi_f = self.bounds
+        if not lo_f < hi_f:
+            raise _KeyedError("identify.bounds", f"lower factor {lo_f:g} must be below upper factor {hi_f:g}")
+
+    def check_box(self, values: Mapping[str, float], box: Mapping[str, tuple[float, float]]) -> None:
+        """Every unknown's search range is a range and holds its configured value."""
+        for name, (lo, hi) in box.items():
+            key = f"identify.limits.{name}" if name in self.limits else "identify.bounds"
+            if not lo < hi:
+                raise _KeyedError(key, f"lower limit {lo:g} must be below upper limit {hi:g}")
+            if not lo <= values[name] <= hi:
+                raise _KeyedError(
+                    key, f"the search range [{lo:g}, {hi:g}] of '{name}' excludes its configured value {values[name]:g}"
+                )
+
+
+class SystemConfig(_Section):
+    """Base of a whole config (a car, a damper): where it was read from, its YAML and its digest."""
+
+    _source: str = PrivateAttr(default="<config>")
+
+    @property
+    def source(self) -> str:
+        """The file the config was read from (for messages and relative paths)."""
+        return self._source
+
+    def to_yaml(self) -> str:
+        """The resolved config as YAML text (defaults filled in, overrides applied)."""
+        return yaml.safe_dump(self.model_dump(mode="json", exclude_none=True, by_alias=True), sort_keys=False)
+
+    def digest(self) -> str:
+        """SHA-256 of the resolved config, independent of key order and formatting."""
+        canonical = json.dumps(self.model_dump(mode="json", exclude_none=True, by_alias=True), sort_keys=True)
+        return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def scaled_bounds(
+    values: typing.Mapping[str, float], names: typing.Sequence[str], low: float = 0.1, high: float = 10.0
+) -> dict[str, tuple[float, float]]:
+    """Bounds by scaling the starting values (the paper's choice), with a symmetric range for values near 0."""
+    out = {}
+    for n in names:
+        v = float(values[n])
+        out[n] = (min(low * v, high * v), max(low * v, high * v)) if abs(v) > 1e-12 else (-1.0, 1.0)
+    return out
+
+
+def flatten(node, prefix: str = "") -> dict[str, object]:
+    """A nested mapping as dotted keys -> leaf values (an empty mapping stays a leaf)."""
+    if isinstance(node, dict):
+        out: dict[str, object] = {}
+        for key, value in node.items():
+            out.update(flatten(value, f"{prefix}{key}."))
+        return out or {prefix[:-1]: {}}
+    return {prefix[:-1]: node}

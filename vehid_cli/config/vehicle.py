@@ -1,0 +1,291 @@
+"""The full car's config: the vehicle, the road, the time grid, the sensors, the noise, the identification."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from ..errors import InputError
+from ..models.effects import LIBRARY, bound_violation
+from ..models.fullcar import VEHICLE_PARAMETERS
+from .common import Finite, IdentifyCommon, NonNeg, Pos, SystemConfig, _did_you_mean, _KeyedError, _Section
+
+
+class Vehicle(_Section):
+    """The 7-DOF full car (Gökdağ Fig. 1). SI units: kg, kg m², m, N/m, N m/rad (kR), N s/m."""
+
+    m: Pos = Field(description="sprung (body) mass [kg]")
+    mf: Pos = Field(description="front unsprung mass, each [kg]")
+    mr: Pos = Field(description="rear unsprung mass, each [kg]")
+    Ix: Pos = Field(description="roll moment of inertia [kg m²]")
+    Iy: Pos = Field(description="pitch moment of inertia [kg m²]")
+    a1: Pos = Field(description="CG to front axle [m]")
+    a2: Pos | None = Field(None, description="CG to rear axle [m]; or give wheelbase")
+    b1: Pos = Field(description="CG to side-1 wheels (corners 1, 4) [m]")
+    b2: Pos | None = Field(None, description="CG to side-2 wheels (corners 2, 3) [m]; or give track")
+    wheelbase: Pos | None = Field(None, description="a1 + a2 [m], alternative to a2")
+    track: Pos | None = Field(None, description="b1 + b2 [m], alternative to b2")
+    kf: Pos = Field(description="front suspension stiffness [N/m]")
+    kr: Pos = Field(description="rear suspension stiffness [N/m]")
+    ktf: Pos = Field(description="front tyre stiffness [N/m]")
+    ktr: Pos = Field(description="rear tyre stiffness [N/m]")
+    kR: NonNeg = Field(0.0, description="front anti-roll bar stiffness [N m/rad]")
+    cf: NonNeg = Field(description="front suspension damping [N s/m]")
+    cr: NonNeg = Field(description="rear suspension damping [N s/m]")
+    effects: dict[str, dict[str, Finite] | None] | None = Field(
+        None,
+        description="nonlinear effects beside the linear car: effect name -> its parameters "
+        "(vehid_cli/models/effects.py; missing parameters at their defaults); "
+        "needs simulation.integrator rk4 or newmark",
+    )
+
+    @model_validator(mode="after")
+    def _effects(self) -> Vehicle:
+        for name, params in (self.effects or {}).items():
+            key = f"vehicle.effects.{name}"
+            if name not in LIBRARY:
+                hint = _did_you_mean(name, LIBRARY)
+                known = "" if hint else f" (known: {', '.join(LIBRARY)})"
+                raise _KeyedError(key, f"unknown effect '{name}'{hint}{known}")
+            effect = LIBRARY[name]
+            for pname, value in (params or {}).items():
+                if pname not in effect.names():
+                    hint = _did_you_mean(pname, effect.names())
+                    if f"{pname}_f" in effect.names():
+                        hint = f"; it is per axle: give '{pname}_f' and '{pname}_r'"
+                    known = "" if hint else f" (known: {', '.join(effect.names())})"
+                    raise _KeyedError(f"{key}.{pname}", f"'{pname}' is not a parameter of {name}{hint}{known}")
+                why = bound_violation(name, pname, value)
+                if why is not None:
+                    raise _KeyedError(f"{key}.{pname}", why)
+            if name == "asymmetric_damping":
+                for axle, c in (("f", self.cf), ("r", self.cr)):
+                    dc = (params or {}).get(f"dc_{axle}", 0.0)
+                    if abs(dc) >= 2 * c and dc != 0.0:
+                        raise _KeyedError(
+                            f"{key}.dc_{axle}",
+                            f"|dc_{axle}| = {abs(dc):g} N s/m must stay below 2 c{axle} = {2 * c:g} N s/m, "
+                            "or the compression or rebound damping turns negative",
+                        )
+            if name == "backlash":
+                for axle, c in (("f", self.cf), ("r", self.cr)):
+                    if (params or {}).get(f"gap_{axle}", 0.0) > 0.0 and c <= 0.0:
+                        raise _KeyedError(f"{key}.gap_{axle}", f"backlash needs a damper: c{axle} is 0")
+        return self
+
+    def effect_values(self) -> dict[str, dict[str, float]]:
+        """The declared effects with every parameter resolved (defaults for those not given)."""
+        return {name: {**LIBRARY[name].defaults(), **(p or {})} for name, p in (self.effects or {}).items()}
+
+    @model_validator(mode="after")
+    def _geometry(self) -> Vehicle:
+        for near, far, total, what in (("a1", "a2", "wheelbase", "wheelbase"), ("b1", "b2", "track", "track")):
+            d_near, d_far, d_total = getattr(self, near), getattr(self, far), getattr(self, total)
+            if d_far is None and d_total is None:
+                raise _KeyedError(f"vehicle.{far}", f"give either '{far}' or '{total}'")
+            if d_total is not None:
+                if d_near >= d_total:
+                    raise _KeyedError(
+                        f"vehicle.{near}",
+                        f"{near} = {d_near:g} m puts the centre of gravity outside the {what} "
+                        f"({total} = {d_total:g} m); expected 0 < {near} < {d_total:g}",
+                    )
+                if d_far is not None and abs(d_near + d_far - d_total) > 1e-9 * d_total:
+                    raise _KeyedError(
+                        f"vehicle.{total}",
+                        f"{near} + {far} = {d_near + d_far:g} m disagrees with {total} = {d_total:g} m",
+                    )
+        return self
+
+    @property
+    def L(self) -> float:
+        """Wheelbase a1 + a2 [m], held fixed when the CG moves."""
+        return self.wheelbase if self.wheelbase is not None else self.a1 + self.a2
+
+    @property
+    def w(self) -> float:
+        """Track b1 + b2 [m], held fixed when the CG moves."""
+        return self.track if self.track is not None else self.b1 + self.b2
+
+    def values(self) -> dict[str, float]:
+        """All 16 model parameters, with a2 and b2 resolved from wheelbase and track."""
+        out = {name: getattr(self, name) for name in VEHICLE_PARAMETERS}
+        out["a2"] = self.L - self.a1
+        out["b2"] = self.w - self.b1
+        return out
+
+
+BumpShape = Literal["step", "cosine_step", "half_sine", "trapezoid"]
+
+
+class Bump(_Section):
+    """A discrete obstacle met at constant speed; the rear tyres meet it (a1 + a2)/V after the front."""
+
+    shape: BumpShape = "cosine_step"
+    length: Pos = Field(0.1, description="ramp length (cosine_step, trapezoid) or bump length (half_sine) [m]")
+    plateau: NonNeg = Field(0.0, description="length of the flat top of a trapezoid [m]")
+    heights: tuple[Finite, Finite, Finite, Finite] = Field(description="height under corners 1..4 [m]")
+    start_time: NonNeg = Field(0.1, description="time at which the front tyres meet the bump [s]")
+
+
+IsoClass = Literal["A", "B", "C", "D", "E", "F", "G", "H"]
+
+
+class RandomRoad(_Section):
+    """A random road of an ISO 8608 class; the two wheel tracks are independent, rear follows front."""
+
+    iso_class: IsoClass
+    n_min: Pos = Field(0.01, description="lowest spatial frequency [cycles/m]")
+    n_max: Pos = Field(10.0, description="highest spatial frequency [cycles/m]")
+    fade_in: NonNeg = Field(5.0, description="distance over which the roughness fades in from zero [m]")
+
+    @model_validator(mode="after")
+    def _band(self) -> RandomRoad:
+        if self.n_max <= self.n_min:
+            raise ValueError(f"n_max = {self.n_max:g} must exceed n_min = {self.n_min:g} cycles/m")
+        return self
+
+
+class Road(_Section):
+    """Road input: bumps and/or a random ISO 8608 road, or a road profile from a measurement file."""
+
+    speed_kmh: Pos | None = Field(None, description="forward speed [km/h]")
+    speed: Pos | None = Field(None, description="forward speed [m/s], alternative to speed_kmh")
+    bump: Bump | None = None
+    random: RandomRoad | None = None
+    file: str | None = Field(None, description="measurement file whose road1..road4 columns and time grid are used")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> Road:
+        if self.speed_kmh is not None and self.speed is not None:
+            raise ValueError("give either 'speed_kmh' or 'speed', not both")
+        if self.file is None:
+            if self.bump is None and self.random is None:
+                raise ValueError("give a 'bump', a 'random' road, or a road 'file'")
+            if self.speed_kmh is None and self.speed is None:
+                raise ValueError("give the forward speed as 'speed_kmh' (km/h) or 'speed' (m/s)")
+        return self
+
+    @property
+    def V(self) -> float:
+        """Forward speed [m/s]."""
+        if self.speed is not None:
+            return self.speed
+        if self.speed_kmh is not None:
+            return self.speed_kmh / 3.6
+        raise InputError("no forward speed configured", key="road.speed_kmh")
+
+
+class Simulation(_Section):
+    """Time grid and integrator."""
+
+    duration: Pos = Field(3.0, description="simulated time [s]")
+    dt: Pos = Field(0.001, description="time step [s]")
+    integrator: Literal["exact", "newmark", "exact-reference", "rk4"] = Field(
+        "exact",
+        description="exact: first-order-hold exact discretisation (compiled modal recursions); newmark: average "
+        "acceleration; exact-reference: the same as exact in plain NumPy, slower, for cross-checks; rk4: the "
+        "compiled fourth-order kernel (with vehicle.effects: rk4 or newmark, chosen explicitly)",
+    )
+    substeps: Annotated[int, Field(ge=1, le=1000)] | None = Field(
+        None, description="rk4/newmark with effects: integration steps per sample (the kernel runs at dt/substeps)"
+    )
+
+    @model_validator(mode="after")
+    def _grid(self) -> Simulation:
+        if self.dt * 2 > self.duration:
+            raise ValueError(f"dt = {self.dt:g} s leaves fewer than 3 samples in duration = {self.duration:g} s")
+        if self.duration / self.dt > 10_000_000:
+            raise ValueError(f"duration/dt = {self.duration / self.dt:.3g} samples is more than 10 million")
+        return self
+
+
+class Noise(_Section):
+    """Measurement noise of Gökdağ Eq. 15: sigma_i = level * std(clean channel i)."""
+
+    level: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = Field(0.0, description="Np, 0.1 = 10 %")
+
+
+class Identify(IdentifyCommon):
+    """What to identify and how (common.IdentifyCommon), with the car's objective. Bounds are relative to the
+    configured (true or nominal) values."""
+
+    unknowns: Annotated[tuple[str, ...], Field(min_length=1)] = ("m", "Ix", "Iy", "a1", "b1")
+    objective: Literal["f1", "f2", "wls"] = "f2"
+
+
+class Config(SystemConfig):
+    """A whole experiment: the car, the road, the time grid, the sensors, the noise, the identification."""
+
+    system: Literal["vehicle"] = "vehicle"
+    vehicle: Vehicle
+    road: Road
+    simulation: Simulation = Simulation()
+    sensors: Literal["acc", "disp", "both"] = "both"
+    noise: Noise = Noise()
+    identify: Identify = Identify()
+
+    @model_validator(mode="after")
+    def _effects_need_time_stepping(self) -> Config:
+        sim = self.simulation
+        if self.vehicle.effects and sim.integrator not in ("rk4", "newmark"):
+            raise _KeyedError(
+                "simulation.integrator",
+                f"vehicle.effects ({', '.join(self.vehicle.effects)}) make the car nonlinear: the '{sim.integrator}' "
+                "integrator is for the linear car; set simulation.integrator to rk4 (order 4) or newmark (order 2)",
+            )
+        if sim.substeps not in (None, 1) and sim.integrator not in ("rk4", "newmark"):
+            raise _KeyedError(
+                "simulation.substeps", f"substeps are for the rk4 and newmark kernels, not '{sim.integrator}'"
+            )
+        return self
+
+    def parameter_values(self) -> dict[str, float]:
+        """Every identifiable value: the car's parameters and the declared effects' (<effect>.<param>)."""
+        effects = {f"{e}.{k}": float(v) for e, ps in self.vehicle.effect_values().items() for k, v in ps.items()}
+        return {**self.vehicle.values(), **effects}
+
+    @model_validator(mode="after")
+    def _identify_against_vehicle(self) -> Config:
+        ident, values = self.identify, self.parameter_values()
+        for name in ident.unknowns:
+            if name not in values:
+                hint = _did_you_mean(name, tuple(values))
+                what = "a vehicle parameter or a parameter of a declared effect (vehicle.effects)"
+                raise _KeyedError("identify.unknowns", f"'{name}' is not {what}{hint}")
+            if "." in name and values[name] == 0 and name not in ident.limits:
+                raise _KeyedError(
+                    f"identify.limits.{name}",
+                    f"'{name}' is 0 in the config, so 'bounds' (factors) give no range: set identify.limits.{name}",
+                )
+        ident.check_names()
+        for pair in (("a1", "a2"), ("b1", "b2")):
+            if set(pair) <= set(ident.unknowns):
+                raise _KeyedError(
+                    "identify.unknowns", f"'{pair[0]}' and '{pair[1]}' cannot both be unknown: their sum is fixed"
+                )
+        if ident.objective == "f1" and self.sensors == "acc":
+            raise _KeyedError("identify.objective", "f1 compares displacements; set sensors to 'disp' or 'both'")
+        if ident.objective == "f2" and self.sensors == "disp":
+            raise _KeyedError("identify.objective", "f2 compares accelerations; set sensors to 'acc' or 'both'")
+        box = self.search_box()
+        ident.check_box(values, box)
+        for name, (lo, hi) in box.items():
+            span = {"a1": self.vehicle.L, "a2": self.vehicle.L, "b1": self.vehicle.w, "b2": self.vehicle.w}.get(name)
+            if span is not None and (lo <= 0 or hi >= span):
+                raise _KeyedError(
+                    f"identify.limits.{name}" if name in ident.limits else "identify.bounds",
+                    f"the search range [{lo:g}, {hi:g}] m of '{name}' leaves the "
+                    f"{'wheelbase' if name[0] == 'a' else 'track'} ({span:g} m); keep it inside (0, {span:g})",
+                )
+            if lo <= 0 and "." not in name and name not in ("kR", "cf", "cr"):
+                raise _KeyedError(f"identify.limits.{name}", f"'{name}' must stay positive; got lower limit {lo:g}")
+        return self
+
+    def search_box(self) -> dict[str, tuple[float, float]]:
+        """Search range of each unknown [SI units]: 'limits' where given, else 'bounds' x configured value."""
+        values, ident = self.parameter_values(), self.identify
+        lo_f, hi_f = ident.bounds
+        box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
+        return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
