@@ -69,13 +69,6 @@ def check_writable(path: Path, suffixes: Sequence[str]) -> Path:
     return check(path, suffixes)
 
 
-def _is_damper(cfg) -> bool:
-    """A damper config (system: damper), without importing the config module at start-up."""
-    from .config import DamperConfig
-
-    return isinstance(cfg, DamperConfig)
-
-
 def _guarded(command):
     """Turn InputError into exit 2 with its message, anything unexpected into exit 1, never a traceback."""
 
@@ -265,8 +258,7 @@ def simulate(
     CSV holds the noisy responses (Eq. 15; --set noise.level=0 for clean ones); HDF5 holds clean and
     noisy. The noise is the noise stream of run 0 of the campaign with the same seed.
     """
-    from .data import write_measurement_csv
-    from .experiment import build_experiment, run_streams, simulate_measurement
+    from .systems import write_simulation
 
     target = check_writable(output, (".csv", ".h5", ".hdf5"))
     if plot is not None:
@@ -275,60 +267,12 @@ def simulate(
         raise InputError(f"--seed must be a non-negative integer, got {seed}")
     cfg = load_config(config, set_ or ())
     seed = cfg.identify.seed if seed is None else seed
-    if _is_damper(cfg):
-        if road is not None:
-            raise InputError("--road is for vehicle configs; a damper config takes its motion from 'bench'")
-        _simulate_damper(cfg, config, target, plot, seed)
-        return
-    experiment = build_experiment(cfg, road_file=road)
-    run = simulate_measurement(experiment, run_streams(seed, 0).noise)
-    if target.suffix.lower() == ".csv":
-        comments = [
-            f"vehid {__version__} simulate {config}",
-            f"config sha256 {cfg.digest()}",
-            f"noise level Np = {cfg.noise.level:g} (Eq. 15), seed {seed}, road from {experiment.road_source}",
-        ]
-        write_measurement_csv(target, experiment.t, experiment.road, run.acc, run.disp, comments)
-    else:
-        from .results import write_simulation_h5
-
-        write_simulation_h5(target, run, seed)
+    simulated = write_simulation(cfg, target, seed, road, origin=f"simulate {config}")
     if plot is not None:
-        from .report.plots import plot_responses
+        from .report.figures import plot_simulation
 
-        plot_responses(run, plot)
-    out.print(
-        f"wrote {target}: {experiment.t.size} samples at dt = {experiment.dt * 1e3:g} ms, "
-        f"noise Np = {100 * cfg.noise.level:g} %" + (f"; figure {plot}" if plot else "")
-    )
-
-
-def _simulate_damper(cfg: DamperConfig, config: Path, target: Path, plot: Path | None, seed: int) -> None:
-    """`vehid simulate` for a damper: the configured bench run, force noise from run 0's noise stream."""
-    from .experiment import run_streams
-    from .systems.damper import simulate_bench, write_bench_csv, write_bench_h5
-
-    run = simulate_bench(cfg, run_streams(seed, 0).noise)
-    h = run.history
-    if target.suffix.lower() == ".csv":
-        comments = [
-            f"vehid {__version__} simulate {config}",
-            f"config sha256 {cfg.digest()}",
-            f"damper {cfg.damper.model} on a {cfg.bench.excitation} bench; force noise {100 * cfg.noise.level:g} % "
-            f"of std (sigma {run.sigma:.6g} N), seed {seed}",
-            "units: t [s], x [m], v [m/s], u [-], force [N]",
-        ]
-        write_bench_csv(target, h, comments)
-    else:
-        write_bench_h5(target, cfg, run, seed)
-    if plot is not None:
-        from .report.damper_plots import plot_bench
-
-        plot_bench(h, run.clean, plot, f"{cfg.damper.model} on a {cfg.bench.excitation} bench")
-    out.print(
-        f"wrote {target}: {h.t.size} samples at dt = {h.dt * 1e3:g} ms, force noise {100 * cfg.noise.level:g} %"
-        + (f"; figure {plot}" if plot else "")
-    )
+        plot_simulation(simulated, plot)
+    out.print(f"wrote {target}: {simulated.summary}" + (f"; figure {plot}" if plot else ""))
 
 
 @app.command()
@@ -672,26 +616,15 @@ def diagnose(
     The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
-    from .diagnose import diagnose as run_diagnosis
-    from .diagnose.damper import diagnose_damper
+    from .diagnose import diagnose_config
     from .results import write_json
 
-    cfg = load_config(config, set_ or ())
     if json_out is not None:
         check_writable(json_out, (".json",))
     if plots is not None:
         check_output_dir(plots, "--plots")
     say = lambda msg: err.print(msg, markup=False)  # noqa: E731
-    if _is_damper(cfg):
-        vfiles = None if not validate else tuple(validate)
-        result = diagnose_damper(cfg, data, vfiles, log=say)
-    else:
-        if data is None:
-            raise InputError("diagnose needs --data FILE (the measured run to fit)", source=str(config))
-        if validate and len(validate) > 1:
-            raise InputError("the full car takes one --validate run", source=str(config))
-        cfg = load_config(config, ["identify.objective=wls", "noise.level=0", *(set_ or ())])
-        result = run_diagnosis(cfg, data, validate[0] if validate else None, log=say)
+    result = diagnose_config(config, set_ or (), data, validate or (), log=say)
     doc = result.to_json()
     out.print(diagnosis_tables(result))
     for step in result.steps:

@@ -21,40 +21,10 @@ from .config import config_from_dict, flatten
 from .crlb import CramerRao
 from .data import atomic_path
 from .errors import InputError
-from .experiment import SimulatedRun
 from .h5io import h5_file
-from .models.fullcar import DOF_NAMES
 from .provenance import provenance
 from .records import Campaign, RunRecord, summarise
 from .systems import SYSTEMS
-
-
-def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
-    """One simulated run: the road, clean and noisy responses, coordinates, and the resolved config.
-
-    Layout: /t, /road (n, 4); /clean/{acc, disp, q}; /noisy/{acc, disp}; root attributes hold the
-    resolved config (YAML), its SHA-256, the noise level, the seed and provenance.
-    """
-    exp = run.experiment
-    with h5_file(path) as h5:
-        h5.attrs["kind"] = "vehid.simulation"
-        h5.attrs["config_yaml"] = exp.config.to_yaml()
-        h5.attrs["config_sha256"] = exp.config.digest()
-        h5.attrs["noise_level"] = run.noise_level
-        h5.attrs["seed"] = seed
-        h5.attrs["road_source"] = exp.road_source
-        for key, value in provenance().items():
-            h5.attrs[key] = value
-        h5.create_dataset("t", data=exp.t).attrs["unit"] = "s"
-        h5.create_dataset("road", data=exp.road).attrs["unit"] = "m"
-        clean, noisy = h5.create_group("clean"), h5.create_group("noisy")
-        for group, acc, disp in ((clean, run.clean.acc, run.clean.disp), (noisy, run.acc, run.disp)):
-            group.create_dataset("acc", data=acc).attrs["unit"] = "m/s^2"
-            group.create_dataset("disp", data=disp).attrs["unit"] = "m"
-        q = clean.create_dataset("q", data=run.clean.q)
-        q.attrs["columns"] = np.array(DOF_NAMES, dtype=h5py.string_dtype())
-        q.attrs["unit"] = "m (bounce, wheels), rad (roll, pitch)"
-
 
 # ------------------------------------------------------------------------------------------ campaigns
 

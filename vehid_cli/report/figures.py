@@ -5,10 +5,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..experiment import SimulatedRun
 from ..records import Campaign
+from ..systems import Simulated
 from . import system_of
-from .damper_plots import write_damper_plots
-from .plots import write_campaign_plots
+from .damper_plots import plot_bench, write_damper_plots
+from .plots import plot_responses, write_campaign_plots
 
 
 def write_plots(campaigns: list[Campaign], files: list[str], out_dir: str | Path) -> list[Path]:
@@ -16,3 +18,12 @@ def write_plots(campaigns: list[Campaign], files: list[str], out_dir: str | Path
     if system_of(campaigns, files) == "damper":
         return write_damper_plots([c.findings for c in campaigns], [Path(f).stem for f in files], out_dir)
     return write_campaign_plots(campaigns, files, out_dir)
+
+
+def plot_simulation(simulated: Simulated, path: str | Path) -> None:
+    """The figure of `vehid simulate --plot`: the car's responses, or the bench run's force."""
+    run = simulated.run
+    if isinstance(run, SimulatedRun):
+        plot_responses(run, path)
+    else:
+        plot_bench(run.history, run.clean, path, simulated.title)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -21,6 +22,15 @@ from ..experiment import run_streams
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
 from ..records import RunRecord
+
+
+@dataclass(frozen=True)
+class Simulated:
+    """What `vehid simulate` made: the simulated run (for its figure) and a one-line summary of the file."""
+
+    run: Any  # experiment.SimulatedRun (the car) or systems.damper.SimulatedBench (the damper)
+    summary: str
+    title: str = ""  # of its figure
 
 
 @dataclass(frozen=True)
@@ -65,6 +75,14 @@ class System(ABC):
     def data_files(self) -> tuple[str, ...]:
         """Every file the campaign's results depend on (their bytes enter the campaign key)."""
         return () if self.data_file is None else (self.data_file,)
+
+    @classmethod
+    @abstractmethod
+    def write_simulation(
+        cls, config: AnyConfig, target: Path, seed: int, road: Path | None = None, origin: str = ""
+    ) -> Simulated:
+        """Simulate the configured system with run 0's noise stream of `seed` and write it to `target` (.csv, or
+        .h5 with clean and noisy data); `origin` (the command) goes into the file's comments."""
 
     @abstractmethod
     def reference(self, run: int) -> Any:

@@ -17,6 +17,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import __version__
 from ..bench import BenchHistory, read_bench, sawtooth, sine, triangle, with_force
 from ..config import DamperConfig
 from ..crlb import CramerRao, cramer_rao_outputs
@@ -29,7 +30,7 @@ from ..noise import estimate_noise_sigma
 from ..optimizers.base import Problem
 from ..provenance import provenance
 from ..records import RunRecord
-from .base import Box, System
+from .base import Box, Simulated, System
 
 BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "u", "force": "force"}
 
@@ -349,6 +350,30 @@ class DamperSystem(System):
     def data_files(self) -> tuple[str, ...]:
         stages = tuple(str(s.file) for s in self.config.identify.stages if s.file is not None)
         return super().data_files() + self.held_out + stages
+
+    @classmethod
+    def write_simulation(
+        cls, config: DamperConfig, target: Path, seed: int, road: Path | None = None, origin: str = ""
+    ) -> Simulated:
+        """The configured bench run, force noise from run 0's noise stream: a bench file (t, x, v, u, force)."""
+        if road is not None:
+            raise InputError("--road is for vehicle configs; a damper config takes its motion from 'bench'")
+        cfg = config
+        run = simulate_bench(cfg, run_streams(seed, 0).noise)
+        h = run.history
+        if target.suffix.lower() == ".csv":
+            comments = [
+                f"vehid {__version__} {origin}".rstrip(),
+                f"config sha256 {cfg.digest()}",
+                f"damper {cfg.damper.model} on a {cfg.bench.excitation} bench; force noise "
+                f"{100 * cfg.noise.level:g} % of std (sigma {run.sigma:.6g} N), seed {seed}",
+                "units: t [s], x [m], v [m/s], u [-], force [N]",
+            ]
+            write_bench_csv(target, h, comments)
+        else:
+            write_bench_h5(target, cfg, run, seed)
+        summary = f"{h.t.size} samples at dt = {h.dt * 1e3:g} ms, force noise {100 * cfg.noise.level:g} %"
+        return Simulated(run, summary, f"{cfg.damper.model} on a {cfg.bench.excitation} bench")
 
     def reference(self, run: int) -> BenchHistory:
         if self.measured is not None:
