@@ -20,7 +20,7 @@ PACKAGE = ROOT / "vehid_cli"
 # Lowest first; a module may import modules of its own layer or of lower ones. Keys are module names relative to
 # the package (a package's __init__ is the package's name); a prefix ending in "." covers a subpackage.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("__init__", "errors", "provenance", "locking", "progress"),  # foundations (progress: plain progress lines)
+    ("__init__", "errors", "provenance", "locking", "progress", "interrupt"),  # foundations
     ("data", "h5io", "bench", "noise", "optimizers", "optimizers."),  # files, the bench's motions, noise, optimizers
     ("models", "models."),  # force laws and matrices: own their parameter tables and defaults
     ("sim", "sim."),  # the generic kernel and the car/bench adapters beside it

@@ -211,6 +211,15 @@ def check_same_campaign(output: Path, config: AnyConfig, data_file: str | Path |
         )
 
 
+def saved_runs_note(output: Path) -> str:
+    """What an interrupted campaign bound for `output` keeps, for the message after an interruption."""
+    partial = checkpoint_dir_for(output)
+    n = len(list(partial.glob("run-*.npz"))) if partial.is_dir() else 0
+    if n == 0:
+        return "no run had finished; nothing was written"
+    return f"{n} finished run(s) saved in {partial}; run the same command again to resume"
+
+
 def checkpoint_dir_for(output: Path) -> Path:
     """Where the finished runs of the campaign bound for `output` wait: `<output>.partial/`."""
     return output.with_name(output.name + ".partial")

@@ -18,6 +18,7 @@ from rich.console import Console
 
 from . import __version__
 from .errors import DiskFull, InputError
+from .interrupt import interruptible
 
 if TYPE_CHECKING:  # the library is imported inside the commands: `vehid --help` starts in a fraction of a second
     from .config import Config, DamperConfig
@@ -154,66 +155,6 @@ def _warn(message: str) -> None:
     err.print(message, markup=False)
 
 
-class _Interrupted(KeyboardInterrupt):
-    """SIGINT or SIGTERM, raised in the main thread so that a campaign stops cleanly."""
-
-    def __init__(self, signum: int):
-        import signal
-
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-def _interruptible(resume_hint):
-    """A context for identify and sweep: SIGINT (Ctrl-C) and SIGTERM (kill, a job scheduler's stop) stop the
-    command cleanly: workers stopped, unfinished writes removed, finished runs kept in the checkpoint. It says
-    what `resume_hint()` returns, then ends the process by the same signal, as shells and job schedulers expect
-    (a killed job: status 128 + signal). SIGKILL cannot be caught; the checkpoint covers it too."""
-    import contextlib
-    import signal
-    import threading
-
-    @contextlib.contextmanager
-    def context():
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-
-        def handler(signum, frame):
-            raise _Interrupted(signum)
-
-        inherited = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-        # a signal the process was started ignoring (SIGINT of a background job) stays ignored
-        previous = {s: signal.signal(s, handler) for s, h in inherited.items() if h is not signal.SIG_IGN}
-        try:
-            yield
-        except _Interrupted as exc:
-            for s, h in previous.items():
-                signal.signal(s, h)
-            _warn(f"interrupted by {signal.Signals(exc.signum).name}: {resume_hint()}")
-            sys.stdout.flush()
-            sys.stderr.flush()
-            signal.signal(exc.signum, signal.SIG_DFL)
-            os.kill(os.getpid(), exc.signum)
-            raise
-        finally:
-            for s, h in previous.items():
-                signal.signal(s, h)
-
-    return context()
-
-
-def _saved_runs(output: Path) -> str:
-    """What an interrupted campaign bound for `output` keeps, for the message after an interruption."""
-    from .campaign import checkpoint_dir_for
-
-    partial = checkpoint_dir_for(output)
-    n = len(list(partial.glob("run-*.npz"))) if partial.is_dir() else 0
-    if n == 0:
-        return "no run had finished; nothing was written"
-    return f"{n} finished run(s) saved in {partial}; run the same command again to resume"
-
-
 def _version(value: bool) -> None:
     if value:
         out.print(f"vehid {__version__}")
@@ -312,7 +253,7 @@ def identify(
     command to resume an interrupted campaign (Ctrl-C, SIGTERM, a killed job).
     """
 
-    from .campaign import run_campaign_to_file
+    from .campaign import run_campaign_to_file, saved_runs_note
     from .executor import check_executor_options, make_executor
     from .report import campaign_notes, rich_tables
     from .results import campaign_json, write_json
@@ -321,7 +262,7 @@ def identify(
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
     target = _results_target(config, cfg, output, json_out)
     with (
-        _interruptible(lambda: _saved_runs(target)),
+        interruptible(lambda: saved_runs_note(target), _warn),
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
         _progress("identify") as progress,
     ):
@@ -385,7 +326,7 @@ def sweep(
     """
     import json
 
-    from .campaign import run_campaign_to_file
+    from .campaign import checkpoint_dir_for, run_campaign_to_file, saved_runs_note
     from .executor import check_executor_options, make_executor
     from .sweep import check_no_other_campaigns, parse_shard, parse_vary, plan_sweep, run_sweep, write_index
 
@@ -405,14 +346,13 @@ def sweep(
     current: list[Path] = []
 
     def resume_hint() -> str:
-        from .campaign import checkpoint_dir_for
 
         unfinished = [p for p in current[-1:] if checkpoint_dir_for(p).is_dir()]
-        where = f"{_saved_runs(unfinished[0]).split(';')[0]}; " if unfinished else ""
+        where = f"{saved_runs_note(unfinished[0]).split(';')[0]}; " if unfinished else ""
         return f"{where}finished campaigns are in {out_dir}; run the same sweep again to resume"
 
     with (
-        _interruptible(resume_hint),
+        interruptible(resume_hint, _warn),
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
         _progress("sweep") as progress,
     ):
@@ -547,16 +487,14 @@ def report(
 
 
 def _tables(output: Path | None, tables: list) -> str | None:
-    """Rich tables: printed to the terminal, or rendered as plain text for --output."""
+    """Rich tables: printed to the terminal, or their plain text for --output."""
     if output is None:
         for table in tables:
             out.print(table)
         return None
-    with open(os.devnull, "w") as sink:
-        record = Console(record=True, width=160, file=sink)
-        for table in tables:
-            record.print(table)
-        return record.export_text()
+    from .report import plain_text
+
+    return plain_text(tables)
 
 
 def _emit(text: str | None, output: Path | None) -> None:
@@ -617,6 +555,7 @@ def diagnose(
     """
 
     from .diagnose import diagnose_config
+    from .report.diagnosis import diagnosis_tables, plot_diagnosis_files
     from .results import write_json
 
     if json_out is not None:
@@ -641,61 +580,6 @@ def diagnose(
     if json_out is not None:
         write_json(json_out, doc)
         out.print(f"wrote {json_out}")
-
-
-def diagnosis_tables(result):
-    """The candidate table (round 1) and the before/after table of a diagnosis, each within 80 columns."""
-    from rich import box
-    from rich.console import Group
-    from rich.table import Table
-
-    claimed = set(result.selected)
-    vname = "val. J" if result.validation_from_file else "held-out J"
-    table = Table(
-        title=f"candidates, round 1 (alpha = {result.alpha:g}, Bonferroni)", box=box.SIMPLE_HEAD,
-        caption="accepted: significant (p < alpha / candidates) and lowers the " + vname
-        + "; claimed: in the final model",
-    )  # fmt: skip
-    for col in ("candidate", "k", "LR", "p", "J", vname, "status"):
-        table.add_column(col, no_wrap=True, justify="left" if col in ("candidate", "status") else "right")
-    for r in result.rounds[0] if result.rounds else ():
-        status = "claimed" if r.effect in claimed else ("accepted" if r.accepted else "-")
-        table.add_row(
-            r.effect, str(r.k), f"{r.statistic:.3g}", f"{r.p_value:.2g}", f"{r.J:.4g}", f"{r.validation_J:.4g}", status
-        )  # fmt: skip
-    ba = Table(title="before / after (J: " + result.J_definition.split(":")[0] + ")", box=box.SIMPLE_HEAD)
-    for col in ("", "before", "after"):
-        ba.add_column(col, no_wrap=col == "")
-
-    def fmt(v):
-        return "-" if v is None else f"{v:.4g}"
-
-    def est(rep, j):
-        if rep.names[j] in rep.fixed:
-            return f"{rep.x[j]:.5g} (fixed)"
-        return f"{rep.x[j]:.5g} ± {rep.ci[j]:.2g}"
-
-    b, a = result.before, result.after
-    ba.add_row("model", ", ".join(b.effects) or "(declared)", ", ".join(a.effects) or "(nothing added)")
-    ba.add_row("J", fmt(b.J), fmt(a.J))
-    ba.add_row("residual / noise power", fmt(b.chi2_per_sample), fmt(a.chi2_per_sample))
-    ba.add_row(vname, fmt(b.validation_J), fmt(a.validation_J))
-    ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
-    for j, name in enumerate(a.names):
-        ba.add_row(name, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
-    return Group(table, ba)
-
-
-def plot_diagnosis_files(result, directory: Path, stem: str) -> list[Path]:
-    """The diagnosis figures, with a clear error if the directory cannot be written."""
-    from .report.diagnose_plots import plot_diagnosis
-
-    try:
-        return plot_diagnosis(result, directory, stem)
-    except DiskFull:
-        raise
-    except OSError as exc:
-        raise InputError(f"cannot write figures: {exc.strerror}", source=str(directory)) from None
 
 
 def run() -> None:

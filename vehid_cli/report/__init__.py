@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 from pathlib import Path
+
+from rich.console import Console
 
 from ..errors import InputError
 from ..records import Campaign
@@ -147,6 +150,15 @@ def campaign_notes(c: Campaign) -> list[str]:
             )
         notes.append(f"[yellow]note:[/] {note}")
     return notes
+
+
+def plain_text(tables: list, width: int = 160) -> str:
+    """Rich tables as plain text (for a report written to a file)."""
+    with open(os.devnull, "w") as sink:
+        record = Console(record=True, width=width, file=sink)
+        for table in tables:
+            record.print(table)
+        return record.export_text()
 
 
 def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dict | None = None) -> str:

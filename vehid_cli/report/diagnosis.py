@@ -1,0 +1,62 @@
+"""The tables of `vehid diagnose`: the first round's candidates and the model before and after, within 80 columns;
+and its figures with a clear error when their directory cannot be written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich import box
+from rich.console import Group
+from rich.table import Table
+
+from ..errors import DiskFull, InputError
+from .diagnose_plots import plot_diagnosis
+
+
+def diagnosis_tables(result):
+    """The candidate table (round 1) and the before/after table of a diagnosis, each within 80 columns."""
+    claimed = set(result.selected)
+    vname = "val. J" if result.validation_from_file else "held-out J"
+    table = Table(
+        title=f"candidates, round 1 (alpha = {result.alpha:g}, Bonferroni)", box=box.SIMPLE_HEAD,
+        caption="accepted: significant (p < alpha / candidates) and lowers the " + vname
+        + "; claimed: in the final model",
+    )  # fmt: skip
+    for col in ("candidate", "k", "LR", "p", "J", vname, "status"):
+        table.add_column(col, no_wrap=True, justify="left" if col in ("candidate", "status") else "right")
+    for r in result.rounds[0] if result.rounds else ():
+        status = "claimed" if r.effect in claimed else ("accepted" if r.accepted else "-")
+        table.add_row(
+            r.effect, str(r.k), f"{r.statistic:.3g}", f"{r.p_value:.2g}", f"{r.J:.4g}", f"{r.validation_J:.4g}", status
+        )  # fmt: skip
+    ba = Table(title="before / after (J: " + result.J_definition.split(":")[0] + ")", box=box.SIMPLE_HEAD)
+    for col in ("", "before", "after"):
+        ba.add_column(col, no_wrap=col == "")
+
+    def fmt(v):
+        return "-" if v is None else f"{v:.4g}"
+
+    def est(rep, j):
+        if rep.names[j] in rep.fixed:
+            return f"{rep.x[j]:.5g} (fixed)"
+        return f"{rep.x[j]:.5g} ± {rep.ci[j]:.2g}"
+
+    b, a = result.before, result.after
+    ba.add_row("model", ", ".join(b.effects) or "(declared)", ", ".join(a.effects) or "(nothing added)")
+    ba.add_row("J", fmt(b.J), fmt(a.J))
+    ba.add_row("residual / noise power", fmt(b.chi2_per_sample), fmt(a.chi2_per_sample))
+    ba.add_row(vname, fmt(b.validation_J), fmt(a.validation_J))
+    ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
+    for j, name in enumerate(a.names):
+        ba.add_row(name, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
+    return Group(table, ba)
+
+
+def plot_diagnosis_files(result, directory: Path, stem: str) -> list[Path]:
+    """The diagnosis figures, with a clear error if the directory cannot be written (a full disk stays DiskFull)."""
+    try:
+        return plot_diagnosis(result, directory, stem)
+    except DiskFull:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot write figures: {exc.strerror}", source=str(directory)) from None
