@@ -2,19 +2,12 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, needs_shared
+from tests.conftest import BASE_CONFIG, VEHICLE_DATA, needs_shared, vehid
 from vehid_cli.data import read_measurement
-
-
-def vehid(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
 def test_simulate_csv_and_plot(tmp_path):

@@ -14,10 +14,8 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from typer.testing import CliRunner
 
-from tests.conftest import BASE_CONFIG
-from vehid_cli.cli import app
+from tests.conftest import BASE_CONFIG, invoke
 
 BASE = yaml.safe_load(BASE_CONFIG.read_text())
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -69,9 +67,9 @@ def quick(raw):
 
 
 def run(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    text = (result.stdout or "") + (result.stderr or "")
-    return result.exit_code, text
+    """`vehid ARGS` in this process: exit code and all its text."""
+    code, out, err = invoke(*args)
+    return code, out + err
 
 
 def assert_clean_failure(code, text, out_dir: Path, produced: list[Path]):

@@ -8,23 +8,11 @@ import io
 import json
 
 import pytest
-from typer.testing import CliRunner
 
-from tests.conftest import BASE_CONFIG
-from tests.test_campaign import SMALL, small_config
+from tests.conftest import BASE_CONFIG, SMALL, invoke, sets, small_config
 from vehid_cli.campaign import run_campaign
-from vehid_cli.cli import app
 from vehid_cli.report.compare import Provenance, differences
 from vehid_cli.results import write_campaign_h5
-
-
-def invoke(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    return result.exit_code, result.stdout or "", result.stderr or ""
-
-
-def sets(items):
-    return [x for s in items for x in ("--set", s)]
 
 
 def test_shards_into_one_directory_make_one_report(tmp_path):

@@ -5,15 +5,13 @@ from __future__ import annotations
 import csv
 import io
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import BASE_CONFIG, ROOT
+from tests.conftest import BASE_CONFIG, ROOT, vehid
 from vehid_cli.errors import InputError
 from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep, split_top_level
 
@@ -53,12 +51,6 @@ def test_bad_value_fails_before_anything_runs(tmp_path):
 def test_bad_shard(bad):
     with pytest.raises(InputError, match="--shard"):
         parse_shard(bad)
-
-
-def vehid(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT
-    )
 
 
 def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
