@@ -84,7 +84,19 @@ def sets(items) -> list[str]:
     return [x for s in items for x in ("--set", s)]
 
 
-# ------------------------------------------------------------------------------------------ campaign files
+# ------------------------------------------------------------------------------------------ output files
+
+
+def read_png(path) -> np.ndarray:
+    """A figure's pixels; fails unless the file is a PNG of at least 200 x 150 pixels with something drawn on it
+    (not one flat colour)."""
+    from matplotlib.image import imread
+
+    assert Path(path).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    pixels = imread(path)
+    assert pixels.shape[0] >= 150 and pixels.shape[1] >= 200, (path, pixels.shape)
+    assert np.ptp(pixels[..., :3]) > 0.5, f"{path} is blank"
+    return pixels
 
 
 def h5_content(path) -> dict:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.conftest import MEASURED, ROOT, needs_shared, needs_shared_data_of, vehid
+from tests.conftest import MEASURED, ROOT, needs_shared, needs_shared_data_of, read_png, vehid
 
 MR = MEASURED / "mr_damper_labcontrol" / "data"
 TRUTH = {"k1": 2000.0, "x0": -0.05, "c0": 1500.0, "fc": 200.0, "v_eps": 0.02}
@@ -46,7 +46,7 @@ def test_simulate_identify_round_trip(tmp_path):
     table = np.genfromtxt(lines, delimiter=",", names=True)
     assert table.dtype.names == ("t", "x", "v", "u", "force")
     np.testing.assert_allclose(table["x"], 0.025 * np.sin(2 * np.pi * 0.8 * table["t"]), atol=1e-9)
-    assert fig.read_bytes()[:4] == b"\x89PNG"
+    read_png(fig)
 
     # the campaign: 3 runs, each with its own noise; estimates near the truth, J at the noise floor
     out, js = tmp_path / "campaign.h5", tmp_path / "campaign.json"
@@ -85,7 +85,8 @@ def test_simulate_identify_round_trip(tmp_path):
     res = vehid("report", out, out2, "--format", "md", "--plots", tmp_path / "figs", "--allow-mixed")
     assert res.returncode == 0, res.stderr
     assert "#### Cost J (Eq. 7)" in res.stdout and "Real-time check" in res.stdout
-    assert len(list((tmp_path / "figs").glob("*.png"))) == 2
+    figures = list((tmp_path / "figs").glob("*.png"))
+    assert len(figures) == 2 and all(read_png(f) is not None for f in figures)
 
 
 def test_measured_mr_damper_small_window(tmp_path):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.conftest import BASE_CONFIG, ROOT, vehid
+from tests.conftest import BASE_CONFIG, ROOT, read_png, vehid
 from vehid_cli.campaign import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.report import load_published, render
@@ -77,6 +77,8 @@ def test_report_cli_tables_and_plots(campaign_dir, tmp_path):
     pngs = sorted(p.name for p in (tmp_path / "fig").glob("*.png"))
     assert "convergence_f1_both_np0.1.png" in pngs and "re_boxes_f1_both_np0.1.png" in pngs
     assert sum(name.startswith("true_vs_estimated") for name in pngs) == 2
+    for name in pngs:
+        read_png(tmp_path / "fig" / name)
 
 
 def test_report_rejects_a_file_that_is_not_a_campaign(tmp_path):
