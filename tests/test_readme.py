@@ -10,6 +10,7 @@ in a directory laid out like a checkout beside ../shared.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -17,10 +18,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import h5py
+import numpy as np
 import pytest
 import typer.main
 
-from tests.conftest import ROOT, SHARED, needs_shared
+from tests.conftest import ROOT, SHARED, needs_shared, read_png
 from vehid_cli.cli import app
 from vehid_cli.config import load_config
 from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep
@@ -150,7 +153,8 @@ def test_each_command_matches_the_cli_and_its_files_exist(line):
 @pytest.mark.slow
 def test_every_command_runs_as_written(tmp_path):
     """Slow: each command, in README order, by `sh` in a fresh directory laid out like a checkout (configs/,
-    an empty runs/) with the shared data at ../shared; each exits 0 and writes what its -o/--json/--plot name."""
+    an empty runs/) with the shared data at ../shared; each exits 0 and writes what its -o/--json/--plot(s) name
+    (read back: tables, JSON, HDF5, figures), or prints its result."""
     shared = needs_shared(SHARED)
     work = tmp_path / "vehid"
     work.mkdir()
@@ -161,8 +165,35 @@ def test_every_command_runs_as_written(tmp_path):
     for line in COMMANDS:
         res = subprocess.run(["sh", "-c", line], cwd=work, env=env, capture_output=True, text=True, timeout=1800)
         assert res.returncode == 0, f"{line}\n{res.stdout[-2000:]}\n{res.stderr[-4000:]}"
+        assert "Traceback" not in res.stderr
+        if " -o " not in f" {line} ":
+            assert res.stdout.strip(), f"nothing printed by: {line}"  # e.g. the report's tables
         words = shlex.split(line)
         for k, word in enumerate(words[:-1]):
             if word in ("-o", "--output", "--json", "--plot", "--plots"):
-                assert (work / words[k + 1]).exists(), f"{words[k + 1]} not written by: {line}"
-        assert "Traceback" not in res.stderr
+                check_output(work / words[k + 1], line)
+
+
+def check_output(path: Path, line: str) -> None:
+    """What a command wrote, read: tables, JSON, HDF5, figures, directories of them."""
+    assert path.exists(), f"{path.name} not written by: {line}"
+    if path.is_dir():
+        files = sorted(path.iterdir())
+        assert files, f"{path.name} is empty after: {line}"
+        for f in files:
+            if f.suffix in (".png", ".h5"):
+                check_output(f, line)
+    elif path.suffix == ".png":
+        read_png(path)
+    elif path.suffix == ".json":
+        assert json.loads(path.read_text()), line
+    elif path.suffix == ".h5":
+        with h5py.File(path, "r") as h5:
+            assert "config_yaml" in h5.attrs and len(h5) > 0, line
+    elif path.suffix == ".csv":
+        table = np.genfromtxt(
+            [r for r in path.read_text().splitlines() if not r.startswith("#")], delimiter=",", names=True
+        )
+        assert table.dtype.names[0] == "t" and table.size > 100 and np.isfinite(table["t"]).all(), line
+    else:
+        assert path.suffix == ".md" and path.read_text().count("|") > 10, line
