@@ -6,42 +6,25 @@ import json
 import subprocess
 import sys
 
-import h5py
 import numpy as np
 import pytest
 import yaml
 
-from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, needs_shared
+from tests.conftest import (
+    BASE_CONFIG,
+    ROOT,
+    SMALL,
+    VEHICLE_DATA,
+    assert_same_content,
+    children,
+    needs_shared,
+    running,
+    small_config,
+    vehid,
+)
 from vehid_cli.campaign import run_campaign, run_campaign_to_file
 from vehid_cli.config import load_config
 from vehid_cli.results import read_campaign_h5, write_campaign_h5
-
-SMALL = [
-    "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=4",
-    "identify.algorithm.name=de", "identify.algorithm.population=8", "identify.algorithm.iterations=5",
-]  # fmt: skip
-
-
-def small_config(*extra):
-    return load_config(BASE_CONFIG, SMALL + list(extra))
-
-
-def h5_content(path):
-    """Every dataset of a campaign file (provenance attributes such as the creation time excluded)."""
-    out = {}
-    with h5py.File(path) as h5:
-        h5.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
-        out["config_yaml"] = h5.attrs["config_yaml"]
-    return out
-
-
-def assert_same_content(a, b):
-    ca, cb = h5_content(a), h5_content(b)
-    assert ca.keys() == cb.keys()
-    for key in ca:
-        if key == "runs/wall_s":
-            continue
-        np.testing.assert_array_equal(ca[key], cb[key], err_msg=key)
 
 
 def test_same_seed_identical_results_for_any_jobs(tmp_path):
@@ -95,12 +78,6 @@ def test_file_round_trip_and_summary_statistics(tmp_path):
     assert s.per_run_nre_rms == pytest.approx(np.sqrt(np.mean(per_run**2)))
     assert s.nre_over_crlb == pytest.approx(s.per_run_nre_rms / back.bound.nre_rms_percent)
     assert all(r.evaluations <= 40 for r in back.records)
-
-
-def vehid(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT
-    )
 
 
 def test_identify_cli_writes_h5_and_spec_json(tmp_path):
@@ -188,8 +165,6 @@ def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path, system):
     import os
     import signal
     import time
-
-    from tests.test_reliability import children, running
 
     if system == "vehicle":
         config = BASE_CONFIG

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, cli, needs_shared, vehid
+from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, cli, needs_shared, read_png, vehid
 from vehid_cli.data import read_measurement
 
 
@@ -20,7 +20,7 @@ def test_simulate_csv_and_plot(tmp_path):
     assert res.returncode == 0, res.stderr
     m = read_measurement(out)
     assert m.t.size == 3000 and m.acc is not None and m.disp is not None
-    assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    read_png(fig)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv", "run.png"]
 
 

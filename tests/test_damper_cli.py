@@ -7,23 +7,17 @@ numpy (Fleps-Dezasse Eq. 7), independently of vehid's cost function.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import h5py
 import numpy as np
 import pytest
 import yaml
 
-from tests.conftest import ROOT, SHARED, needs_shared
+from tests.conftest import MEASURED, ROOT, needs_shared, needs_shared_data_of, read_png, vehid
 
-MR = SHARED / "data" / "measured" / "mr_damper_labcontrol" / "data"
+MR = MEASURED / "mr_damper_labcontrol" / "data"
 TRUTH = {"k1": 2000.0, "x0": -0.05, "c0": 1500.0, "fc": 200.0, "v_eps": 0.02}
 LEVEL = 0.02  # force noise, fraction of the clean force's std
-
-
-def vehid(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
 def synthetic_config(tmp_path, **identify):
@@ -52,7 +46,7 @@ def test_simulate_identify_round_trip(tmp_path):
     table = np.genfromtxt(lines, delimiter=",", names=True)
     assert table.dtype.names == ("t", "x", "v", "u", "force")
     np.testing.assert_allclose(table["x"], 0.025 * np.sin(2 * np.pi * 0.8 * table["t"]), atol=1e-9)
-    assert fig.read_bytes()[:4] == b"\x89PNG"
+    read_png(fig)
 
     # the campaign: 3 runs, each with its own noise; estimates near the truth, J at the noise floor
     out, js = tmp_path / "campaign.h5", tmp_path / "campaign.json"
@@ -94,19 +88,21 @@ def test_simulate_identify_round_trip(tmp_path):
     res = vehid("report", out, out2, "--format", "md", "--plots", tmp_path / "figs", "--allow-mixed")
     assert res.returncode == 0, res.stderr
     assert "#### Cost J (Eq. 7)" in res.stdout and "Real-time check" in res.stdout
-    assert len(list((tmp_path / "figs").glob("*.png"))) == 2
+    figures = list((tmp_path / "figs").glob("*.png"))
+    assert len(figures) == 2 and all(read_png(f) is not None for f in figures)
 
 
 def test_measured_mr_damper_small_window(tmp_path):
     """A Bingham fit on 6 s of ensaio1.1, validated on the same window of ensaio2.1."""
-    data = needs_shared(MR / "ensaio1.1.csv")
+    config = needs_shared_data_of(ROOT / "configs" / "dampers" / "mr_bingham.yaml")
+    data, held_out = needs_shared(MR / "ensaio1.1.csv"), needs_shared(MR / "ensaio2.1.csv")
     out = tmp_path / "mr.h5"
     sets = [
-        "data.window=[0, 6]", f"data.validate=[{MR / 'ensaio2.1.csv'}]", "identify.budget=400",
+        "data.window=[0, 6]", f"data.validate=[{held_out}]", "identify.budget=400",
         "identify.unknowns=[k1, x0, c0, fc]",
     ]  # fmt: skip
     args = [a for s in sets for a in ("--set", s)]
-    res = vehid("identify", ROOT / "configs" / "dampers" / "mr_bingham.yaml", "-o", out, *args)
+    res = vehid("identify", config, "-o", out, *args)
     assert res.returncode == 0, res.stderr
     raw = np.genfromtxt(data, delimiter=",", names=True)
     with h5py.File(out) as h5:
@@ -212,10 +208,7 @@ def test_step_by_step_from_the_cli(tmp_path):
     import json
 
     out = tmp_path / "fm.h5"
-    res = subprocess.run(
-        [sys.executable, "-m", "vehid_cli", "identify", str(STAGED), "--set", "identify.runs=1", "-o", str(out),
-         "--json", str(tmp_path / "fm.json")], capture_output=True, text=True, cwd=ROOT,
-    )  # fmt: skip
+    res = vehid("identify", STAGED, "--set", "identify.runs=1", "-o", out, "--json", tmp_path / "fm.json")
     assert res.returncode == 0, res.stderr
     doc = json.loads((tmp_path / "fm.json").read_text())
     for name in ("k1", "F_1_1", "F_5_2"):
@@ -224,10 +217,9 @@ def test_step_by_step_from_the_cli(tmp_path):
 
 def test_bench_csv_holds_the_shortest_exact_repr(tmp_path):
     """Was %.10g: lossy for the force and x, and a grid time like 0.006 only by luck of rounding."""
-    from vehid_cli.systems.damper import write_bench_csv
-
     from vehid_cli.bench import BenchHistory
     from vehid_cli.data import read_table
+    from vehid_cli.systems.damper import write_bench_csv
 
     rng = np.random.default_rng(3)
     t = np.arange(50) * 0.002

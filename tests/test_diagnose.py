@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from tests.conftest import VEHICLE_DATA, needs_shared
 from vehid_cli.cli import app
 from vehid_cli.config import load_config
 from vehid_cli.diagnose import diagnose
@@ -17,10 +18,7 @@ from vehid_cli.identification import build_task
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"
-DATA = ROOT.parent / "shared" / "data" / "vehicle"
 OVERRIDES = ["identify.objective=wls", "noise.level=0", "identify.truth=config", "identify.algorithm.name=hybrid"]
-
-needs_data = pytest.mark.skipif(not (DATA / "bump_run_A.csv").exists(), reason="shared vehicle data not present")
 
 
 # ------------------------------------------------------------------------------------ residual statistics
@@ -82,23 +80,22 @@ def test_task_with_effect_unknowns_simulates_the_effect():
 # ------------------------------------------------------------------------------------ the loop
 
 
-@needs_data
 def test_linear_run_selects_nothing():
     cfg = load_config(BASE, OVERRIDES)
-    d = diagnose(cfg, DATA / "bump_run_linear.csv", analyse_residuals=False)
+    d = diagnose(cfg, needs_shared(VEHICLE_DATA / "bump_run_linear.csv"), analyse_residuals=False)
     assert d.selected == ()
     assert d.before.chi2_per_sample < 1.05
     assert all(not r.accepted for r in d.rounds[0])
 
 
-@needs_data
 def test_bump_run_A_acceptance(tmp_path):
     """Issue 6, acceptance 1 (vehicle part)."""
+    run_a, run_b = needs_shared(VEHICLE_DATA / "bump_run_A.csv"), needs_shared(VEHICLE_DATA / "bump_run_B.csv")
     out = tmp_path / "diag.json"
     result = CliRunner().invoke(
         app,
         [
-            "diagnose", str(BASE), "--data", str(DATA / "bump_run_A.csv"), "--validate", str(DATA / "bump_run_B.csv"),
+            "diagnose", str(BASE), "--data", str(run_a), "--validate", str(run_b),
             "--json", str(out), *[a for o in OVERRIDES for a in ("--set", o)],
         ],
     )  # fmt: skip

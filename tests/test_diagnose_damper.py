@@ -12,6 +12,7 @@ import yaml
 from scipy import signal
 from typer.testing import CliRunner
 
+from tests.conftest import needs_shared_data_of, read_png
 from vehid_cli.bench import sine
 from vehid_cli.cli import app
 from vehid_cli.config import load_config
@@ -21,7 +22,6 @@ from vehid_cli.models.damper import default_values
 
 ROOT = Path(__file__).resolve().parents[1]
 BRFD = ROOT / "configs" / "dampers" / "brfd_bingham.yaml"
-MEASURED = ROOT.parent / "shared" / "data" / "measured"
 
 BINGHAM = {"k1": 1000.0, "x0": -0.15, "c0": 2000.0, "fc": 100.0, "v_eps": 0.01}
 
@@ -142,9 +142,9 @@ def test_noisy_bench_data_claims_nothing(tmp_path):
     assert any("too noisy" in r for r in d.quality.reasons)
 
 
-@pytest.mark.skipif(not (MEASURED / "friction_damper_brfd").exists(), reason="shared measured data not present")
 def test_real_friction_damper_cli(tmp_path):
     """Issue 6, item 3 (friction damper): the CLI adds hysteresis, the held-out J falls, figures are written."""
+    needs_shared_data_of(BRFD)
     out = tmp_path / "brfd.json"
     result = CliRunner().invoke(app, ["diagnose", str(BRFD), "--json", str(out), "--plots", str(tmp_path / "fig")])
     assert result.exit_code == 0, result.output
@@ -158,7 +158,7 @@ def test_real_friction_damper_cli(tmp_path):
         "dataset-2_char_0.5Hz36lbtension0.5amplitude", "dataset-2_char_0.5Hz36lbtension1.5amplitude"
     }  # fmt: skip
     for kind in ("residual", "fingerprint", "spectrum"):
-        assert (tmp_path / "fig" / f"brfd_bingham-{kind}.png").stat().st_size > 1000
+        read_png(tmp_path / "fig" / f"brfd_bingham-{kind}.png")
 
 
 MR = ROOT / "configs" / "dampers" / "mr_bingham.yaml"
@@ -168,10 +168,7 @@ MR = ROOT / "configs" / "dampers" / "mr_bingham.yaml"
 def test_real_damper_claims_are_real(config):
     """Issue 11, acceptance 4: on the shared real dampers every claimed effect has a strength interval that
     excludes zero and lowers J on every held-out run; the verdict says whether the residual is at the noise."""
-    needs = MEASURED / ("friction_damper_brfd" if config == BRFD else "mr_damper_labcontrol")
-    if not needs.exists():
-        pytest.skip("shared measured data not present")
-    d = diagnose_damper(load_config(config))
+    d = diagnose_damper(load_config(needs_shared_data_of(config)))
     assert d.selected, d.notes
     before = d.before.validation_per_file
     assert before and len(before) >= 2

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.conftest import BASE_CONFIG, PAPER_CAR, ROOT
+from tests.conftest import BASE_CONFIG, PAPER_CAR, ROOT, vehid
 from tests.reference import rel_rms
-from tests.test_cli import vehid
 from tests.test_kernel import knotted_road, orders
 from vehid_cli.config import load_config
 from vehid_cli.data import read_measurement, time_grid

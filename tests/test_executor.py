@@ -8,12 +8,9 @@ import subprocess
 import sys
 
 import pytest
-from typer.testing import CliRunner
 
-from tests.conftest import BASE_CONFIG, ROOT
-from tests.test_campaign import SMALL, assert_same_content, small_config
+from tests.conftest import BASE_CONFIG, ROOT, SMALL, assert_same_content, invoke, sets, small_config, vehid
 from vehid_cli.campaign import run_campaign
-from vehid_cli.cli import app
 from vehid_cli.errors import InputError
 from vehid_cli.executor import DaskExecutor, LocalExecutor, identity_mismatch, make_executor
 from vehid_cli.results import write_campaign_h5
@@ -59,11 +56,9 @@ def test_identify_cli_on_dask_resumes_a_local_checkpoint(cluster, tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         run_campaign(cfg, jobs=1, checkpoint_dir=tmp_path / "c.h5.partial", on_run=stop_after_two)
-    sets = [x for s in SMALL for x in ("--set", s)]
-    res = subprocess.run(
-        [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), *sets, "-o", str(tmp_path / "c.h5"),
-         "--executor", "dask", "--scheduler", cluster.scheduler_address],
-        capture_output=True, text=True, cwd=ROOT,
+    res = vehid(
+        "identify", BASE_CONFIG, *sets(SMALL), "-o", tmp_path / "c.h5", "--executor", "dask",
+        "--scheduler", cluster.scheduler_address,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     assert "Traceback" not in res.stderr
@@ -82,10 +77,9 @@ def test_a_worker_with_other_code_is_refused(cluster):
 
 def test_unreachable_scheduler_exits_2_quickly(tmp_path):
     env = dict(os.environ, VEHID_DASK_TIMEOUT="1")
-    res = subprocess.run(
-        [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), "--runs", "1", "-o", str(tmp_path / "c.h5"),
-         "--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"],
-        capture_output=True, text=True, cwd=ROOT, env=env, timeout=60,
+    res = vehid(
+        "identify", BASE_CONFIG, "--runs", 1, "-o", tmp_path / "c.h5", "--executor", "dask",
+        "--scheduler", "tcp://127.0.0.1:9", env=env, timeout=60,
     )  # fmt: skip
     assert res.returncode == 2, res.stderr
     assert "cannot reach a Dask scheduler" in res.stderr and "tcp://127.0.0.1:9" in res.stderr
@@ -106,11 +100,9 @@ def test_unreachable_scheduler_exits_2_quickly(tmp_path):
 @pytest.mark.parametrize("command", ["identify", "sweep"])
 def test_executor_options_bad_input_exit_2(tmp_path, command, args, fragment):
     extra = ["--vary", "noise.level=0.1,0.2"] if command == "sweep" else []
-    result = CliRunner().invoke(
-        app, [command, str(BASE_CONFIG), *extra, "--runs", "1", "-o", str(tmp_path / "out.h5"), *args]
-    )
-    assert result.exit_code == 2, result.output
-    assert fragment in result.output and "Traceback" not in result.output
+    code, out, err = invoke(command, BASE_CONFIG, *extra, "--runs", 1, "-o", tmp_path / "out.h5", *args)
+    assert code == 2, out + err
+    assert fragment in err and "Traceback" not in out + err
     assert not (tmp_path / "out.h5").exists()
 
 

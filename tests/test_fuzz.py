@@ -1,4 +1,5 @@
-"""Bad input, exhaustively (issue 7): random and mutated configs and road files thrown at the commands.
+"""Bad input, exhaustively (issues 7, 12): random and mutated configs, road and bench files and sweep
+--vary/--shard options thrown at the commands.
 
 Whatever the input, a command exits 0 or 2 (never 1, never a traceback), and when it fails it leaves no
 output file, finished or half-written, behind.
@@ -12,12 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-from typer.testing import CliRunner
 
-from tests.conftest import BASE_CONFIG
-from vehid_cli.cli import app
+from tests.conftest import BASE_CONFIG, invoke
 
 BASE = yaml.safe_load(BASE_CONFIG.read_text())
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -69,9 +68,9 @@ def quick(raw):
 
 
 def run(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    text = (result.stdout or "") + (result.stderr or "")
-    return result.exit_code, text
+    """`vehid ARGS` in this process: exit code and all its text."""
+    code, out, err = invoke(*args)
+    return code, out + err
 
 
 def assert_clean_failure(code, text, out_dir: Path, produced: list[Path]):
@@ -232,3 +231,128 @@ def test_mutated_bench_files_exit_0_or_2(tmp_path_factory, header, n, dt, jitter
     out, js = d / "fit.h5", d / "fit.json"
     code, text = run("identify", cfg, "--data", bench, "-o", out, "--json", js)
     assert_clean_failure(code, text, d, [out, js])
+
+
+# ------------------------------------------------------------------------------------------ sweeps
+
+SWEEP_KEYS = {  # valid keys: (valid values, each cheap to run; invalid values)
+    "noise.level": (["0", "0.05", "0.2"], ["-1", "nan", "1e999", "abc", "[1, 2]", "{a: 1}", "null"]),
+    "identify.algorithm.name": (["de", "lsq", "cpso"], ["pso", "DE", "null"]),
+    "identify.objective": (["f1", "f2", "wls"], ["f3", "1"]),
+    "identify.seed": (["1", "2", "2015"], ["-1", "1.5", "x", "1e30"]),
+    "sensors": (["acc", "disp", "both"], ["all", "[acc]"]),
+    "identify.algorithm.population": (["4", "5"], ["0", "-2", "x"]),
+}
+ODD_KEYS = ["nosuch.key", "noise", "identify", "noise..level", " noise.level ", "vehicle.mass", "identify.runs.x"]
+SWEEP_SMALL = [
+    "simulation.duration=0.5", "identify.runs=1", "identify.algorithm.iterations=1",
+    "identify.algorithm.population=4", "identify.algorithm.name=de",
+]  # fmt: skip
+
+
+@st.composite
+def vary_items(draw, max_values=3):
+    """One --vary string: mostly KEY=V1,V2 of valid values, else odd keys, separators, values or arbitrary text."""
+    kind = draw(st.integers(0, 9))
+    if kind == 0:
+        return draw(st.text(max_size=30))
+    if kind == 1:
+        key, pool = draw(st.sampled_from(ODD_KEYS)), ["1", "a"]
+    else:
+        key = draw(st.sampled_from(list(SWEEP_KEYS)))
+        valid, invalid = SWEEP_KEYS[key]
+        pool = valid if kind >= 5 else valid + invalid + ["", " ", "[1,", "'q'"]
+    values = draw(st.lists(st.sampled_from(pool), min_size=1, max_size=max_values, unique=kind >= 5))
+    sep = "=" if kind >= 4 else draw(st.sampled_from(["", "==", ":", "="]))
+    return f"{key}{sep}" + draw(st.sampled_from([",", ", "])).join(values)
+
+
+SHARDS = st.one_of(
+    st.none(),
+    st.sampled_from(["1/1", "1/2", "2/2", "2/3", " 1 / 2 "]),
+    st.sampled_from(["3/2", "0/1", "1/0", "a/b", "1-2", "", "-1/2", "２/２", "1/2/3"]),
+    st.builds(lambda k, n: f"{k}/{n}", st.integers(-2, 5), st.integers(-2, 5)),
+    st.text(max_size=8),
+)
+
+
+def tiny_sweep_config(d: Path) -> Path:
+    raw = yaml.safe_load(yaml.safe_dump(BASE))
+    raw["simulation"].update(duration=0.5)
+    raw["identify"].update(runs=1, algorithm={"name": "de", "population": 4, "iterations": 1})
+    path = d / "base.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(items=st.lists(vary_items(), max_size=3), shard=SHARDS)
+def test_sweep_planning_accepts_or_names_the_problem(tmp_path_factory, items, shard):
+    """parse_vary, parse_shard and plan_sweep on random --vary/--shard input: an InputError naming the option, or a
+    plan of exactly the Cartesian product, one distinct file in the output directory each; nothing is written."""
+    from vehid_cli.errors import InputError
+    from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep
+
+    d = tmp_path_factory.mktemp("plan")
+    config = tiny_sweep_config(d)
+    out = d / "out"
+    try:
+        k, n = parse_shard(shard)
+    except InputError as exc:
+        assert "--shard" in str(exc)
+    else:
+        assert 1 <= k <= n
+    try:
+        variations = parse_vary(items)
+    except InputError as exc:
+        assert "--vary" in str(exc) or "at least one" in str(exc)
+        return
+    assert variations and len({v.key for v in variations}) == len(variations)
+    assert all(v.key and v.values and all(v.values) for v in variations)
+    try:
+        planned = plan_sweep(config, [], variations, out)
+    except InputError as exc:
+        assert str(exc)
+    else:
+        assert len(planned) == math.prod(len(v.values) for v in variations)
+        assert [p.index for p in planned] == list(range(len(planned)))
+        assert len({p.path for p in planned}) == len(planned)
+        assert all(p.path.parent == out and p.path.suffix == ".h5" for p in planned)
+    assert sorted(p.name for p in d.iterdir()) == ["base.yaml"]  # planning writes nothing
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    items=st.lists(vary_items(max_values=2), min_size=1, max_size=2),
+    shard=SHARDS,
+    out_is_a_file=st.sampled_from([False, False, False, True]),
+)
+def test_sweep_cli_exits_0_or_2_and_leaves_nothing_on_failure(tmp_path_factory, items, shard, out_is_a_file):
+    """`vehid sweep` with random --vary/--shard (a tiny campaign each): exit 0 with index.csv listing the whole
+    product and one campaign file per campaign of this shard, or exit 2 with no campaign file and no index."""
+    d = tmp_path_factory.mktemp("sweep")
+    out = d / "out"
+    if out_is_a_file:
+        out.write_text("not a directory")
+    args = ["sweep", BASE_CONFIG, *[a for item in items for a in ("--vary", item)], "-o", out, "--jobs", 1]
+    args += [a for s in SWEEP_SMALL for a in ("--set", s)] + (["--shard", shard] if shard is not None else [])
+    code, text = run(*args)
+    event(f"exit {code}")
+    assert code in (0, 2), (code, text)
+    assert "Traceback" not in text and "internal error" not in text, text
+    if out_is_a_file:
+        assert code == 2 and out.read_text() == "not a directory", text
+        return
+    if code == 2:
+        assert not out.exists() or list(out.iterdir()) == [], (text, list(out.iterdir()))
+        return
+    from vehid_cli.sweep import parse_shard, parse_vary
+
+    total = math.prod(len(v.values) for v in parse_vary(items))
+    k, n = parse_shard(shard)
+    index = (out / "index.csv").read_text().splitlines()
+    assert len(index) == 1 + total, index
+    mine = len(range(k - 1, total, n))
+    assert len(list(out.glob("*.h5"))) == mine
+    assert f"{mine} campaign(s) run" in text
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".") or p.name.endswith(".partial")]

@@ -17,13 +17,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from tests.conftest import BASE_CONFIG, ROOT
-from tests.test_campaign import SMALL, assert_same_content, small_config
+from tests.conftest import BASE_CONFIG, ROOT, SMALL, assert_same_content, children, running, sets, small_config, vehid
+from tests.conftest import invoke as invoke_cli
 from vehid_cli import data as data_module
 from vehid_cli.campaign import run_campaign, run_campaign_to_file
-from vehid_cli.cli import app
 from vehid_cli.errors import InputError
 from vehid_cli.locking import Busy, exclusive, lock_path
 from vehid_cli.results import check_integrity, read_campaign_h5, write_campaign_h5
@@ -31,35 +29,10 @@ from vehid_cli.results import check_integrity, read_campaign_h5, write_campaign_
 LONG = SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"]
 
 
-def vehid(*args, **kwargs):
-    return subprocess.run(
-        [sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT, **kwargs
-    )
-
-
-def sets(items):
-    return [x for s in items for x in ("--set", s)]
-
-
 def invoke(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    return result.exit_code, (result.stdout or "") + (result.stderr or "")
-
-
-def children(pid: int) -> list[int]:
-    out = []
-    for task in os.listdir(f"/proc/{pid}/task"):
-        with open(f"/proc/{pid}/task/{task}/children") as fh:
-            out += [int(c) for c in fh.read().split()]
-    return out
-
-
-def running(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
+    """`vehid ARGS` in this process: exit code and all its text (stdout then stderr)."""
+    code, out, err = invoke_cli(*args)
+    return code, out + err
 
 
 @pytest.fixture(scope="module")

@@ -5,14 +5,12 @@ from __future__ import annotations
 import csv
 import io
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import yaml
 
-from tests.conftest import BASE_CONFIG, ROOT, cli
+from tests.conftest import BASE_CONFIG, ROOT, cli, read_png, vehid
 from vehid_cli.campaign import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.report import load_published, render
@@ -73,23 +71,20 @@ def test_latex_and_json(campaign_dir):
 
 
 def test_report_cli_tables_and_plots(campaign_dir, tmp_path):
-    res = subprocess.run(
-        [sys.executable, "-m", "vehid_cli", "report", str(campaign_dir), "--plots", str(tmp_path / "fig")],
-        capture_output=True, text=True, cwd=ROOT,
-    )  # fmt: skip
+    res = vehid("report", campaign_dir, "--plots", tmp_path / "fig")
     assert res.returncode == 0, res.stderr
     assert "NRE of mean" in res.stdout
     pngs = sorted(p.name for p in (tmp_path / "fig").glob("*.png"))
     assert "convergence_f1_both_np0.1.png" in pngs and "re_boxes_f1_both_np0.1.png" in pngs
     assert sum(name.startswith("true_vs_estimated") for name in pngs) == 2
+    for name in pngs:
+        read_png(tmp_path / "fig" / name)
 
 
 def test_report_rejects_a_file_that_is_not_a_campaign(tmp_path):
     bad = tmp_path / "bad.h5"
     bad.write_text("not hdf5")
-    res = subprocess.run(
-        [sys.executable, "-m", "vehid_cli", "report", str(bad)], capture_output=True, text=True, cwd=ROOT
-    )
+    res = vehid("report", bad)
     assert res.returncode == 2 and "bad.h5" in res.stderr and "Traceback" not in res.stderr
 
 
@@ -112,14 +107,10 @@ def test_published_tables_are_consistent():
 
 def test_table_format_writes_to_a_file_and_directories_skip_other_h5(campaign_dir, tmp_path):
     sim = campaign_dir / "zz_simulation.h5"
-    subprocess.run(
-        [sys.executable, "-m", "vehid_cli", "simulate", str(BASE_CONFIG), "-o", str(sim)], cwd=ROOT, check=True
-    )
+    made = vehid("simulate", BASE_CONFIG, "-o", sim)
+    assert made.returncode == 0, made.stderr
     try:
-        res = subprocess.run(
-            [sys.executable, "-m", "vehid_cli", "report", str(campaign_dir), "-o", str(tmp_path / "t.txt")],
-            capture_output=True, text=True, cwd=ROOT,
-        )  # fmt: skip
+        res = vehid("report", campaign_dir, "-o", tmp_path / "t.txt")
         assert res.returncode == 0, res.stderr
         text = (tmp_path / "t.txt").read_text()
         assert text.count("NRE of mean") == 2  # the two campaigns; the simulation file is not one

@@ -6,25 +6,15 @@ from __future__ import annotations
 import csv
 import io
 import json
+from pathlib import Path
 
+import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from tests.conftest import BASE_CONFIG
-from tests.test_campaign import SMALL, small_config
+from tests.conftest import BASE_CONFIG, PAPER_CAR, SMALL, invoke, sets, small_config
 from vehid_cli.campaign import run_campaign
-from vehid_cli.cli import app
 from vehid_cli.report.compare import Provenance, differences
-from vehid_cli.results import write_campaign_h5
-
-
-def invoke(*args):
-    result = CliRunner().invoke(app, [str(a) for a in args])
-    return result.exit_code, result.stdout or "", result.stderr or ""
-
-
-def sets(items):
-    return [x for s in items for x in ("--set", s)]
+from vehid_cli.results import read_campaign_h5, write_campaign_h5
 
 
 def test_shards_into_one_directory_make_one_report(tmp_path):
@@ -60,9 +50,43 @@ def files(tmp_path_factory):
     return d
 
 
+def md_tables(md: str) -> dict[str, dict[str, list[str]]]:
+    """The markdown report's tables: {table title: {row label: cells}} (the header row under '')."""
+    tables, title = {}, None
+    for line in md.splitlines():
+        if line.startswith("**"):
+            title = line.strip("*")
+            tables[title] = {}
+        elif line.startswith("|") and not line.startswith("|---") and title is not None:
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            tables[title][cells[0]] = cells[1:]
+    return tables
+
+
 def test_method_keys_may_differ(files):
+    """DE (f2, both sensors, 10 %) and CPSO (acc only, 20 %) in one report: a table each, with the files' mean
+    estimates, the paper's truth, and RE and NRE recomputed here from the printed estimates."""
     code, out, err = invoke("report", files / "base.h5", files / "cpso.h5", "--format", "md")
     assert code == 0 and err == "", err
+    tables = md_tables(out)
+    assert sorted(tables) == ["objective f2, sensors acc, Np = 20 %", "objective f2, sensors both, Np = 10 %"]
+    for title, name in (
+        ("objective f2, sensors both, Np = 10 %", "base"),
+        ("objective f2, sensors acc, Np = 20 %", "cpso"),
+    ):
+        table = tables[title]
+        algorithm = "cpso" if name == "cpso" else "de"
+        assert table[""] == ["true", f"{algorithm} est", f"{algorithm} RE %"]
+        mean = read_campaign_h5(files / f"{name}.h5").summary.mean
+        res = []
+        for j, parameter in enumerate(("m", "Ix", "Iy", "a1", "b1")):
+            true, est, re = map(float, table[parameter])
+            assert true == PAPER_CAR[parameter]
+            assert est == pytest.approx(mean[j], rel=1e-5)
+            assert re == pytest.approx(100 * (est - true) / true, abs=2e-3)
+            res.append(re)
+        assert float(table["NRE of mean %"][-1]) == pytest.approx(np.linalg.norm(res), abs=5e-3)
+        assert table["runs"][-1] == "2" and table["evaluations / run"][-1] == "40"
 
 
 def test_another_car_is_refused_unless_allowed(files):
@@ -85,6 +109,20 @@ def test_keys_a_sweep_varied_may_differ(tmp_path):
     assert code == 0, err
     code, out, err = invoke("report", tmp_path, "--format", "csv")
     assert code == 0 and err == "", err
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert sorted({Path(r["file"]).name for r in rows}) == ["speed_kmh-20.h5", "speed_kmh-30.h5"] and len(rows) == 10
+    for name, speed in (("speed_kmh-20.h5", 20), ("speed_kmh-30.h5", 30)):
+        assert read_campaign_h5(tmp_path / name).config.road.speed_kmh == speed
+        mine = [r for r in rows if Path(r["file"]).name == name]
+        assert [r["parameter"] for r in mine] == ["m", "Ix", "Iy", "a1", "b1"]
+        re = []
+        for r in mine:
+            truth, mean = float(r["truth"]), float(r["mean"])
+            assert truth == PAPER_CAR[r["parameter"]] and r["runs"] == "1"
+            assert float(r["re_percent"]) == pytest.approx(100 * (mean - truth) / truth, rel=1e-9)
+            re.append(float(r["re_percent"]))
+        assert float(mine[0]["nre_percent"]) == pytest.approx(np.linalg.norm(re), rel=1e-9)
+    assert rows[0]["mean"] != rows[5]["mean"]  # another speed, another road: another estimate
 
 
 def test_another_numpy_is_refused(files, tmp_path, monkeypatch):

@@ -5,16 +5,15 @@ from __future__ import annotations
 import csv
 import io
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import BASE_CONFIG, ROOT
+from tests.conftest import BASE_CONFIG, ROOT, vehid
 from vehid_cli.errors import InputError
+from vehid_cli.results import read_campaign_h5
 from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep, split_top_level
 
 SMALL = [
@@ -55,12 +54,6 @@ def test_bad_shard(bad):
         parse_shard(bad)
 
 
-def vehid(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "vehid_cli", *map(str, args)], capture_output=True, text=True, cwd=ROOT
-    )
-
-
 def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
     sets = [x for s in SMALL for x in ("--set", s)]
     args = ["sweep", BASE_CONFIG, "--vary", "identify.algorithm.name=de,cpso", "--vary", "noise.level=0.1,0.2"]
@@ -70,8 +63,17 @@ def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
         assert res.returncode == 0, res.stderr
         assert "2 campaign(s) run" in res.stdout
     files = sorted(p.name for p in tmp_path.glob("*.h5"))
-    assert len(files) == 4
-    assert (tmp_path / "index.csv").read_text().count("\n") == 5
+    assert files == [f"name-{a}_level-{n}.h5" for a in ("cpso", "de") for n in ("0.1", "0.2")]
+    index = {r["file"]: r for r in csv.DictReader(io.StringIO((tmp_path / "index.csv").read_text()))}
+    assert sorted(index) == files
+    for name in files:  # each file holds the campaign its name and its index row say
+        algorithm, level = name.removesuffix(".h5").split("_")
+        config = read_campaign_h5(tmp_path / name).config
+        assert (config.identify.algorithm.name, config.noise.level) == (algorithm[5:], float(level[6:]))
+        assert (config.identify.runs, config.simulation.duration) == (2, 1.5)
+        row = index[name]
+        assert row["overrides"] == f"identify.algorithm.name={algorithm[5:]} noise.level={level[6:]}"
+        assert row["config_sha256"] == config.digest()
     again = vehid(*args)
     assert "0 campaign(s) run, 4 up to date" in again.stdout
     changed = vehid(*args, "--set", "identify.seed=9")  # files of another config: refused before any work
