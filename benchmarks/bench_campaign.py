@@ -2,7 +2,8 @@
 
 Targets (issue 4): the paper's campaign (30 runs x 1000 evaluations, linear car) <= 20 s on 2 cores;
 the Table 1 + 2 sweep (12 campaigns of the paper's algorithms, plus 4 of `hybrid`) <= 5 min; peak memory
-of a sweep < 1 GB. Each command runs as a user runs it, through the CLI, in a fresh output directory.
+of a sweep < 1 GB. Issue 12: `vehid --help` <= 0.3 s; the paper's 30-run `lsq` campaign end to end (process
+wall) <= 2.5 s on 2 cores. Each command runs as a user runs it, through the CLI, in a fresh output directory.
 Run: python benchmarks/bench_campaign.py [--repeats 3] [--sweep]
 """
 
@@ -70,15 +71,28 @@ def main() -> None:
     parser.add_argument("--sweep", action="store_true", help="also time the Table 1 + 2 sweep (minutes)")
     args = parser.parse_args()
     print(f"# {platform.node()} {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
+    helps = []
+    for _ in range(max(args.repeats, 5)):
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "vehid_cli", "--help"], cwd=ROOT, stdout=subprocess.DEVNULL, check=True)
+        helps.append(time.perf_counter() - start)
+    print(f"{'vehid --help':<40} median wall {statistics.median(helps):6.2f} s  (runs: "
+          f"{', '.join(f'{w:.2f}' for w in helps)})")  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         hybrid = ["identify.algorithm.name=hybrid", "identify.objective=wls", "sensors=acc"]
-        for name, extra in (
-            ("paper campaign: abc, f2, 30 x 1000", []),
-            ("hybrid + wls, acc, 30 runs", [x for s in hybrid for x in ("--set", s)]),
+        lsq = ["identify.algorithm.name=lsq", "identify.objective=wls"]
+        bingham = ROOT / "configs" / "dampers" / "synthetic_bingham.yaml"
+        for k, (name, config, extra) in enumerate(
+            (
+                ("lsq + wls, 30 runs", BASE, [x for s in lsq for x in ("--set", s)]),
+                ("paper campaign: abc, f2, 30 x 1000", BASE, []),
+                ("hybrid + wls, acc, 30 runs", BASE, [x for s in hybrid for x in ("--set", s)]),
+                ("damper: bingham, 30 runs x 300", bingham, ["--runs", "30"]),
+            )
         ):
             walls, peaks = [], []
             for i in range(args.repeats):
-                wall, peak = timed_run(["identify", str(BASE), "-o", f"{tmp}/c{i}.h5", *extra])
+                wall, peak = timed_run(["identify", str(config), "-o", f"{tmp}/c{k}-{i}.h5", *extra])
                 walls.append(wall)
                 peaks.append(peak)
             print(f"{name:<40} median wall {statistics.median(walls):6.1f} s  (runs: "

@@ -84,7 +84,7 @@ def test_simulate_identify_round_trip(tmp_path):
 
     # report: markdown and the figure of the run
     res = vehid("report", out, out2, "--format", "md")  # simulated vs measured data: not comparable
-    assert res.returncode == 2 and "not comparable" in res.stderr and "identify.truth" in res.stderr
+    assert res.returncode == 2 and "not comparable" in res.stderr and "data (simulated vs" in res.stderr
     res = vehid("report", out, out2, "--format", "md", "--plots", tmp_path / "figs", "--allow-mixed")
     assert res.returncode == 0, res.stderr
     assert "#### Cost J (Eq. 7)" in res.stdout and "Real-time check" in res.stdout
@@ -233,3 +233,32 @@ def test_bench_csv_holds_the_shortest_exact_repr(tmp_path):
     table = read_table(path)
     for name, values in (("t", t), ("x", x), ("v", v), ("force", force)):
         np.testing.assert_array_equal(table.column(name), values)
+
+
+SHIPPED = sorted((ROOT / "configs" / "dampers").glob("*.yaml"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_every_shipped_damper_config_goes_through_the_one_pipeline(tmp_path, config):
+    """identify (2 workers), a rerun that resumes nothing and refuses nothing, and report: every shipped damper
+    config, with a small budget, writes the car's campaign layout with system = damper."""
+    needs_shared_data_of(config)
+    out = tmp_path / f"{config.stem}.h5"
+    args = ["identify", config, "-o", out, "--jobs", "2", "--set", "identify.budget=40", "--runs", "2"]
+    res = vehid(*args)
+    assert res.returncode == 0, res.stderr
+    with h5py.File(out) as h5:
+        assert h5.attrs["system"] == "damper" and h5.attrs["objective"] == "J"
+        measured = bool(h5.attrs["data_file"])
+        assert h5.attrs["runs"] == (1 if measured else 2)  # measured data: one fit
+        cost, evals = h5["runs/cost"][()], h5["runs/evaluations"][()]
+        stages = len(yaml.safe_load(config.read_text())["identify"].get("stages", [])) or 1
+        assert np.all(evals <= 40 * stages) and np.all(np.isfinite(cost))
+        traces = [h5[f"damper/traces/{k}"] for k in sorted(h5["damper/traces"])]
+        first = traces[0]
+        assert J(first["measured"][()], first["model"][()]) == pytest.approx(float(first.attrs["J"]), rel=1e-9)
+    report = vehid("report", out, "--format", "json")
+    assert report.returncode == 0, report.stderr
+    doc = json.loads(report.stdout)[0]
+    assert doc["system"] == "damper" and doc["J"] == pytest.approx(list(cost), rel=1e-12)

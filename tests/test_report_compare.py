@@ -145,3 +145,23 @@ def test_data_files_must_match():
     assert "simulated" in differences(prov(), prov("run.csv", "aa"))[0]
     assert differences(prov(git_commit="abc"), prov(git_commit="unknown")) == []
     assert differences(prov(vehid_version="0.1.0"), prov(vehid_version="0.2.0")) == ["vehid_version (0.1.0 vs 0.2.0)"]
+
+
+def test_damper_models_on_one_bench_test_are_comparable_other_benches_are_not():
+    """A damper campaign's model and identify keys are its method (models side by side on one test); its bench,
+    data and noise are the experiment."""
+
+    def prov(model, unknowns, amplitude=0.025, level=0.02, system="damper"):
+        cfg = {
+            "system": system, "damper": {"model": model, "parameters": {"c0": 1500.0}},
+            "bench": {"excitation": "sine", "amplitude": amplitude}, "noise": {"level": level},
+            "identify": {"unknowns": unknowns, "budget": 300},
+        }  # fmt: skip
+        return Provenance("f.h5", cfg, "x", "run.csv", "abc", {}, frozenset())
+
+    assert differences(prov("bingham", ["c0", "fc"]), prov("bouc_wen", ["c0", "alpha"])) == []
+    assert differences(prov("bingham", ["c0"]), prov("bingham", ["c0"], amplitude=0.05)) == [
+        "bench.amplitude (0.025 vs 0.05)"
+    ]
+    car = differences(prov("bingham", ["c0"], system="vehicle"), prov("bouc_wen", ["c0"], system="vehicle"))
+    assert car == ['damper.model ("bingham" vs "bouc_wen")']  # only dampers widen the method keys

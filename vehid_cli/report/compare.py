@@ -6,7 +6,8 @@ Two campaigns are comparable when they identified the same experiment with the s
   `identify.objective`, `identify.runs`, `identify.seed`, `identify.budget`, `identify.start`, `sensors`,
   `noise.level`: what the tables put side by side) or in keys a sweep varied (each campaign file of a sweep
   records its `--vary` keys). A different car, road, time grid, unknown set, search box or truth is not
-  comparable unless a sweep varied it.
+  comparable unless a sweep varied it. For dampers the model and everything under `identify` are method keys
+  too (models side by side on one bench test); the bench, the data and the noise are the experiment.
 - **data**: both simulated, or both identified from the same data file (same name and same SHA-256 of its
   bytes).
 - **code**: the same vehid version and git commit (when both are known), and the same NumPy, SciPy and numba
@@ -34,6 +35,9 @@ METHOD_KEYS = (
     "identify.algorithm", "identify.objective", "identify.runs", "identify.seed", "identify.budget",
     "identify.start", "sensors", "noise.level",
 )  # fmt: skip
+# A damper bench test is the same experiment for every model fitted to it: the model, its configured values and
+# what is identified are the method (`damper.*`, `identify.*`); the bench, the data and the noise are not.
+DAMPER_METHOD_KEYS = ("damper", "identify")
 CODE_KEYS = ("vehid_version", "git_commit", "numpy_version", "scipy_version", "numba_version")
 _MISSING = object()
 
@@ -85,6 +89,8 @@ def differences(a: Provenance, b: Provenance) -> list[str]:
     out = []
     fa, fb = flatten(a.config), flatten(b.config)
     allowed = set(METHOD_KEYS) | a.varied | b.varied
+    if a.config.get("system") == "damper" and b.config.get("system") == "damper":
+        allowed |= set(DAMPER_METHOD_KEYS)
     for key in sorted(set(fa) | set(fb)):
         va, vb = fa.get(key, _MISSING), fb.get(key, _MISSING)
         if va != vb and not _covered(key, allowed):
