@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vehid_cli.optimizers import REGISTRY, Problem, get_optimizer
+from vehid_cli.optimizers import ALGORITHMS, REGISTRY, Problem, get_optimizer, load_all
 from vehid_cli.optimizers.abc import abc_fitness
 from vehid_cli.optimizers.cpso import constriction_factor
 from vehid_cli.optimizers.ga import rank_scaling, stochastic_uniform
@@ -193,8 +193,9 @@ def test_nelder_mead_coefficients():
 
 
 def test_all_algorithms_are_registered():
-    get_optimizer("de")  # loads every module
-    assert set(ALL_METHODS) <= set(REGISTRY)
+    load_all()  # imports every module: each registers its class under the SPEC name the table gives
+    assert set(ALL_METHODS) <= set(REGISTRY) == set(ALGORITHMS)
+    assert all(REGISTRY[name].name == name for name in ALGORITHMS)
 
 
 @pytest.mark.parametrize("name", ALL_METHODS)

@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
-from ..optimizers import REGISTRY, load_all
+from ..optimizers import ALGORITHMS, algorithm_class
 
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -69,13 +69,12 @@ Start = Annotated[Literal["auto", "random", "config"], BeforeValidator(_start_al
 
 
 def _check_algorithm(algorithm: Algorithm) -> None:
-    """The algorithm exists (the optimizer registry is the one list of names) and its population suffices."""
-    load_all()
-    cls = REGISTRY.get(algorithm.name)
-    if cls is None:
-        hint = _did_you_mean(algorithm.name, REGISTRY)
-        known = "" if hint else f" (known: {', '.join(sorted(REGISTRY))})"
+    """The algorithm exists (the optimizers' table of SPEC names is the one list) and its population suffices."""
+    if algorithm.name not in ALGORITHMS:
+        hint = _did_you_mean(algorithm.name, ALGORITHMS)
+        known = "" if hint else f" (known: {', '.join(sorted(ALGORITHMS))})"
         raise _KeyedError("identify.algorithm.name", f"unknown algorithm '{algorithm.name}'{hint}{known}")
+    cls = algorithm_class(algorithm.name)
     if algorithm.population < cls.min_population:
         raise _KeyedError(
             "identify.algorithm.population",

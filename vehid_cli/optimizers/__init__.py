@@ -7,24 +7,33 @@ from typing import Any
 
 from .base import REGISTRY, Optimizer, OptimizeResult, Problem
 
-ALGORITHM_MODULES = ("ga", "cpso", "abc", "de", "nelder_mead", "lsq", "hybrid")
+# SPEC name -> module: an algorithm's module is imported when it is asked for (lsq pulls in scipy.optimize, which
+# a GA campaign need not load).
+ALGORITHMS = {
+    "ga": "ga", "cpso": "cpso", "abc": "abc", "de": "de", "nelder-mead": "nelder_mead", "lsq": "lsq",
+    "hybrid": "hybrid",
+}  # fmt: skip
+ALGORITHM_MODULES = tuple(ALGORITHMS.values())
 
-__all__ = ["REGISTRY", "OptimizeResult", "Optimizer", "Problem", "get_optimizer", "load_all"]
+__all__ = [
+    "ALGORITHMS", "REGISTRY", "OptimizeResult", "Optimizer", "Problem", "algorithm_class", "get_optimizer", "load_all",
+]  # fmt: skip
 
 
 def load_all() -> None:
-    """Import every algorithm module present, so each registers itself."""
+    """Import every algorithm module, so each registers itself."""
     for module in ALGORITHM_MODULES:
-        try:
-            importlib.import_module(f"{__name__}.{module}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"{__name__}.{module}":
-                raise
+        importlib.import_module(f"{__name__}.{module}")
+
+
+def algorithm_class(name: str) -> type[Optimizer]:
+    """The optimizer class of a SPEC name, importing only its module (KeyError for an unknown name)."""
+    if name not in ALGORITHMS:
+        raise KeyError(f"unknown algorithm {name!r}; known: {', '.join(sorted(ALGORITHMS))}")
+    importlib.import_module(f"{__name__}.{ALGORITHMS[name]}")
+    return REGISTRY[name]
 
 
 def get_optimizer(name: str, population: int = 20, iterations: int = 50, **options: Any) -> Optimizer:
     """An optimizer by its SPEC name (`ga`, `cpso`, `abc`, `de`, `nelder-mead`, `lsq`, `hybrid`)."""
-    load_all()
-    if name not in REGISTRY:
-        raise KeyError(f"unknown algorithm {name!r}; known: {', '.join(sorted(REGISTRY))}")
-    return REGISTRY[name](population=population, iterations=iterations, **options)
+    return algorithm_class(name)(population=population, iterations=iterations, **options)
