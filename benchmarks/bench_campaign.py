@@ -46,7 +46,8 @@ def timed_run(args: list[str]) -> tuple[float, int]:
     """Wall time [s] and peak tree RSS [bytes] of `vehid ARGS`."""
     peak = 0
     start = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "vehid_cli", *args], cwd=ROOT, stdout=subprocess.DEVNULL)
+    cmd = [sys.executable, "-m", "vehid_cli", *args]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     done = threading.Event()
 
     def sample() -> None:
