@@ -11,6 +11,7 @@ import pytest
 
 from tests.conftest import BASE_CONFIG, ROOT, SMALL, assert_same_content, invoke, sets, small_config, vehid
 from vehid_cli.campaign import run_campaign
+from vehid_cli.config import load_config
 from vehid_cli.errors import InputError
 from vehid_cli.executor import DaskExecutor, LocalExecutor, identity_mismatch, make_executor
 from vehid_cli.results import write_campaign_h5
@@ -35,8 +36,14 @@ def test_local_executor_yields_every_result_in_process_and_in_a_pool():
 
 
 def test_dask_campaigns_are_bit_identical_to_local_ones(cluster, tmp_path):
-    """Two campaigns on one cluster (its workers compile once, then serve both) against local execution."""
-    configs = {"de": small_config(), "abc": small_config("identify.algorithm.name=abc", "identify.runs=5")}
+    """Three campaigns on one cluster (its workers compile once, then serve them all), two of the car and one of a
+    damper (the same runner ships either system), against local execution."""
+    damper = load_config(
+        ROOT / "configs" / "dampers" / "synthetic_bingham.yaml", ["identify.runs=3", "identify.budget=80"]
+    )
+    configs = {
+        "de": small_config(), "abc": small_config("identify.algorithm.name=abc", "identify.runs=5"), "damper": damper,
+    }  # fmt: skip
     with DaskExecutor(cluster.scheduler_address) as ex:
         for name, cfg in configs.items():
             write_campaign_h5(tmp_path / f"{name}-dask.h5", run_campaign(cfg, executor=ex))
