@@ -12,12 +12,10 @@ import contextlib
 import itertools
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+
+import h5py
 
 from .data import write_bytes
-
-if TYPE_CHECKING:
-    import h5py
 
 _names = itertools.count()
 
@@ -30,8 +28,6 @@ def h5_file(
 
     `userblock` reserves that many bytes at the start (HDF5 skips them); `head(body)` fills them from the bytes
     after them (e.g. a checksum), else they are zeros."""
-    import h5py
-
     # The name only tells HDF5's open files apart: no file of that name is read or written (backing_store=False).
     name = f"vehid-memory-{next(_names)}-{Path(path).name}"
     h5 = h5py.File(name, "w", driver="core", backing_store=False, userblock_size=userblock or None)

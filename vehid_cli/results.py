@@ -10,6 +10,7 @@ for every other tool.
 from __future__ import annotations
 
 import hashlib
+import json
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -199,7 +200,6 @@ def finite_or_none(value) -> float | None:
 
 def to_json(doc) -> str:
     """Strict JSON text: every non-finite number anywhere in `doc` becomes null."""
-    import json
 
     def clean(x):
         if isinstance(x, dict):

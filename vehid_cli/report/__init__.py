@@ -7,6 +7,8 @@ import io
 import os
 from pathlib import Path
 
+import h5py
+import yaml
 from rich.console import Console
 
 from ..errors import InputError
@@ -21,8 +23,6 @@ FORMATS = ("table", "md", "csv", "latex", "json")
 def is_campaign_file(path: Path) -> bool:
     """A vehid campaign file? False for other HDF5 files; InputError for a file HDF5 cannot open (truncated or
     damaged): a report never drops a campaign silently."""
-    import h5py
-
     try:
         check_integrity(path)
         with h5py.File(path, "r") as h5:
@@ -74,8 +74,6 @@ def sweep_notes(paths: list[Path]) -> list[str]:
 
 def load_published(path: Path) -> dict:
     """Published reference values (e.g. configs/gokdag2015/paper_tables.yaml) to set beside ours."""
-    import yaml
-
     try:
         doc = yaml.safe_load(Path(path).read_text())
     except (OSError, yaml.YAMLError) as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -62,8 +63,6 @@ def _save(fig, path: Path) -> None:
 
 def _best_cost_on_grid(record, grid):
     """Best cost so far at each evaluation count of `grid` (a step function of the run's history)."""
-    import numpy as np
-
     idx = np.searchsorted(record.history_evals, grid, side="right") - 1
     out = np.where(idx >= 0, record.history_cost[np.clip(idx, 0, None)], np.nan)
     return out
@@ -71,8 +70,6 @@ def _best_cost_on_grid(record, grid):
 
 def plot_convergence(group, path: str | Path) -> None:
     """Best cost against evaluations: median over runs and the 10-90 % band, one curve per algorithm."""
-    import numpy as np
-
     fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
     for i, c in enumerate(group):
         recorded = [r for r in c.records if r.history_evals.size]

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import ClassVar
 
+import h5py
 import numpy as np
 from numpy.typing import NDArray
 
@@ -240,8 +241,6 @@ class Findings:
 
     def write_h5(self, group) -> None:
         """Into the results file's /damper group (results.py)."""
-        import h5py
-
         strings = h5py.string_dtype()
         group.attrs["model"] = self.model
         group.create_dataset("model_names", data=np.array(self.names, dtype=strings))
