@@ -15,8 +15,9 @@ import os
 import re
 import stat
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -80,10 +81,24 @@ def _number(cell: str, decimal_comma: bool) -> float:
         raise
 
 
-def read_table(path: str | Path) -> Table:
+def _timestamp(cell: str, decimal_comma: bool) -> datetime | None:
+    """An ISO 8601 date-time ('2025-11-14 20:07:10.531160', 'T' or ' ' between, 'Z' or an offset allowed), or None."""
+    text = cell.strip()
+    text = text[:-1] + "+00:00" if text.endswith("Z") else text
+    for candidate in (text, text.replace(",", ".")) if decimal_comma else (text,):
+        try:
+            return datetime.fromisoformat(candidate)
+        except ValueError:
+            continue
+    return None
+
+
+def read_table(path: str | Path, *, timestamps: Collection[str] = ()) -> Table:
     """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column.
 
-    Columns are separated by ',', ';' or tabs (from the header line); with ';' or tabs, decimal commas read."""
+    Columns are separated by ',', ';' or tabs (from the header line); with ';' or tabs, decimal commas read.
+    A column named in `timestamps` may hold ISO 8601 date-times (logger exports): it reads as seconds after the
+    first row's."""
     source = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a byte-order mark (spreadsheet exports)
@@ -113,6 +128,7 @@ def read_table(path: str | Path) -> Table:
     if not rows:
         raise InputError("no data rows after the header", source=source)
     values = np.empty((len(rows), len(names)))
+    stamps: dict[int, list[datetime]] = {c: [] for c, n in enumerate(names) if n in set(timestamps)}
     for r, (no, line) in enumerate(rows):
         cells = line.split(sep)
         if len(cells) != len(names):
@@ -126,10 +142,29 @@ def read_table(path: str | Path) -> Table:
             try:
                 values[r, c] = _number(cell, decimal_comma)
             except ValueError:
+                when = _timestamp(cell, decimal_comma) if c in stamps and len(stamps[c]) == r else None
+                if when is not None:
+                    stamps[c].append(when)
+                    continue
                 hint = f"; {DECIMAL_COMMA_HINT}" if "," in cell or cell.count(".") > 1 else ""
                 raise InputError(
                     f"column '{names[c]}', line {no}: expected a number, got '{cell.strip()}'{hint}", source=source
                 ) from None
+    for c, when in stamps.items():
+        if not when:
+            continue
+        if len(when) != len(rows):  # a number after date-times (a date-time after a number failed above)
+            raise InputError(
+                f"column '{names[c]}', line {rows[len(when)][0]}: expected a date-time like the rows before it, "
+                f"got '{rows[len(when)][1].split(sep)[c].strip()}'",
+                source=source,
+            )
+        try:
+            values[:, c] = [(w - when[0]).total_seconds() for w in when]
+        except TypeError:
+            raise InputError(
+                f"column '{names[c]}' mixes date-times with and without a time zone", source=source
+            ) from None
     return Table(columns={n: values[:, i] for i, n in enumerate(names)}, source=source)
 
 

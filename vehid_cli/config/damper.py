@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
-from ..bench import UNITS
+from ..bench import BENCH_QUANTITIES, UNITS
 from ..models.damper import MODELS, default_values
 from ..models.effects import BENCH_EFFECTS, LIBRARY, bound_violation
 from .common import (
@@ -112,7 +112,8 @@ class DamperData(_Section):
 
     @model_validator(mode="after")
     def _window(self) -> DamperData:
-        for role, table in UNITS.items():
+        for role in BENCH_QUANTITIES:
+            table = UNITS[role]
             unit = getattr(self.units, role)
             if unit not in table:
                 column = getattr(self.columns, role)

@@ -1,0 +1,192 @@
+"""Logger files read back as the known run (tests/logger_files.py) in SI units on one grid; bad input is InputError
+naming the file and the channel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.io
+
+from tests.logger_files import CHANNELS, HF_AMPLITUDE, G, csv_times, offset_si, truth, write_csv, write_logger_run
+from vehid_cli.data import check_time
+from vehid_cli.errors import InputError
+from vehid_cli.logger import Record, read_record, remove_offset
+
+SUFFIX = {"mf4": "mf4", "mat": "mat", "mat73": "mat", "h5": "h5", "csv": "csv"}
+SLOW = ("acc_fl", "acc_rr", "disp_fl")  # no content near 150 Hz: comparable on every grid
+UNITS = {"acc_fl": "g", "acc_hf": "g", "acc_rr": "g", "disp_fl": "mm"}
+
+
+def amplitude(ours: str) -> float:
+    t = np.linspace(0, 1, 2001)
+    y = truth(ours, t, low_pass=True)
+    return float(np.ptp(y) / 2)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("logger")
+    return {fmt: write_logger_run(d / f"run_{fmt}.{SUFFIX[fmt]}", fmt) for fmt in SUFFIX}
+
+
+H5_PATHS = {ours: f"{theirs.split('_')[0].lower()}/{theirs}" for ours, theirs in CHANNELS.items()}  # acc/ACC_FL_Z
+
+
+def read(files, fmt, **kw) -> Record:
+    channels = kw.pop("channels", H5_PATHS if fmt == "h5" else CHANNELS)
+    units = kw.pop("units", None if fmt in ("mf4", "h5") else {k: UNITS[k] for k in channels})  # those declare units
+    return read_record(files[fmt], channels, units, **kw)
+
+
+@pytest.mark.parametrize("fmt", ["mf4", "mat", "mat73", "h5"])
+def test_each_format_gives_the_known_signals_in_si_on_one_1khz_grid(files, fmt):
+    rec = read(files, fmt)
+    # MDF4: the 200 Hz group ends at 3.995 s, the common span; the others hold 4000 samples at 1 kHz
+    n = 3996 if fmt == "mf4" else 4000
+    assert rec.t.size == n and rec.rate == pytest.approx(1000.0, rel=1e-12)
+    assert check_time(rec.t, "grid") == pytest.approx(1e-3, rel=1e-12) and rec.t[0] == 0.0
+    assert set(rec.channels) == set(CHANNELS)
+    first = rec.t < 1.0
+    for ours in SLOW:
+        err = np.max(np.abs(rec.channels[ours] - truth(ours, rec.t)))
+        # at 1 kHz in the file: exact; the 200 Hz MDF4 group through a cubic spline: < 1e-3 of the amplitude
+        tol = 1e-3 if fmt == "mf4" and ours in ("acc_rr", "disp_fl") else 1e-12
+        assert err <= tol * amplitude(ours), (ours, err)
+        # the offset as written, in SI: the mean over the first second (whole cycles of 3, 11 and 2 Hz)
+        assert np.mean(rec.channels[ours][first]) == pytest.approx(offset_si(ours), abs=tol * amplitude(ours))
+
+
+def test_a_200hz_channel_on_the_1khz_grid_is_the_sine_a_cubic_spline_gives_not_a_linear_one(files):
+    rec = read(files, "mf4", channels={"acc_rr": "ACC_RR_Z"} | {"acc_fl": "ACC_FL_Z"})
+    err = np.max(np.abs(rec.channels["acc_rr"] - truth("acc_rr", rec.t)))
+    t200 = np.arange(800) / 200
+    linear = np.max(np.abs(np.interp(rec.t, t200, truth("acc_rr", t200)) - truth("acc_rr", rec.t)))
+    assert err < 1e-3 * amplitude("acc_rr") < linear / 10  # 11 Hz at 200 Hz: linear interpolation errs 1.5 %
+
+
+def test_down_to_200hz_the_150hz_content_is_filtered_out_not_folded_to_50hz(files):
+    rec = read(files, "mf4", channels={"acc_hf": "ACC_HF_Z", "acc_fl": "ACC_FL_Z"}, rate=200.0)
+    assert rec.rate == pytest.approx(200.0) and rec.t.size == 800
+    inner = (rec.t > 0.2) & (rec.t < rec.t[-1] - 0.2)  # away from the filter's start-up at the record's ends
+    residual = rec.channels["acc_hf"] - truth("acc_hf", rec.t, low_pass=True)
+    assert np.max(np.abs(residual[inner])) < 0.01 * HF_AMPLITUDE * G  # attenuated to < 1 % (-40 dB)
+    # the 4 Hz part passes: its amplitude (least squares) within 0.5 % of the 0.1 g written
+    t = rec.t[inner]
+    basis = np.column_stack([np.sin(8 * np.pi * t), np.cos(8 * np.pi * t), np.ones_like(t)])
+    coef = np.linalg.lstsq(basis, rec.channels["acc_hf"][inner], rcond=None)[0]
+    assert np.hypot(*coef[:2]) == pytest.approx(0.1 * G, rel=5e-3)
+    # the test can fail: every 5th sample of the 1 kHz channel folds the 150 Hz sine onto 50 Hz at full amplitude
+    naive = truth("acc_hf", rec.t) - truth("acc_hf", rec.t, low_pass=True)
+    assert np.max(np.abs(naive)) > 0.9 * HF_AMPLITUDE * G
+    # slow channels are unaffected by the filter
+    assert np.max(np.abs(rec.channels["acc_fl"] - truth("acc_fl", rec.t))[inner]) < 1e-3 * amplitude("acc_fl")
+
+
+def test_csv_with_iso_stamps_at_a_jittered_300hz_is_resampled_at_the_median_rate(files):
+    rec = read(files, "csv", channels={k: CHANNELS[k] for k in SLOW})
+    stamps = csv_times()
+    assert np.ptp(np.diff(stamps)) > 0.02 / 300  # the file really jitters (by ±2 % of a step at each stamp)
+    assert rec.rate == pytest.approx(1 / np.median(np.diff(stamps)), rel=1e-8)
+    assert rec.rate == pytest.approx(300.0, rel=0.01)
+    assert rec.t.size == int(np.floor(stamps[-1] * rec.rate)) + 1
+    for ours in SLOW:
+        err = np.max(np.abs(rec.channels[ours] - truth(ours, rec.t)))
+        assert err < 1e-4 * amplitude(ours), (ours, err)  # spline of a 2..11 Hz sine at 300 Hz; stamps to 1 µs
+
+
+def test_the_window_keeps_start_to_stop_of_the_record_time(files):
+    rec = read(files, "h5", window=(1.0, 2.5))
+    assert rec.t[0] == pytest.approx(1.0) and rec.t[-1] < 2.5 and rec.t.size == 1500
+    assert np.max(np.abs(rec.channels["acc_fl"] - truth("acc_fl", rec.t))) < 1e-12
+
+
+def test_remove_offset_over_the_first_second_and_the_mean(files):
+    rec = read(files, "mat")
+    still = remove_offset(rec, ["acc_fl", "acc_rr"], mode="first_second")
+    for ours in ("acc_fl", "acc_rr"):
+        assert np.max(np.abs(still.channels[ours] - (truth(ours, rec.t) - offset_si(ours)))) < 1e-9
+    assert np.array_equal(still.channels["disp_fl"], rec.channels["disp_fl"])  # not named: untouched
+    mean = remove_offset(rec, ["disp_fl"])
+    assert np.mean(mean.channels["disp_fl"]) == pytest.approx(0.0, abs=1e-12)
+    assert np.mean(rec.channels["disp_fl"]) == pytest.approx(offset_si("disp_fl"), rel=1e-9)  # 8 whole cycles
+    with pytest.raises(InputError, match="acc_xx.*did you mean 'acc_rr'"):
+        remove_offset(rec, ["acc_xx"])
+
+
+def test_a_mat_struct_is_found_without_the_variable_and_by_name(files):
+    by_name = read(files, "mat", variable="run")
+    found = read(files, "mat")
+    assert np.array_equal(by_name.channels["acc_fl"], found.channels["acc_fl"])
+
+
+def test_mat73_is_read_as_hdf5_behind_the_matlab_header(files):
+    with pytest.raises(NotImplementedError):  # the file is what MATLAB's -v7.3 writes, as scipy sees it
+        scipy.io.loadmat(files["mat73"])
+    assert np.array_equal(read(files, "mat73").channels["acc_fl"], read(files, "mat").channels["acc_fl"])
+
+
+# ------------------------------------------------------------------------------------------ bad input
+
+
+def raises(files_or_path, *fragments, **kw) -> str:
+    with pytest.raises(InputError) as info:
+        if isinstance(files_or_path, tuple):
+            read(*files_or_path, **kw)
+        else:
+            read_record(files_or_path, **kw)
+    msg = str(info.value)
+    for fragment in fragments:
+        assert fragment in msg, (fragment, msg)
+    return msg
+
+
+@pytest.mark.parametrize("fmt", ["mf4", "mat", "mat73", "h5", "csv"])
+def test_a_channel_not_in_the_file_is_named_with_the_names_present(files, fmt):
+    prefix = "acc/" if fmt == "h5" else ""
+    raises(
+        (files, fmt),
+        str(files[fmt]),
+        f"'{prefix}ACC_FL'",
+        f"did you mean '{prefix}ACC_FL_Z'",
+        "ACC_RR_Z",
+        "'acc_fl'",
+        channels={"acc_fl": f"{prefix}ACC_FL"},
+    )
+
+
+def test_an_unknown_unit_names_file_channel_and_the_known_units(files):
+    raises((files, "mf4"), str(files["mf4"]), "acc_fl", "ACC_FL_Z", "'gee'", "m/s^2", "mm", units={"acc_fl": "gee"})
+
+
+def test_a_mat_without_the_variable_lists_the_variables(files):
+    raises((files, "mat"), str(files["mat"]), "'runs'", "did you mean 'run'", "operator", variable="runs")
+    raises((files, "mat73"), str(files["mat73"]), "'runs'", "did you mean 'run'", variable="runs")
+
+
+def test_non_finite_samples_name_file_and_channel(tmp_path):
+    path = tmp_path / "nan.csv"
+    path.write_text("t,ACC\n0,1\n0.01,nan\n0.02,1\n0.03,1\n")
+    raises(path, str(path), "acc", "'ACC'", "non-finite", "sample 2", channels={"acc": "ACC"})
+
+
+def test_a_time_that_goes_backwards_names_file_and_channel(tmp_path):
+    path = tmp_path / "back.csv"
+    t = csv_times()[:50]
+    write_csv(path, np.concatenate([t[:20], t[21:22], t[20:21], t[22:]]))
+    raises(path, str(path), "acc_fl", "backwards", "sample 22", channels={"acc_fl": "ACC_FL_Z"})
+
+
+def test_a_gap_in_time_is_not_jitter(tmp_path):
+    path = tmp_path / "gap.csv"
+    t = csv_times()[:50]
+    write_csv(path, np.concatenate([t[:20], t[22:]]))
+    raises(path, str(path), "acc_fl", "gap", channels={"acc_fl": "ACC_FL_Z"})
+
+
+def test_a_window_outside_the_record_names_the_window_and_the_span(files):
+    raises((files, "mf4"), str(files["mf4"]), "[10, 20)", "[0, 3.995]", window=(10.0, 20.0))
+
+
+def test_an_unknown_suffix_and_a_missing_file(tmp_path):
+    raises(tmp_path / "run.xlsx", "run.xlsx", ".mf4", channels={"a": "A"})
+    raises(tmp_path / "none.mf4", "none.mf4", "not found", channels={"a": "A"})

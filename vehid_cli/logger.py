@@ -1,0 +1,458 @@
+"""Logger files (issue 13): a recorded run as named channels on one uniform time grid, in SI units.
+
+Vehicle data loggers write ASAM MDF4 (`.mf4`/`.mdf`), test engineers pass on MATLAB files (`.mat`, v5 or the
+HDF5-based v7.3), HDF5 (`.h5`/`.hdf5`) and CSV exports (`.csv`/`.txt`, numeric or ISO 8601 time stamps).
+`read_record` reads the channels a caller names (our name -> the name in the file), converts them to SI
+(`bench.UNITS`: one unit table for the whole package) and puts them on one uniform grid:
+
+- the grid rate is `rate` when given, else the highest channel rate; the grid spans the time all channels cover;
+- a channel sampled faster than the grid (down-sampling) is first low-passed on its own grid with a zero-phase
+  Butterworth filter (order 8, `scipy.signal.sosfiltfilt`, cut-off at 40 % of the grid rate, i.e. 80 % of the new
+  Nyquist frequency), then interpolated: content above the new Nyquist frequency is removed, not folded back;
+- a channel sampled at the grid rate or slower (up-sampling) is interpolated with a cubic spline (not-a-knot);
+  samples already on the grid are kept as they are;
+- the low-pass starts up over about 2.5 / cut-off seconds at the record's ends (30 ms for a 200 Hz grid): there,
+  content above the new Nyquist frequency is not fully removed; cut it with `window` when it matters;
+- time stamps that jitter (steps within ±50 % of the median step) are resampled the same way at the median rate;
+  a larger step is a gap (a dropped block of samples) and an error, as is a time that goes backwards.
+
+Every problem a user can fix is an `InputError` naming the file and the channel (exit status 2).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .bench import UNITS
+from .data import UNIFORM_TOLERANCE, read_table
+from .errors import InputError
+
+SUFFIXES = {
+    ".csv": "csv",
+    ".txt": "csv",
+    ".mf4": "mdf",
+    ".mdf": "mdf",
+    ".mat": "mat",
+    ".h5": "hdf5",
+    ".hdf5": "hdf5",
+}
+TIME_NAMES = ("t", "time", "Time", "TIME", "timestamp", "Timestamp")  # a time column/vector found without `time=`
+JITTER = 0.5  # a step within ±50 % of the median step is jitter (resampled); a longer one is a gap (an error)
+DOWNSAMPLE_ORDER = 8  # Butterworth order of the anti-alias filter (applied forwards and backwards: zero phase)
+DOWNSAMPLE_CUTOFF = 0.4  # its cut-off as a fraction of the new rate (0.8 x the new Nyquist frequency)
+RATE_MATCH = 1e-2  # a channel within 1 % of the grid rate is at the grid rate (no filter)
+# One unit name -> its factor to SI, over all quantities of bench.UNITS (no unit name means two things there).
+SI_FACTORS: dict[str, float] = {unit: f for table in UNITS.values() for unit, f in table.items()}
+
+
+@dataclass(frozen=True)
+class Record:
+    """A recorded run: channels (our names) in SI units on one uniform time grid."""
+
+    t: NDArray  # (n,) [s] since the start of the record, uniform
+    channels: dict[str, NDArray]  # name -> (n,) values in SI units
+    source: str
+
+    @property
+    def rate(self) -> float:
+        """Sampling rate [Hz]."""
+        return float((self.t.size - 1) / (self.t[-1] - self.t[0]))
+
+    def channel(self, name: str) -> NDArray:
+        if name not in self.channels:
+            raise InputError(
+                f"no channel '{name}' in the record{_did_you_mean(name, self.channels)} "
+                f"(channels: {', '.join(self.channels)})",
+                source=self.source,
+            )
+        return self.channels[name]
+
+
+def _did_you_mean(name: str, known) -> str:
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    if not close:
+        lower = {k.lower(): k for k in known}
+        close = [lower[name.lower()]] if name.lower() in lower else []
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def _missing(what: str, name: str, known: Sequence[str], source: str, key: str | None = None) -> InputError:
+    return InputError(
+        f"{what} '{name}' is not in the file{_did_you_mean(name, known)}; present: {', '.join(known) or 'none'}",
+        source=source,
+        key=key,
+    )
+
+
+def unit_factor(unit: str, source: str, channel: str) -> float:
+    """The factor that turns `unit` into SI ('' is SI); InputError naming the file, the channel and the known units."""
+    unit = unit.strip()
+    if not unit:
+        return 1.0
+    if unit in SI_FACTORS:
+        return SI_FACTORS[unit]
+    raise InputError(
+        f"{channel}: unknown unit '{unit}'{_did_you_mean(unit, SI_FACTORS)}; known units: {', '.join(SI_FACTORS)}",
+        source=source,
+    )
+
+
+# ------------------------------------------------------------------------------------------ raw channels
+
+
+@dataclass
+class _Raw:
+    """One channel as stored: its own time stamps [s], values, and the unit the file declares ('' if none)."""
+
+    t: NDArray
+    y: NDArray
+    unit: str = ""
+
+
+def _numeric(values, source: str, what: str) -> NDArray:
+    arr = np.asarray(values)
+    if arr.dtype.kind not in "biuf":
+        raise InputError(f"{what} is not numeric (type {arr.dtype})", source=source)
+    arr = np.squeeze(arr).astype(float)
+    if arr.ndim != 1:
+        raise InputError(f"{what} has shape {np.shape(values)}; expected a vector", source=source)
+    return arr
+
+
+def _read_csv(path: Path, channels: Mapping[str, str], time: str | None, rate: float | None) -> dict[str, _Raw]:
+    candidates = (time,) if time else TIME_NAMES
+    table = read_table(path, timestamps=candidates)
+    src = table.source
+    t = _time_vector(
+        time,
+        [c for c in candidates if c in table.columns],
+        lambda name: table.columns[name],
+        list(table.columns),
+        src,
+        rate,
+        n=next(iter(table.columns.values())).size,
+    )
+    raw = {}
+    for ours, theirs in channels.items():
+        if theirs not in table.columns:
+            raise _missing("column", theirs, list(table.columns), src, key=ours)
+        raw[ours] = _Raw(t, table.columns[theirs])
+    return raw
+
+
+def _time_vector(time, found, get, names, src, rate, n) -> NDArray:
+    """The time vector named `time`, else the first of `found`, else k / rate; InputError if none."""
+    if time is not None:
+        if time not in names:
+            raise _missing("time vector", time, names, src)
+        return _numeric(get(time), src, f"time vector '{time}'")
+    if found:
+        return _numeric(get(found[0]), src, f"time vector '{found[0]}'")
+    if rate is not None:
+        return np.arange(n) / rate
+    raise InputError(
+        f"no time vector ({' or '.join(TIME_NAMES[:2])}): name it with time=..., or give the rate; present: "
+        f"{', '.join(names)}",
+        source=src,
+    )
+
+
+def _read_mdf(path: Path, channels: Mapping[str, str]) -> dict[str, _Raw]:
+    from asammdf import MDF
+    from asammdf.blocks.utils import MdfException
+
+    src = str(path)
+    try:
+        mdf = MDF(path)
+    except (MdfException, OSError, ValueError) as exc:
+        raise InputError(f"cannot read as ASAM MDF: {exc}", source=src) from None
+    try:
+        masters = mdf.masters_db
+        present = [
+            name
+            for name, where in mdf.channels_db.items()
+            if any(masters.get(g) != i for g, i in where)  # the master (time) channels are not data
+        ]
+        raw = {}
+        for ours, theirs in channels.items():
+            if theirs not in present:
+                raise _missing("channel", theirs, present, src, key=ours)
+            where = [(g, i) for g, i in mdf.channels_db[theirs] if masters.get(g) != i]
+            if len(where) > 1:
+                groups = ", ".join(str(g) for g, _ in where)
+                raise InputError(f"channel '{theirs}' is in several channel groups ({groups})", source=src, key=ours)
+            signal = mdf.get(theirs, group=where[0][0], index=where[0][1])
+            y = _numeric(signal.samples, src, f"channel '{theirs}'")
+            raw[ours] = _Raw(np.asarray(signal.timestamps, dtype=float), y, str(signal.unit or ""))
+        return raw
+    finally:
+        mdf.close()
+
+
+def _is_hdf5(path: Path) -> bool:
+    import h5py
+
+    return h5py.is_hdf5(path)
+
+
+def _read_mat(
+    path: Path, channels: Mapping[str, str], time: str | None, rate: float | None, variable: str | None
+) -> dict[str, _Raw]:
+    import scipy.io
+
+    src = str(path)
+    try:
+        mat = scipy.io.loadmat(path, simplify_cells=True)
+    except NotImplementedError:  # MATLAB v7.3: an HDF5 file behind a 512-byte MATLAB header
+        return _read_hdf5(path, channels, time, rate, variable, matlab=True)
+    except (ValueError, OSError, TypeError) as exc:
+        if _is_hdf5(path):
+            return _read_hdf5(path, channels, time, rate, variable, matlab=True)
+        raise InputError(f"cannot read as a MATLAB file: {exc}", source=src) from None
+    top = {k: v for k, v in mat.items() if not k.startswith("__")}
+    container = _container(top, variable, channels, src)
+    return _collect(container, channels, time, rate, src)
+
+
+def _container(top: dict, variable: str | None, channels: Mapping[str, str], src: str) -> dict:
+    """Where the channels are: `variable` (a struct), else the top level, else the one struct at the top level."""
+    if variable is not None:
+        if variable not in top:
+            raise _missing("variable", variable, list(top), src)
+        if not isinstance(top[variable], dict):
+            raise InputError(f"variable '{variable}' is not a struct of channels", source=src)
+        return top[variable]
+    structs = [k for k, v in top.items() if isinstance(v, dict)]
+    if any(name in top for name in channels.values()) or len(structs) != 1:
+        return top
+    return top[structs[0]]
+
+
+def _collect(container: dict, channels, time, rate, src) -> dict[str, _Raw]:
+    names = list(container)
+    first = next(iter(channels.values()), None)
+    n = np.size(container[first]) if first in container else 0
+    t = _time_vector(time, [c for c in TIME_NAMES if c in container], container.__getitem__, names, src, rate, n)
+    raw = {}
+    for ours, theirs in channels.items():
+        if theirs not in container:
+            raise _missing("channel", theirs, names, src, key=ours)
+        raw[ours] = _Raw(t, _numeric(container[theirs], src, f"channel '{theirs}'"))
+    return raw
+
+
+def _read_hdf5(path, channels, time, rate, variable, matlab: bool = False) -> dict[str, _Raw]:
+    """Datasets by path (relative to the group `variable`, or the root). MATLAB v7.3 stores arrays transposed;
+    vectors (all a channel can be) read the same either way. A dataset's `unit` or `units` attribute is its unit."""
+    import h5py
+
+    src = str(path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"cannot read as HDF5{' (MATLAB v7.3)' if matlab else ''}: {exc}", source=src) from None
+    with f:
+        group = f
+        if variable is not None:
+            if variable not in f or not isinstance(f[variable], h5py.Group):
+                tops = [k for k in f if not k.startswith("#")]  # '#refs#': MATLAB's internal references
+                if variable in f:
+                    raise InputError(f"variable '{variable}' is not a struct (HDF5 group) of channels", source=src)
+                raise _missing("variable", variable, tops, src)
+            group = f[variable]
+        elif matlab:
+            tops = [k for k in f if not k.startswith("#")]
+            structs = [k for k in tops if isinstance(f[k], h5py.Group)]
+            if not any(name in f for name in channels.values()) and len(structs) == 1:
+                group = f[structs[0]]
+
+        datasets: list[str] = []
+        group.visititems(lambda name, obj: datasets.append(name) if isinstance(obj, h5py.Dataset) else None)
+
+        def get(name: str) -> NDArray:
+            return group[name][()]
+
+        def unit(name: str) -> str:
+            attrs = group[name].attrs
+            value = attrs.get("unit", attrs.get("units", ""))
+            return value.decode() if isinstance(value, bytes) else str(value)
+
+        first = next(iter(channels.values()), None)
+        n = group[first].size if first in datasets else 0
+        t = _time_vector(time, [c for c in TIME_NAMES if c in datasets], get, datasets, src, rate, n)
+        raw = {}
+        for ours, theirs in channels.items():
+            key = theirs.strip("/")
+            if key not in datasets:
+                raise _missing("dataset" if not matlab else "channel", theirs, datasets, src, key=ours)
+            raw[ours] = _Raw(t, _numeric(get(key), src, f"channel '{theirs}'"), unit(key))
+        return raw
+
+
+# ------------------------------------------------------------------------------------------ one grid
+
+
+def _check_channel(name: str, theirs: str, raw: _Raw, src: str) -> float:
+    """Check a channel's stamps and values; return its (median) sampling step [s]."""
+    label = f"channel '{name}' ('{theirs}')"
+    if raw.t.size != raw.y.size:
+        raise InputError(f"{label} has {raw.y.size} samples but its time vector {raw.t.size}", source=src)
+    if raw.y.size < 3:
+        raise InputError(f"{label} has {raw.y.size} samples; at least 3 are needed", source=src)
+    for what, values in (("time stamp", raw.t), ("sample", raw.y)):
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise InputError(
+                f"{label} has {bad.size} non-finite {what}(s) (NaN or Inf), first at sample {bad[0] + 1}", source=src
+            )
+    steps = np.diff(raw.t)
+    if np.any(steps <= 0):
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise InputError(
+            f"{label}: time goes backwards (or stands still) at sample {k + 2}: t = {raw.t[k + 1]:.9g} s after "
+            f"{raw.t[k]:.9g} s",
+            source=src,
+        )
+    dt = float(np.median(steps))
+    worst = int(np.argmax(np.abs(steps - dt)))
+    if abs(steps[worst] - dt) > JITTER * dt:
+        raise InputError(
+            f"{label}: a gap in time at sample {worst + 2}: step {steps[worst]:.6g} s against the usual {dt:.6g} s "
+            f"(dropped samples?); cut the record with a window",
+            source=src,
+        )
+    return dt
+
+
+def _uniform(t: NDArray, dt: float) -> bool:
+    return bool(np.max(np.abs(np.diff(t) - dt)) <= max(UNIFORM_TOLERANCE * dt, 1e-9 * float(np.max(np.abs(t)))))
+
+
+def _rate(raw: _Raw, dt: float) -> float:
+    """A channel's rate [Hz]: from its span when uniform, else its median step; to 9 significant digits (a logger's
+    nominal rate, not the round-off of its time stamps: 1/0.0010000000000000002 s is 1000 Hz)."""
+    rate = (raw.t.size - 1) / float(raw.t[-1] - raw.t[0]) if _uniform(raw.t, dt) else 1.0 / dt
+    return float(f"{rate:.9g}")
+
+
+def _onto(raw: _Raw, dt: float, grid: NDArray, rate: float) -> NDArray:
+    """A channel on the grid: anti-alias low-pass first when its rate is above the grid's, then a cubic spline."""
+    from scipy.interpolate import CubicSpline
+    from scipy.signal import butter, sosfiltfilt
+
+    t, y = raw.t, raw.y
+    own = 1.0 / dt
+    if own > rate * (1 + RATE_MATCH):
+        if not _uniform(t, dt):  # filter on a uniform grid: resample the jittered stamps at their median rate first
+            tu = t[0] + np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1) * dt
+            y, t = CubicSpline(t, y)(tu), tu
+        sos = butter(DOWNSAMPLE_ORDER, DOWNSAMPLE_CUTOFF * rate, fs=own, output="sos")
+        y = sosfiltfilt(sos, y)
+    on_grid = t.size == grid.size and np.allclose(t, grid, rtol=0, atol=UNIFORM_TOLERANCE * dt)
+    return y.copy() if on_grid else CubicSpline(t, y)(grid)
+
+
+def read_record(
+    path: str | Path,
+    channels: Mapping[str, str],
+    units: Mapping[str, str] | None = None,
+    *,
+    time: str | None = None,
+    window: tuple[float, float] | None = None,
+    rate: float | None = None,
+    variable: str | None = None,
+) -> Record:
+    """Read the `channels` (our name -> the name in the file) of a logger file as one Record in SI units.
+
+    The format is the suffix's (module docstring). `units` gives a channel's unit (our name -> unit, e.g. 'g',
+    'mm'); without it, the unit the file declares (MDF4 channel unit, HDF5 `unit` attribute), else SI.
+    `time` names the time column/vector (CSV, MAT, HDF5; default `t` or `time`; MDF4 channels carry their own);
+    CSV time stamps may be ISO 8601 date-times, read as seconds after the first. Without a time vector, `rate`
+    [Hz] gives the sampling rate; with one, `rate` is the rate of the grid (default: the highest channel rate;
+    below a channel's rate, the channel is low-passed before it is down-sampled). `window` (start, stop) [s]
+    keeps start <= t - t0 < stop, t0 the start of the record; times are kept, t0 is 0. `variable` names the MAT
+    struct (or HDF5 group) that holds the channels when there is more than one."""
+    path = Path(path)
+    src = str(path)
+    units = dict(units or {})
+    kind = SUFFIXES.get(path.suffix.lower())
+    if kind is None:
+        raise InputError(f"unknown logger file type '{path.suffix}'; expected one of {', '.join(SUFFIXES)}", source=src)
+    if not channels:
+        raise InputError("no channels named to read", source=src)
+    for ours in units:
+        if ours not in channels:
+            raise InputError(
+                f"a unit is given for '{ours}', which is not a channel read ({', '.join(channels)})", source=src
+            )
+    if rate is not None and not (math.isfinite(rate) and rate > 0):
+        raise InputError(f"rate must be a positive number of Hz, got {rate}", source=src)
+    if window is not None and not (window[0] < window[1]):
+        raise InputError(f"window start {window[0]:g} s must be before its stop {window[1]:g} s", source=src)
+    if kind != "csv" and not path.is_file():
+        raise InputError("file not found" if not path.exists() else "is not a file", source=src)
+
+    if kind == "csv":
+        raw = _read_csv(path, channels, time, rate)
+    elif kind == "mdf":
+        raw = _read_mdf(path, channels)
+    elif kind == "mat":
+        raw = _read_mat(path, channels, time, rate, variable)
+    else:
+        raw = _read_hdf5(path, channels, time, rate, variable)
+
+    steps = {}
+    for ours, r in raw.items():
+        unit = units.get(ours, r.unit)
+        r.y = r.y * unit_factor(unit, src, f"channel '{ours}' ('{channels[ours]}')")
+        steps[ours] = _check_channel(ours, channels[ours], r, src)
+
+    grid_rate = rate if rate is not None else max(_rate(r, steps[ours]) for ours, r in raw.items())
+    start = max(float(r.t[0]) for r in raw.values())
+    stop = min(float(r.t[-1]) for r in raw.values())
+    n = int(math.floor((stop - start) * grid_rate + 1e-6)) + 1  # 1e-6: a sample at `stop` despite round-off
+    if stop <= start or n < 3:
+        raise InputError(
+            f"the channels ({', '.join(channels)}) share no common time span of 3 samples at {grid_rate:g} Hz",
+            source=src,
+        )
+    grid = start + np.arange(n) / grid_rate
+    values = {ours: _onto(r, steps[ours], grid, grid_rate) for ours, r in raw.items()}
+    t = np.arange(n) / grid_rate
+    if window is not None:
+        keep = (t >= window[0]) & (t < window[1])
+        if keep.sum() < 3:
+            raise InputError(
+                f"window [{window[0]:g}, {window[1]:g}) s holds {int(keep.sum())} samples; the record spans "
+                f"[0, {t[-1]:g}] s",
+                source=src,
+            )
+        t = t[keep]
+        values = {k: v[keep] for k, v in values.items()}
+    return Record(t=t, channels=values, source=src)
+
+
+def remove_offset(record: Record, names: Sequence[str], mode: str = "mean") -> Record:
+    """The record with the named channels' offsets removed: their mean over the whole record (`mean`) or over
+    its first second (`first_second`: the car at rest before the run), e.g. accelerometers' gravity and bias."""
+    if mode not in ("mean", "first_second"):
+        raise InputError(f"unknown offset mode '{mode}'; expected mean or first_second", source=record.source)
+    keep = slice(None)
+    if mode == "first_second":
+        keep = record.t < record.t[0] + 1.0
+        if record.t[-1] - record.t[0] < 1.0:
+            raise InputError(
+                f"the record lasts {record.t[-1] - record.t[0]:g} s, less than one second", source=record.source
+            )
+    channels = dict(record.channels)
+    for name in names:
+        y = record.channel(name)
+        channels[name] = y - float(np.mean(y[keep]))
+    return replace(record, channels=channels)
