@@ -36,8 +36,11 @@ def test_same_seed_identical_results_for_any_jobs(tmp_path):
     assert not np.array_equal(other.summary.mean, read_campaign_h5(tmp_path / "j1.h5").summary.mean)
 
 
-def test_interrupted_campaign_resumes_to_the_same_result(tmp_path):
-    cfg = small_config()
+@pytest.mark.parametrize("system", ["vehicle", "damper"])
+def test_interrupted_campaign_resumes_to_the_same_result(tmp_path, system):
+    """Two runs finished, then an interruption; the resumed campaign (on two workers) writes the uninterrupted
+    campaign's content, for the car and for the damper (one runner)."""
+    cfg = small_config() if system == "vehicle" else load_config(damper_config(tmp_path))
     write_campaign_h5(tmp_path / "whole.h5", run_campaign(cfg, jobs=1))
 
     def interrupt_after_two(done, total):
@@ -48,9 +51,9 @@ def test_interrupted_campaign_resumes_to_the_same_result(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         run_campaign(cfg, jobs=1, checkpoint_dir=partial, on_run=interrupt_after_two)
     assert len(list(partial.glob("run-*.npz"))) == 2
-    seen = []
-    resumed = run_campaign(cfg, jobs=2, checkpoint_dir=partial, on_run=lambda d, n: seen.append(d))
-    assert seen[0] == 2  # started from the two finished runs
+    seen, notes = [], []
+    resumed = run_campaign(cfg, jobs=2, checkpoint_dir=partial, on_run=lambda d, n: seen.append(d), log=notes.append)
+    assert seen[0] == 2 and notes == [f"note: resumed 2 of 4 runs from {partial}"]  # from the two finished runs
     write_campaign_h5(tmp_path / "part.h5", resumed)
     assert_same_content(tmp_path / "whole.h5", tmp_path / "part.h5")
 
@@ -196,29 +199,17 @@ def test_sigkilled_cli_campaign_resumes_to_the_same_file(tmp_path, system):
     assert not partial.exists()
 
 
-def test_damper_campaign_is_parallel_and_resumes_bit_identically(tmp_path):
-    """The damper through the one runner: --jobs 1 and 2 give the same file; an interrupted campaign resumes
-    from its checkpoint to the same content."""
+def test_damper_campaign_is_parallel_and_written_in_the_cars_layout(tmp_path):
+    """The damper through the one runner: --jobs 1 and 2 give the same file, read back as a damper campaign with
+    its findings, every fit within the exact evaluation budget."""
     cfg = load_config(damper_config(tmp_path))
-    for jobs in (1, 2):
-        write_campaign_h5(tmp_path / f"j{jobs}.h5", run_campaign(cfg, jobs=jobs))
+    campaigns = {jobs: run_campaign(cfg, jobs=jobs) for jobs in (1, 2)}
+    for jobs, campaign in campaigns.items():
+        write_campaign_h5(tmp_path / f"j{jobs}.h5", campaign)
     assert_same_content(tmp_path / "j1.h5", tmp_path / "j2.h5")
-
-    def interrupt_after_two(done, total):
-        if done == 2:
-            raise KeyboardInterrupt
-
-    partial = tmp_path / "part.h5.partial"
-    with pytest.raises(KeyboardInterrupt):
-        run_campaign(cfg, jobs=1, checkpoint_dir=partial, on_run=interrupt_after_two)
-    notes = []
-    resumed = run_campaign(cfg, jobs=2, checkpoint_dir=partial, log=notes.append)
-    assert notes == [f"note: resumed 2 of 4 runs from {partial}"]
-    write_campaign_h5(tmp_path / "part.h5", resumed)
-    assert_same_content(tmp_path / "j1.h5", tmp_path / "part.h5")
-    back = read_campaign_h5(tmp_path / "part.h5")
+    back = read_campaign_h5(tmp_path / "j2.h5")
     assert back.system == "damper" and back.findings.model == "bingham"
-    assert [r.cost for r in back.records] == [r.cost for r in resumed.records]
+    assert [r.cost for r in back.records] == [r.cost for r in campaigns[2].records]
     assert all(r.evaluations == 150 for r in back.records)  # the evaluation budget, honoured exactly
 
 

@@ -135,6 +135,18 @@ def _results_target(config: Path, cfg, output: Path | None, json_out: Path | Non
     return target
 
 
+RunsOption = Annotated[
+    Optional[int],  # noqa: UP045 - typer needs Optional here
+    typer.Option("--runs", metavar="N", help="Runs per campaign (identify.runs)."),
+]
+SeedOption = Annotated[
+    Optional[int],  # noqa: UP045
+    typer.Option("--seed", metavar="N", help="Campaign seed (identify.seed)."),
+]
+JobsOption = Annotated[
+    Optional[int],  # noqa: UP045
+    typer.Option("--jobs", metavar="N", help="Worker processes (default: all cores)."),
+]
 ExecutorOption = Annotated[
     str,
     typer.Option(
@@ -224,12 +236,9 @@ def identify(
         Optional[Path],  # noqa: UP045
         typer.Option("--data", metavar="FILE", help="Identify from this measurement file instead of simulated data."),
     ] = None,
-    runs: Annotated[Optional[int], typer.Option("--runs", metavar="N", help="Number of runs (identify.runs).")] = None,  # noqa: UP045
-    seed: Annotated[Optional[int], typer.Option("--seed", metavar="N", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
-    jobs: Annotated[
-        Optional[int],  # noqa: UP045
-        typer.Option("--jobs", metavar="N", help="Worker processes (default: all cores)."),
-    ] = None,
+    runs: RunsOption = None,
+    seed: SeedOption = None,
+    jobs: JobsOption = None,
     output: Annotated[
         Optional[Path],  # noqa: UP045
         typer.Option("-o", "--output", metavar="FILE", help="Campaign file (.h5); default runs/<config>-<hash>.h5."),
@@ -301,15 +310,9 @@ def sweep(
         Optional[str],  # noqa: UP045
         typer.Option("--shard", metavar="K/N", help="K/N: run only this share, for job arrays."),
     ] = None,
-    runs: Annotated[
-        Optional[int],  # noqa: UP045
-        typer.Option("--runs", metavar="N", help="Runs per campaign (identify.runs)."),
-    ] = None,
-    seed: Annotated[Optional[int], typer.Option("--seed", metavar="N", help="Campaign seed (identify.seed).")] = None,  # noqa: UP045
-    jobs: Annotated[
-        Optional[int],  # noqa: UP045
-        typer.Option("--jobs", metavar="N", help="Worker processes (default: all cores)."),
-    ] = None,
+    runs: RunsOption = None,
+    seed: SeedOption = None,
+    jobs: JobsOption = None,
     set_: SetOption = None,
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
