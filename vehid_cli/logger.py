@@ -48,6 +48,7 @@ JITTER = 0.5  # a step within ±50 % of the median step is jitter (resampled); a
 DOWNSAMPLE_ORDER = 8  # Butterworth order of the anti-alias filter (applied forwards and backwards: zero phase)
 DOWNSAMPLE_CUTOFF = 0.4  # its cut-off as a fraction of the new rate (0.8 x the new Nyquist frequency)
 RATE_MATCH = 1e-2  # a channel within 1 % of the grid rate is at the grid rate (no filter)
+NOMINAL_RATE_MATCH = 0.05  # time stamps printed off a nominal rate: each step within 5 % of 1 / rate
 # One unit name -> its factor to SI, over all quantities of bench.UNITS (no unit name means two things there).
 SI_FACTORS: dict[str, float] = {unit: f for table in UNITS.values() for unit, f in table.items()}
 
@@ -114,6 +115,7 @@ class _Raw:
     t: NDArray
     y: NDArray
     unit: str = ""
+    time: str = ""  # the name of its time column/vector ('' for MDF4 masters and stamps made from a rate)
 
 
 def _numeric(values, source: str, what: str) -> NDArray:
@@ -130,7 +132,7 @@ def _read_csv(path: Path, channels: Mapping[str, str], time: str | None, rate: f
     candidates = (time,) if time else TIME_NAMES
     table = read_table(path, timestamps=candidates)
     src = table.source
-    t = _time_vector(
+    t, tname = _time_vector(
         time,
         [c for c in candidates if c in table.columns],
         lambda name: table.columns[name],
@@ -143,20 +145,21 @@ def _read_csv(path: Path, channels: Mapping[str, str], time: str | None, rate: f
     for ours, theirs in channels.items():
         if theirs not in table.columns:
             raise _missing("column", theirs, list(table.columns), src, key=ours)
-        raw[ours] = _Raw(t, table.columns[theirs])
+        raw[ours] = _Raw(t, table.columns[theirs], time=tname)
     return raw
 
 
-def _time_vector(time, found, get, names, src, rate, n) -> NDArray:
-    """The time vector named `time`, else the first of `found`, else k / rate; InputError if none."""
+def _time_vector(time, found, get, names, src, rate, n) -> tuple[NDArray, str]:
+    """The time vector named `time`, else the first of `found`, else k / rate ('' for its name); InputError if
+    none."""
     if time is not None:
         if time not in names:
             raise _missing("time vector", time, names, src)
-        return _numeric(get(time), src, f"time vector '{time}'")
+        return _numeric(get(time), src, f"time vector '{time}'"), time
     if found:
-        return _numeric(get(found[0]), src, f"time vector '{found[0]}'")
+        return _numeric(get(found[0]), src, f"time vector '{found[0]}'"), found[0]
     if rate is not None:
-        return np.arange(n) / rate
+        return np.arange(n) / rate, ""
     raise InputError(
         f"no time vector ({' or '.join(TIME_NAMES[:2])}): name it with time=..., or give the rate; present: "
         f"{', '.join(names)}",
@@ -239,12 +242,12 @@ def _collect(container: dict, channels, time, rate, src) -> dict[str, _Raw]:
     names = list(container)
     first = next(iter(channels.values()), None)
     n = np.size(container[first]) if first in container else 0
-    t = _time_vector(time, [c for c in TIME_NAMES if c in container], container.__getitem__, names, src, rate, n)
+    t, tname = _time_vector(time, [c for c in TIME_NAMES if c in container], container.__getitem__, names, src, rate, n)
     raw = {}
     for ours, theirs in channels.items():
         if theirs not in container:
             raise _missing("channel", theirs, names, src, key=ours)
-        raw[ours] = _Raw(t, _numeric(container[theirs], src, f"channel '{theirs}'"))
+        raw[ours] = _Raw(t, _numeric(container[theirs], src, f"channel '{theirs}'"), time=tname)
     return raw
 
 
@@ -286,17 +289,41 @@ def _read_hdf5(path, channels, time, rate, variable, matlab: bool = False) -> di
 
         first = next(iter(channels.values()), None)
         n = group[first].size if first in datasets else 0
-        t = _time_vector(time, [c for c in TIME_NAMES if c in datasets], get, datasets, src, rate, n)
+        t, tname = _time_vector(time, [c for c in TIME_NAMES if c in datasets], get, datasets, src, rate, n)
         raw = {}
         for ours, theirs in channels.items():
             key = theirs.strip("/")
             if key not in datasets:
                 raise _missing("dataset" if not matlab else "channel", theirs, datasets, src, key=ours)
-            raw[ours] = _Raw(t, _numeric(get(key), src, f"channel '{theirs}'"), unit(key))
+            raw[ours] = _Raw(t, _numeric(get(key), src, f"channel '{theirs}'"), unit(key), time=tname)
         return raw
 
 
 # ------------------------------------------------------------------------------------------ one grid
+
+
+def _named(time: str, before: str = "") -> str:
+    """ " '<time column>'" (after `before`) when the stamps come from a named column/vector, else ''."""
+    return f"{before} '{time}'" if time else ""
+
+
+class NominalRateError(InputError):
+    """Time stamps that do not follow the nominal rate given to `read_record` (callers may name their key)."""
+
+
+def _on_nominal_rate(name: str, theirs: str, raw: _Raw, rate: float, src: str) -> None:
+    """Printed time stamps rounded off a nominal rate: check every step is within 5 % of 1 / rate, then rebuild
+    the stamps as t0 + k / rate (the samples are kept as they are, not resampled)."""
+    dt = 1.0 / rate
+    steps = np.diff(raw.t)
+    bad = int(np.argmax(np.abs(steps - dt)))
+    if abs(steps[bad] - dt) > NOMINAL_RATE_MATCH * dt:
+        raise NominalRateError(
+            f"channel '{name}' ('{theirs}'): time{_named(raw.time)} does not follow the nominal rate {rate:g} Hz "
+            f"(step {dt:g} s) within {NOMINAL_RATE_MATCH:.0%}: step {steps[bad]:g} s at sample {bad + 2}",
+            source=src,
+        )
+    raw.t = raw.t[0] + np.arange(raw.t.size) * dt
 
 
 def _check_channel(name: str, theirs: str, raw: _Raw, src: str) -> float:
@@ -310,14 +337,16 @@ def _check_channel(name: str, theirs: str, raw: _Raw, src: str) -> float:
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise InputError(
-                f"{label} has {bad.size} non-finite {what}(s) (NaN or Inf), first at sample {bad[0] + 1}", source=src
+                f"{label} has {bad.size} non-finite {what}(s){_named(raw.time, ' in') if what[0] == 't' else ''} "
+                f"(NaN or Inf), first at sample {bad[0] + 1}",
+                source=src,
             )
     steps = np.diff(raw.t)
     if np.any(steps <= 0):
         k = int(np.flatnonzero(steps <= 0)[0])
         raise InputError(
-            f"{label}: time goes backwards (or stands still) at sample {k + 2}: t = {raw.t[k + 1]:.9g} s after "
-            f"{raw.t[k]:.9g} s",
+            f"{label}: time{_named(raw.time)} goes backwards (or stands still), it must increase strictly: at "
+            f"sample {k + 2}, t = {raw.t[k + 1]:.9g} s after {raw.t[k]:.9g} s",
             source=src,
         )
     dt = float(np.median(steps))
@@ -368,6 +397,8 @@ def read_record(
     window: tuple[float, float] | None = None,
     rate: float | None = None,
     variable: str | None = None,
+    time_unit: str = "s",
+    nominal_rate: float | None = None,
 ) -> Record:
     """Read the `channels` (our name -> the name in the file) of a logger file as one Record in SI units.
 
@@ -378,7 +409,10 @@ def read_record(
     [Hz] gives the sampling rate; with one, `rate` is the rate of the grid (default: the highest channel rate;
     below a channel's rate, the channel is low-passed before it is down-sampled). `window` (start, stop) [s]
     keeps start <= t - t0 < stop, t0 the start of the record; times are kept, t0 is 0. `variable` names the MAT
-    struct (or HDF5 group) that holds the channels when there is more than one."""
+    struct (or HDF5 group) that holds the channels when there is more than one. `time_unit` (bench.UNITS['time'])
+    is the unit of a numeric time column/vector (CSV, MAT, HDF5; MDF4 stamps are seconds). `nominal_rate` [Hz]
+    declares stamps printed with too few digits to be uniform: each step must be within 5 % of 1 / rate, and the
+    stamps are rebuilt as t0 + k / rate with the samples kept as they are (NominalRateError otherwise)."""
     path = Path(path)
     src = str(path)
     units = dict(units or {})
@@ -394,6 +428,14 @@ def read_record(
             )
     if rate is not None and not (math.isfinite(rate) and rate > 0):
         raise InputError(f"rate must be a positive number of Hz, got {rate}", source=src)
+    if nominal_rate is not None and not (math.isfinite(nominal_rate) and nominal_rate > 0):
+        raise InputError(f"nominal rate must be a positive number of Hz, got {nominal_rate}", source=src)
+    if time_unit not in UNITS["time"]:
+        raise InputError(
+            f"unknown time unit '{time_unit}'{_did_you_mean(time_unit, UNITS['time'])}; known: "
+            f"{', '.join(UNITS['time'])}",
+            source=src,
+        )
     if window is not None and not (window[0] < window[1]):
         raise InputError(f"window start {window[0]:g} s must be before its stop {window[1]:g} s", source=src)
     if kind != "csv" and not path.is_file():
@@ -412,7 +454,12 @@ def read_record(
     for ours, r in raw.items():
         unit = units.get(ours, r.unit)
         r.y = r.y * unit_factor(unit, src, f"channel '{ours}' ('{channels[ours]}')")
+        if r.time:
+            r.t = r.t * UNITS["time"][time_unit]
         steps[ours] = _check_channel(ours, channels[ours], r, src)
+        if nominal_rate is not None:
+            _on_nominal_rate(ours, channels[ours], r, nominal_rate, src)
+            steps[ours] = 1.0 / nominal_rate
 
     grid_rate = rate if rate is not None else max(_rate(r, steps[ours]) for ours, r in raw.items())
     start = max(float(r.t[0]) for r in raw.values())
