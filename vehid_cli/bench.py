@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .data import check_finite, check_time, read_table
 from .errors import InputError
 
 UNITS: dict[str, dict[str, float]] = {
@@ -131,61 +130,42 @@ def with_force(history: BenchHistory, force: NDArray, source: str | None = None)
 # ------------------------------------------------------------------------------------------ measured
 
 
-def convert(kind: str, unit: str, key: str) -> float:
-    """The factor that turns `unit` into SI for a quantity `kind`; InputError naming the key when unknown."""
-    table = UNITS[kind]
-    if unit not in table:
-        raise InputError(f"unknown {kind} unit '{unit}'; expected one of {', '.join(table)}", key=key)
-    return table[unit]
-
-
 def read_bench(
     path: str | Path,
     columns: Mapping[str, str | None],
     units: Mapping[str, str],
     source_key: str = "data",
     sample_rate: float | None = None,
+    variable: str | None = None,
 ) -> BenchHistory:
-    """A measured bench run: columns named by the config (time, displacement, force; velocity and control
-    optional), converted to SI. The velocity, when not measured, is the central difference of x.
+    """A measured bench run, read by `logger.read_record` (one reader for every format: CSV with numeric or ISO
+    8601 time stamps, MDF4, MAT v5/v7.3, HDF5): the columns/channels named by the config (time, displacement,
+    force; velocity and control optional) in SI units on one uniform grid starting at t = 0. The velocity, when
+    not measured, is the central difference of x; the control, when not measured, is 0.
 
-    `sample_rate` [Hz] declares the rate of a file whose time column was printed with too few digits to be
-    uniform: the column must then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it."""
-    table = read_table(path)
-    src = table.source
+    `units` gives a quantity's unit (time included); a channel without one has the unit its file declares (MDF4,
+    HDF5), else SI. Jittered time stamps are resampled at their median rate (logger.py). `sample_rate` [Hz]
+    declares the rate of a file whose time column was printed with too few digits to be uniform: the column must
+    then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it (the samples kept as they
+    are). `variable` names the MAT struct / HDF5 group holding the channels."""
+    from .logger import NominalRateError, read_record  # logger imports UNITS from here
+
     for role in ("time", "displacement", "force"):
         if not columns.get(role):
             raise InputError(f"no column given for the {role}", key=f"{source_key}.columns.{role}")
-    factors = {role: convert(role, units.get(role, default), f"{source_key}.units.{role}") for role, default in (
-        ("time", "s"), ("displacement", "m"), ("force", "N"), ("velocity", "m/s"), ("control", "1"))}  # fmt: skip
-    values = {}
-    for role, name in columns.items():
-        if not name:
-            continue
-        if name not in table.columns:
-            raise InputError(
-                f"column '{name}' (the {role}) is not in the file; columns present: {', '.join(table.columns)}",
-                source=src,
-            )
-        check_finite(table.columns[name], name, src)
-        values[role] = table.columns[name] * factors[role]
-    t = values["time"]
-    if sample_rate is None:
-        dt = check_time(t, src, column=str(columns["time"]))
-    else:
-        dt = 1.0 / sample_rate
-        steps = np.diff(t)
-        if t.size < 3 or np.any(np.abs(steps - dt) > 0.05 * dt):
-            bad = int(np.argmax(np.abs(steps - dt))) if steps.size else 0
-            raise InputError(
-                f"column '{columns['time']}' does not follow data.sample_rate = {sample_rate:g} Hz (step {dt:g} s) "
-                f"within 5 %: step {steps[bad] if steps.size else float('nan'):g} s at data row {bad + 2}",
-                source=src,
-            )
-    t = t[0] + np.arange(t.size) * dt
-    x = values["displacement"]
-    v = values.get("velocity")
+    channels = {role: str(name) for role, name in columns.items() if name and role != "time"}
+    given = {role: unit for role, unit in units.items() if role in channels}
+    try:
+        record = read_record(
+            path, channels, given, time=str(columns["time"]), time_unit=units.get("time", "s"),
+            nominal_rate=sample_rate, variable=variable,
+        )  # fmt: skip
+    except NominalRateError as exc:
+        raise InputError(exc.detail, source=exc.source, key=f"{source_key}.sample_rate") from None
+    t = record.t
+    x = record.channels["displacement"]
+    v = record.channels.get("velocity")
     if v is None:
         v = np.gradient(x, t)
-    u = values.get("control", np.zeros(t.size))
-    return BenchHistory(t, x, v, u, values["force"], source=src)
+    u = record.channels.get("control", np.zeros(t.size))
+    return BenchHistory(t, x, v, u, record.channels["force"], source=record.source)

@@ -84,7 +84,8 @@ class DataColumns(_Section):
 
 
 class DataUnits(_Section):
-    """Units of the columns (see vehid_cli.bench.UNITS)."""
+    """Units of the columns (see vehid_cli.bench.UNITS); a unit left out is the one the file declares (MDF4
+    channel unit, HDF5 `unit` attribute), else the SI default below."""
 
     time: str = "s"
     displacement: str = "m"
@@ -96,7 +97,11 @@ class DataUnits(_Section):
 class DamperData(_Section):
     """Measured bench runs: the training file, its columns and units, and held-out validation files."""
 
-    file: str | None = Field(None, description="training run (CSV); relative paths are relative to the config")
+    file: str | None = Field(
+        None,
+        description="training run: CSV (numeric or ISO 8601 time stamps, jitter resampled), MDF4 (.mf4), MAT "
+        "(v5/v7.3) or HDF5 (.h5), read by vehid_cli.logger; relative paths are relative to the config",
+    )
     columns: DataColumns = DataColumns()
     units: DataUnits = DataUnits()
     window: tuple[NonNeg, Pos] | None = Field(None, description="use only start <= t < stop [s] of each file")
@@ -105,6 +110,9 @@ class DamperData(_Section):
         None,
         description="nominal sampling rate [Hz] of files whose time column was printed with too few digits to be "
         "uniform: time is rebuilt as t0 + k / rate after checking it increases and agrees within 5 %",
+    )
+    variable: str | None = Field(
+        None, description="the MAT struct (or HDF5 group) holding the channels, when the file has more than one"
     )
     validate_files: tuple[str, ...] = Field((), alias="validate", description="held-out runs, same columns")
 

@@ -121,9 +121,12 @@ def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
         columns, units, window, step = dict(BENCH_COLUMNS), {}, None, 1
     else:
         columns = data.columns.model_dump()
-        units, window, step = data.units.model_dump(), data.window, data.decimate
+        # only the units the config sets: a channel without one has its file's declared unit (MDF4), else SI
+        units = data.units.model_dump(include=data.units.model_fields_set)
+        window, step = data.window, data.decimate
     rate = None if data is None else data.sample_rate
-    history = read_bench(path, columns, units, sample_rate=rate)
+    variable = None if data is None else data.variable
+    history = read_bench(path, columns, units, sample_rate=rate, variable=variable)
     if window is not None:
         history = history.window(history.t[0] + window[0], history.t[0] + window[1])
     if step > 1:
