@@ -262,3 +262,154 @@ def test_every_shipped_damper_config_goes_through_the_one_pipeline(tmp_path, con
     assert report.returncode == 0, report.stderr
     doc = json.loads(report.stdout)[0]
     assert doc["system"] == "damper" and doc["J"] == pytest.approx(list(cost), rel=1e-12)
+
+
+# ------------------------------------------------------------------------------------------ logger formats
+
+BENCH_RATE = 300.0  # Hz, nominal: the stamps jitter by ±10 % of 1/300 s around it
+BENCH_N = 1200  # 4 s
+BENCH_START = {"k1": 2400.0, "c0": 1200.0, "fc": 250.0}  # the config's values: the start of the fit
+
+
+def _jittered_bench_run():
+    """A Bingham damper (TRUTH) on a 25 mm, 1.5 Hz sine, sampled at ISO time stamps with ±10 % jitter around
+    1/300 s (whole microseconds, as an ISO stamp prints them): (t [s], x [m], v [m/s], F [N])."""
+    from vehid_cli.bench import BenchHistory
+    from vehid_cli.damper_fit import DamperSpec
+    from vehid_cli.models.damper import default_values
+
+    rng = np.random.default_rng(13)
+    steps = (1 + rng.uniform(-0.1, 0.1, BENCH_N - 1)) / BENCH_RATE
+    us = np.round(np.concatenate([[0.0], np.cumsum(steps)]) * 1e6).astype(np.int64)
+    t = us / 1e6
+    w = 2 * np.pi * 1.5
+    x, v = 0.025 * np.sin(w * t), 0.025 * w * np.cos(w * t)
+    force = DamperSpec("bingham", {**default_values("bingham"), **TRUTH}).simulate(
+        BenchHistory(t, x, v, np.zeros(t.size))
+    )
+    np.testing.assert_allclose(force, 1500 * v + 200 * np.tanh(v / 0.02) + 2000 * (x + 0.05))  # memoryless
+    return us, t, x, v, force
+
+
+def _bench_config(path, data, columns, units=None, **more):
+    cfg = {
+        "system": "damper",
+        "damper": {"model": "bingham", "parameters": {**TRUTH, **BENCH_START}},
+        "data": {"file": str(data), "columns": columns, **({"units": units} if units else {}), **more},
+        "identify": {"unknowns": ["k1", "c0", "fc"], "bounds": [0.5, 2.0], "budget": 150},
+    }
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def _identify(config, out):
+    res = vehid("identify", config, "-o", out)
+    assert res.returncode == 0, res.stderr
+    with h5py.File(out) as h5:
+        names = [n.decode() if isinstance(n, bytes) else n for n in h5["damper/model_names"][()]]
+        values = dict(zip(names, h5["damper/model_values"][()], strict=True))
+        trace = {k: h5["damper/traces/00"][k][()] for k in ("t", "x", "v", "measured")}
+    return {n: float(values[n]) for n in BENCH_START}, trace
+
+
+@pytest.fixture(scope="module")
+def iso_bench(tmp_path_factory):
+    """The jittered run as a CSV with ISO time stamps, x in mm, v in mm/s, F in kN; identified once."""
+    import datetime
+
+    tmp = tmp_path_factory.mktemp("iso_bench")
+    us, t, x, v, force = _jittered_bench_run()
+    start = datetime.datetime(2026, 3, 1, 10, 0, 0)
+    rows = [
+        f"{(start + datetime.timedelta(microseconds=int(u))).isoformat(timespec='microseconds')},"
+        f"{float(1e3 * a)!r},{float(1e3 * b)!r},{float(1e-3 * f)!r}"
+        for u, a, b, f in zip(us, x, v, force, strict=True)
+    ]
+    data = tmp / "bench_iso.csv"
+    data.write_text("stamp,stroke_mm,speed_mm_s,load_kN\n" + "\n".join(rows) + "\n")
+    columns = {"time": "stamp", "displacement": "stroke_mm", "velocity": "speed_mm_s", "force": "load_kN"}
+    units = {"displacement": "mm", "velocity": "mm/s", "force": "kN"}
+    config = _bench_config(tmp / "iso.yaml", data, columns, units)
+    estimates, trace = _identify(config, tmp / "iso.h5")
+    return {"tmp": tmp, "t": t, "x": x, "v": v, "force": force, "estimates": estimates, "trace": trace}
+
+
+def test_bench_csv_with_jittered_iso_stamps_identifies_the_damper(iso_bench):
+    """Acceptance item 6: ISO time stamps at a jittered ~300 Hz, mm and kN; the training trace is in SI on a
+    uniform ~300 Hz grid, and the fit finds the Bingham damper it was made from."""
+    for name, value in iso_bench["estimates"].items():
+        assert value == pytest.approx(TRUTH[name], rel=0.02), (name, value)
+    trace = iso_bench["trace"]
+    t = trace["t"]
+    steps = np.diff(t)
+    assert t[0] == 0.0 and np.ptp(steps) < 1e-9 * t[-1]  # uniform
+    assert 1 / steps.mean() == pytest.approx(BENCH_RATE, rel=0.02)
+    assert t[-1] <= iso_bench["t"][-1] and t.size >= 0.97 * BENCH_N
+    # the force in N (not kN) and x in m: the written signals, interpolated onto the grid
+    truth = np.interp(t, iso_bench["t"], iso_bench["force"])
+    assert np.max(np.abs(trace["measured"] - truth)) < 0.01 * np.ptp(iso_bench["force"])
+    assert np.max(np.abs(trace["x"] - np.interp(t, iso_bench["t"], iso_bench["x"]))) < 1e-4
+    assert np.max(np.abs(trace["v"] - np.interp(t, iso_bench["t"], iso_bench["v"]))) < 2e-3
+
+
+def _write_mdf(path, t, x, v, force):
+    from asammdf import MDF, Signal
+
+    mdf = MDF(version="4.10")
+    mdf.append(
+        [
+            Signal(1e3 * x, t, name="Kolben.Weg[Ist]", unit="mm"),
+            Signal(1e3 * v, t, name="Kolben.Geschw", unit="mm/s"),
+            Signal(1e-3 * force, t, name="KMD F_ist (Zyl 1)", unit="kN"),
+        ]
+    )
+    mdf.save(path, overwrite=True)
+    mdf.close()
+    return path
+
+
+MDF_COLUMNS = {
+    "time": "t",
+    "displacement": "Kolben.Weg[Ist]",
+    "velocity": "Kolben.Geschw",
+    "force": "KMD F_ist (Zyl 1)",
+}
+
+
+@pytest.mark.parametrize("kind", ["mf4", "mat"])
+def test_the_same_bench_run_as_mdf4_or_mat_gives_the_same_estimates(iso_bench, kind):
+    """The same samples at the same stamps in MDF4 (odd channel names; the units the file declares, none in the
+    config) and in a MAT v5 struct (units in the config): the same grid, the same data, the same estimates."""
+    import scipy.io
+
+    tmp, t, x, v, force = (iso_bench[k] for k in ("tmp", "t", "x", "v", "force"))
+    if kind == "mf4":
+        data = _write_mdf(tmp / "bench.mf4", t, x, v, force)
+        config = _bench_config(tmp / "mdf.yaml", data, MDF_COLUMNS)
+    else:
+        data = tmp / "bench.mat"
+        run = {"time": t, "pos_mm": 1e3 * x, "vel_mm_s": 1e3 * v, "force_kN": 1e-3 * force}
+        scipy.io.savemat(data, {"run": run, "note": np.array([1.0, 2.0])})
+        columns = {"time": "time", "displacement": "pos_mm", "velocity": "vel_mm_s", "force": "force_kN"}
+        units = {"displacement": "mm", "velocity": "mm/s", "force": "kN"}
+        config = _bench_config(tmp / "mat.yaml", data, columns, units, variable="run")
+    estimates, trace = _identify(config, tmp / f"{kind}.h5")
+    ref = iso_bench["trace"]
+    np.testing.assert_allclose(trace["t"], ref["t"], rtol=0, atol=1e-12)
+    for key in ("x", "v", "measured"):
+        np.testing.assert_allclose(trace[key], ref[key], rtol=1e-12, atol=1e-12 * np.max(np.abs(ref[key])))
+    for name, value in estimates.items():
+        assert value == pytest.approx(iso_bench["estimates"][name], rel=1e-6), (name, value)
+
+
+def test_a_bench_channel_missing_from_the_mdf4_file_exits_2_listing_the_channels(iso_bench):
+    tmp, t, x, v, force = (iso_bench[k] for k in ("tmp", "t", "x", "v", "force"))
+    data = _write_mdf(tmp / "missing.mf4", t, x, v, force)
+    config = _bench_config(tmp / "missing.yaml", data, {**MDF_COLUMNS, "force": "KMD F_soll"})
+    out = tmp / "missing.h5"
+    res = vehid("identify", config, "-o", out)
+    assert res.returncode == 2, (res.stdout, res.stderr)
+    assert str(data) in res.stderr and "'KMD F_soll'" in res.stderr and "not in the file" in res.stderr
+    present = res.stderr.split("present: ")[1].strip()
+    assert present == "Kolben.Weg[Ist], Kolben.Geschw, KMD F_ist (Zyl 1)", res.stderr
+    assert "Traceback" not in res.stderr and not out.exists()
