@@ -413,3 +413,30 @@ def test_a_bench_channel_missing_from_the_mdf4_file_exits_2_listing_the_channels
     present = res.stderr.split("present: ")[1].strip()
     assert present == "Kolben.Weg[Ist], Kolben.Geschw, KMD F_ist (Zyl 1)", res.stderr
     assert "Traceback" not in res.stderr and not out.exists()
+
+
+def test_bench_csv_sample_rate_rebuilds_a_rounded_time_column_and_keeps_the_samples(tmp_path):
+    """data.sample_rate through the one reader: a time column in ms printed with 5 digits (up to 1 % round-off of
+    the step) is rebuilt as k / rate, the samples kept as printed; a rate the column does not follow is an
+    error naming data.sample_rate."""
+    from vehid_cli.bench import read_bench
+    from vehid_cli.errors import InputError
+
+    k = np.arange(300)
+    x, force = np.sin(k / 10), np.cos(k / 7)
+    path = tmp_path / "rounded.csv"
+    rows = "\n".join(
+        f"{1e3 * k_ / 1024:.5g},{a!r},{b!r}" for k_, a, b in zip(k, x.tolist(), force.tolist(), strict=True)
+    )
+    path.write_text("t_ms,pos_mm,force_N\n" + rows + "\n")
+    columns = {"time": "t_ms", "displacement": "pos_mm", "force": "force_N"}
+    units = {"time": "ms", "displacement": "mm"}
+    h = read_bench(path, columns, units, sample_rate=1024.0)
+    np.testing.assert_array_equal(h.t, k / 1024)
+    np.testing.assert_array_equal(h.x, 1e-3 * x)
+    np.testing.assert_array_equal(h.force, force)
+    np.testing.assert_array_equal(h.u, np.zeros(k.size))
+    np.testing.assert_allclose(h.v, np.gradient(1e-3 * x, k / 1024))
+    with pytest.raises(InputError) as err:
+        read_bench(path, columns, units, sample_rate=900.0)
+    assert err.value.key == "data.sample_rate" and "'t_ms'" in str(err.value) and "900 Hz" in str(err.value)
