@@ -419,8 +419,8 @@ def test_bench_csv_sample_rate_rebuilds_a_rounded_time_column_and_keeps_the_samp
     """data.sample_rate through the one reader: a time column in ms printed with 5 digits (up to 1 % round-off of
     the step) is rebuilt as k / rate, the samples kept as printed; a rate the column does not follow is an
     error naming data.sample_rate."""
-    from vehid_cli.bench import read_bench
     from vehid_cli.errors import InputError
+    from vehid_cli.systems.damper import read_bench
 
     k = np.arange(300)
     x, force = np.sin(k / 10), np.cos(k / 7)

@@ -4,15 +4,15 @@ A history is the prescribed piston motion x(t) [m] (extension positive), its vel
 control input u(t) [0..1] and, when measured, the force F(t) [N]. Excitations follow Fleps-Dezasse
 section 4.2: constant very low velocity in compression and rebound (gas force), a 25 mm sine at 0.8 Hz
 (Bouc-Wen or force-map row at one control input), a 25 mm sawtooth at ±0.15 m/s with control steps
-(time constants and delays).
+(time constants and delays). Measured runs are read by `systems.damper.read_bench` through `logger.read_record`
+(every file format; `UNITS` below is the package's one unit table).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -125,47 +125,3 @@ def sawtooth(
 
 def with_force(history: BenchHistory, force: NDArray, source: str | None = None) -> BenchHistory:
     return replace(history, force=np.asarray(force, dtype=float), source=source or history.source)
-
-
-# ------------------------------------------------------------------------------------------ measured
-
-
-def read_bench(
-    path: str | Path,
-    columns: Mapping[str, str | None],
-    units: Mapping[str, str],
-    source_key: str = "data",
-    sample_rate: float | None = None,
-    variable: str | None = None,
-) -> BenchHistory:
-    """A measured bench run, read by `logger.read_record` (one reader for every format: CSV with numeric or ISO
-    8601 time stamps, MDF4, MAT v5/v7.3, HDF5): the columns/channels named by the config (time, displacement,
-    force; velocity and control optional) in SI units on one uniform grid starting at t = 0. The velocity, when
-    not measured, is the central difference of x; the control, when not measured, is 0.
-
-    `units` gives a quantity's unit (time included); a channel without one has the unit its file declares (MDF4,
-    HDF5), else SI. Jittered time stamps are resampled at their median rate (logger.py). `sample_rate` [Hz]
-    declares the rate of a file whose time column was printed with too few digits to be uniform: the column must
-    then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it (the samples kept as they
-    are). `variable` names the MAT struct / HDF5 group holding the channels."""
-    from .logger import NominalRateError, read_record  # logger imports UNITS from here
-
-    for role in ("time", "displacement", "force"):
-        if not columns.get(role):
-            raise InputError(f"no column given for the {role}", key=f"{source_key}.columns.{role}")
-    channels = {role: str(name) for role, name in columns.items() if name and role != "time"}
-    given = {role: unit for role, unit in units.items() if role in channels}
-    try:
-        record = read_record(
-            path, channels, given, time=str(columns["time"]), time_unit=units.get("time", "s"),
-            nominal_rate=sample_rate, variable=variable,
-        )  # fmt: skip
-    except NominalRateError as exc:
-        raise InputError(exc.detail, source=exc.source, key=f"{source_key}.sample_rate") from None
-    t = record.t
-    x = record.channels["displacement"]
-    v = record.channels.get("velocity")
-    if v is None:
-        v = np.gradient(x, t)
-    u = record.channels.get("control", np.zeros(t.size))
-    return BenchHistory(t, x, v, u, record.channels["force"], source=record.source)

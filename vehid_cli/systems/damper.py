@@ -10,6 +10,7 @@ held-out runs, the real-time check and the force traces for the figures.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import ClassVar
@@ -19,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import __version__
-from ..bench import BenchHistory, read_bench, sawtooth, sine, triangle, with_force
+from ..bench import BenchHistory, sawtooth, sine, triangle, with_force
 from ..config import DamperConfig
 from ..crlb import CramerRao, cramer_rao_outputs
 from ..damper_fit import DamperSpec, RealTime, cost_J, fit, j_problem, realtime_check
@@ -27,6 +28,7 @@ from ..data import atomic_path, format_rows
 from ..errors import InputError
 from ..experiment import run_streams
 from ..h5io import h5_file
+from ..logger import NominalRateError, read_record
 from ..noise import estimate_noise_sigma
 from ..optimizers.base import Problem
 from ..provenance import provenance
@@ -112,6 +114,45 @@ def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, see
 
 
 MIN_RUN_S = 0.1  # [s] shortest bench run: damper_fit.realtime_check resamples it at steps up to 50 ms
+
+
+def read_bench(
+    path: str | Path,
+    columns: Mapping[str, str | None],
+    units: Mapping[str, str],
+    source_key: str = "data",
+    sample_rate: float | None = None,
+    variable: str | None = None,
+) -> BenchHistory:
+    """A measured bench run, read by `logger.read_record` (one reader for every format: CSV with numeric or ISO
+    8601 time stamps, MDF4, MAT v5/v7.3, HDF5): the columns/channels named by the config (time, displacement,
+    force; velocity and control optional) in SI units on one uniform grid starting at t = 0. The velocity, when
+    not measured, is the central difference of x; the control, when not measured, is 0.
+
+    `units` gives a quantity's unit (time included); a channel without one has the unit its file declares (MDF4,
+    HDF5), else SI. Jittered time stamps are resampled at their median rate (logger.py). `sample_rate` [Hz]
+    declares the rate of a file whose time column was printed with too few digits to be uniform: the column must
+    then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it (the samples kept as they
+    are). `variable` names the MAT struct / HDF5 group holding the channels."""
+    for role in ("time", "displacement", "force"):
+        if not columns.get(role):
+            raise InputError(f"no column given for the {role}", key=f"{source_key}.columns.{role}")
+    channels = {role: str(name) for role, name in columns.items() if name and role != "time"}
+    given = {role: unit for role, unit in units.items() if role in channels}
+    try:
+        record = read_record(
+            path, channels, given, time=str(columns["time"]), time_unit=units.get("time", "s"),
+            nominal_rate=sample_rate, variable=variable,
+        )  # fmt: skip
+    except NominalRateError as exc:
+        raise InputError(exc.detail, source=exc.source, key=f"{source_key}.sample_rate") from None
+    t = record.t
+    x = record.channels["displacement"]
+    v = record.channels.get("velocity")
+    if v is None:
+        v = np.gradient(x, t)
+    u = record.channels.get("control", np.zeros(t.size))
+    return BenchHistory(t, x, v, u, record.channels["force"], source=record.source)
 
 
 def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
