@@ -20,6 +20,7 @@ worker ignores Ctrl-C (the parent stops the pool) and exits by itself if its par
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -115,6 +116,22 @@ def _exit_with_parent(parent: int) -> None:
     os._exit(1)
 
 
+@contextlib.contextmanager
+def _silenced(thread: threading.Thread | None) -> Iterator[None]:
+    """Drop uncaught exceptions of `thread` (only that thread's) while the context lasts."""
+    previous = threading.excepthook
+
+    def hook(args: threading.ExceptHookArgs) -> None:
+        if thread is None or args.thread is not thread:
+            previous(args)
+
+    threading.excepthook = hook
+    try:
+        yield
+    finally:
+        threading.excepthook = previous
+
+
 class LocalExecutor(Executor):
     """This machine: in-process for one job, else a pool of `jobs` worker processes (default: all cores)."""
 
@@ -156,8 +173,14 @@ class LocalExecutor(Executor):
         if abort:
             # Runs in progress are redone on resume: stop them now rather than wait for them (a job scheduler's
             # SIGTERM leaves a short grace period). ProcessPoolExecutor has no public way to stop its workers.
-            for process in list(getattr(pool, "_processes", {}).values()):
-                process.terminate()
+            # The pool's manager thread then marks every pending future broken and, on CPython 3.11, raises for one
+            # already cancelled (InvalidStateError, or KeyError in a race with its own clean-up): a traceback on
+            # stderr from a pool we stopped on purpose. Silence that thread until the pool is shut down.
+            with _silenced(getattr(pool, "_executor_manager_thread", None)):
+                for process in list(getattr(pool, "_processes", {}).values()):
+                    process.terminate()
+                pool.shutdown(wait=True, cancel_futures=True)
+            return
         pool.shutdown(wait=True, cancel_futures=True)
 
 
