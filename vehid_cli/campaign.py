@@ -36,6 +36,7 @@ from .results import (
     write_campaign_h5,
 )
 from .systems import System, build_system
+from .systems.base import configured_data_file
 
 Log = Callable[[str], None]
 
@@ -191,13 +192,6 @@ def run_campaign(
         bound=bound, summary=summary, data_sha256=data_digest(system.data_file), system=system.name,
         findings=findings,
     )  # fmt: skip
-
-
-def configured_data_file(config: AnyConfig, data_file: str | Path | None) -> str | Path | None:
-    """The data file a campaign identifies from: `--data`, else a damper config's data.file (None: simulated)."""
-    if data_file is None and getattr(config, "data", None) is not None and config.data.file is not None:
-        return config.data.file
-    return data_file
 
 
 def check_same_campaign(output: Path, config: AnyConfig, data_file: str | Path | None) -> None:

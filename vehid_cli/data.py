@@ -93,6 +93,20 @@ def _timestamp(cell: str, decimal_comma: bool) -> datetime | None:
     return None
 
 
+def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8") -> str:
+    """A user's text file, or an InputError naming it: `what` it is ("config file") when missing or unreadable,
+    `expected` ("a CSV file") when it is a directory."""
+    source = str(path)
+    try:
+        return Path(path).read_text(encoding=encoding)
+    except FileNotFoundError:
+        raise InputError(f"{what} not found", source=source) from None
+    except IsADirectoryError:
+        raise InputError(f"is a directory, expected {expected}", source=source) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {what} ({exc.__class__.__name__}: {exc})", source=source) from None
+
+
 def read_table(path: str | Path, *, timestamps: Collection[str] = ()) -> Table:
     """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column.
 
@@ -100,14 +114,7 @@ def read_table(path: str | Path, *, timestamps: Collection[str] = ()) -> Table:
     A column named in `timestamps` may hold ISO 8601 date-times (logger exports): it reads as seconds after the
     first row's."""
     source = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")  # tolerate a byte-order mark (spreadsheet exports)
-    except FileNotFoundError:
-        raise InputError("file not found", source=source) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a CSV file", source=source) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read file ({exc.__class__.__name__}: {exc})", source=source) from None
+    text = read_text(path, "file", "a CSV file", encoding="utf-8-sig")  # tolerate a BOM (spreadsheet exports)
     lines = [
         (no, line)
         for no, line in enumerate(text.splitlines(), start=1)

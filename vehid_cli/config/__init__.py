@@ -17,6 +17,7 @@ from typing import Any, Union
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from ..data import read_text
 from ..errors import InputError
 from .common import (
     Algorithm,
@@ -53,14 +54,7 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
     """Read a YAML config, apply `--set dotted.key=value` overrides, validate. Raises InputError."""
     path = Path(path)
     source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("config file not found", source=source) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a YAML config file", source=source) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read config file ({exc.__class__.__name__}: {exc})", source=source) from None
+    text = read_text(path, "config file", "a YAML config file")
     try:
         raw = yaml.safe_load(text)
     except yaml.YAMLError as exc:

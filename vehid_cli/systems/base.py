@@ -44,6 +44,14 @@ class Box:
     truth: NDArray | None  # the true values when known
 
 
+def configured_data_file(config: AnyConfig, data_file: str | Path | None) -> str | Path | None:
+    """The data file a campaign identifies from: `--data`, else a damper config's data.file (None: simulated)."""
+    data = getattr(config, "data", None)
+    if data_file is None and data is not None and data.file is not None:
+        return data.file
+    return data_file
+
+
 class System(ABC):
     """What a system under test offers a campaign. Subclasses set `name` and implement the hooks."""
 

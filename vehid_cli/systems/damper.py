@@ -33,7 +33,7 @@ from ..noise import estimate_noise_sigma
 from ..optimizers.base import Problem
 from ..provenance import provenance
 from ..records import RunRecord
-from .base import Box, Simulated, System
+from .base import Box, Simulated, System, configured_data_file
 
 BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "u", "force": "force"}
 
@@ -361,8 +361,7 @@ class DamperSystem(System):
 
     def __init__(self, config: DamperConfig, data_file: str | Path | None = None):
         cfg = config
-        if data_file is None and cfg.data is not None and cfg.data.file is not None:
-            data_file = cfg.data.file
+        data_file = configured_data_file(cfg, data_file)
         self.config = cfg
         self.data_file = None if data_file is None else str(data_file)
         self.spec = configured_spec(cfg)
@@ -377,18 +376,24 @@ class DamperSystem(System):
         )  # fmt: skip
         self.measured = None if synthetic else load_measured(cfg, self.data_file)
         self.held_out = () if synthetic or cfg.data is None else tuple(str(p) for p in cfg.data.validate_files)
-        if synthetic:
-            clean = self.spec.simulate(bench_history(cfg), cfg.bench.substeps)
-            sigma = cfg.noise.level * np.std(clean)
+        if synthetic:  # run 0's bench run, kept: its bound, traces and real-time check all use it
+            run0 = simulate_bench(cfg, run_streams(cfg.identify.seed, 0).noise)
+            self.first, sigma = run0.history, run0.sigma
             self.sigma_source = f"force noise {cfg.noise.level:g} x std of the clean force"
         else:
+            self.first = self.measured
             sigma = float(estimate_noise_sigma(self.measured.force[:, None])[0])
             self.sigma_source = "estimated from the data (third differences)"
         self.sigma = {"force": np.array([sigma])}
 
     @property
     def residual_samples(self) -> int:
-        return int(self.reference(0).t.size) if self.data_file is None else int(self.measured.t.size)
+        return int(self.first.t.size)
+
+    @property
+    def _bounds(self) -> dict[str, tuple[float, float]]:
+        """The search box by name."""
+        return {n: (lo, hi) for n, lo, hi in zip(self.names, self.box.lower, self.box.upper, strict=True)}
 
     def data_files(self) -> tuple[str, ...]:
         stages = tuple(str(s.file) for s in self.config.identify.stages if s.file is not None)
@@ -419,13 +424,12 @@ class DamperSystem(System):
         return Simulated(run, summary, f"{cfg.damper.model} on a {cfg.bench.excitation} bench")
 
     def reference(self, run: int) -> BenchHistory:
-        if self.measured is not None:
-            return self.measured
+        if self.measured is not None or run == 0:
+            return self.first
         return simulate_bench(self.config, run_streams(self.config.identify.seed, run).noise).history
 
     def problem(self, reference: BenchHistory) -> Problem:
-        box = {n: (lo, hi) for n, lo, hi in zip(self.names, self.box.lower, self.box.upper, strict=True)}
-        return j_problem(self.spec, reference, self.names, box, self.config.bench.substeps)[0]
+        return j_problem(self.spec, reference, self.names, self._bounds, self.config.bench.substeps)[0]
 
     def bound(self, at: NDArray | None = None) -> CramerRao:
         """The Cramér–Rao bound of the bench run (run 0's motion) for white force noise of the campaign's sigma, at
@@ -460,7 +464,7 @@ class DamperSystem(System):
         synthetic = self.data_file is None
         history = simulate_bench(cfg, streams.noise).history if synthetic else self.measured
         x0 = self.start(streams.optimizer)
-        box = {n: (lo, hi) for n, lo, hi in zip(self.names, self.box.lower, self.box.upper, strict=True)}
+        box = self._bounds
         if cfg.identify.stages:
             result = _fit_in_stages(
                 cfg, self.spec, self.measured, self.names, box, x0, streams.noise, streams.optimizer
@@ -494,14 +498,12 @@ class DamperSystem(System):
             for stage, h in zip(cfg.identify.stages, histories, strict=True):
                 traces.append(_trace(f"stage:{stage.name}", h, final, substeps))
         else:
-            history = self.reference(0)
+            history = self.first
             label = Path(self.data_file).stem if self.data_file else f"bench-{history.source.removeprefix('bench:')}"
             traces.append(_trace(f"train:{label}", history, final, substeps))
         for path in self.held_out:
             trace = _trace(f"validate:{Path(path).stem}", load_measured(cfg, path), final, substeps)
             traces.append(trace)
             validation.append((path, trace.J))
-        check = simulate_bench(cfg, run_streams(cfg.identify.seed, 0).noise).history if self.measured is None else (
-            self.measured)  # fmt: skip
-        realtime = realtime_check(final, check, dt=cfg.identify.realtime_dt)
+        realtime = realtime_check(final, self.first, dt=cfg.identify.realtime_dt)
         return Findings(cfg.damper.model, final.names, final.row(), tuple(validation), realtime, tuple(traces))
