@@ -16,6 +16,16 @@ HDF5-based v7.3), HDF5 (`.h5`/`.hdf5`) and CSV exports (`.csv`/`.txt`, numeric o
 - time stamps that jitter (steps within ±50 % of the median step) are resampled the same way at the median rate;
   a larger step is a gap (a dropped block of samples) and an error, as is a time that goes backwards.
 
+`resample=False` refuses all of this: channels at different rates, jittered stamps or samples off the common grid
+are an error, and every value in the Record is a sample of the file. Either way the Record keeps each channel's
+own rate and sample times (`Record.rates`, `Record.stamps`), and `Record.native_samples` gives the grid points
+that hold a channel's own samples (a 200 Hz channel on a 1 kHz grid: every 5th).
+
+A MAT or HDF5 file holds one time vector for all channels (`t`, `time` or the one named by `time=`), and a channel
+`X` sampled otherwise its own beside it: `t_X` (HDF5: in X's group, `acc/t_X` for `acc/X`; see `own_time_name`).
+A MAT v5 file may declare its channels' units in a struct `units` (file name -> unit) beside them
+(`logger_write.write_record` writes both).
+
 Every problem a user can fix is an `InputError` naming the file and the channel (exit status 2).
 """
 
@@ -53,13 +63,24 @@ NOMINAL_RATE_MATCH = 0.05  # time stamps printed off a nominal rate: each step w
 SI_FACTORS: dict[str, float] = {unit: f for table in UNITS.values() for unit, f in table.items()}
 
 
+NATIVE_MATCH = 1e-3  # a channel's sample within 1e-3 of a grid step of a grid point is on that grid point
+
+
 @dataclass(frozen=True)
 class Record:
-    """A recorded run: channels (our names) in SI units on one uniform time grid."""
+    """A recorded run: channels (our names) in SI units on one uniform time grid.
+
+    `rates` and `stamps` keep what the grid hides: a channel's own sampling rate in the file and its own sample
+    times, so that a channel up-sampled onto the grid can be compared at its own samples only
+    (`native_samples`) rather than at the spline values between them."""
 
     t: NDArray  # (n,) [s] since the start of the record, uniform
     channels: dict[str, NDArray]  # name -> (n,) values in SI units
     source: str
+    rates: dict[str, float]  # name -> its own sampling rate in the file [Hz] (`_rate`; of its time vector)
+    # name -> its own sample times [s] on the axis of `t` (the file's stamps less the record's start), those
+    # within [t[0], t[-1]] (to 1e-3 of a grid step): after a window, those inside the window
+    stamps: dict[str, NDArray]
 
     @property
     def rate(self) -> float:
@@ -74,6 +95,41 @@ class Record:
                 source=self.source,
             )
         return self.channels[name]
+
+    def native_samples(self, name: str, *, nearest: bool = False) -> NDArray[np.intp]:
+        """The grid indices (into `t` and the channel) at which channel `name` was sampled in the file.
+
+        - at the grid rate or faster (within 1 %, `RATE_MATCH`): every index. Every grid point then carries the
+          channel, though not always a sample of the file: stamps off the grid were interpolated, and a faster
+          channel was low-passed before it was down-sampled (see the module docstring);
+        - slower, with every sample within 1e-3 of a step of a grid point (its rate an integer fraction of the grid
+          rate, its samples in phase with the grid: a 200 Hz channel on a 1 kHz grid): the indices of those grid
+          points, where the values are the file's samples (to round-off; between them they are a cubic spline);
+        - slower but off the grid (a rate that does not divide the grid rate, a phase between grid points, or
+          jittered stamps): no grid point holds its samples, so this is an InputError, unless `nearest`: then the
+          (distinct) grid points nearest to its samples, up to half a step away, where the values are
+          interpolated, not sampled; compare at them knowing so.
+
+        After a window the indices refer to the windowed grid."""
+        self.channel(name)
+        n = self.t.size
+        if self.rates[name] >= self.rate * (1 - RATE_MATCH):
+            return np.arange(n)
+        position = (self.stamps[name] - self.t[0]) * self.rate
+        k = np.rint(position)
+        off = np.abs(position - k)
+        if off.size and float(np.max(off)) > NATIVE_MATCH:
+            if not nearest:
+                worst = int(np.argmax(off))
+                raise InputError(
+                    f"channel '{name}' ({self.rates[name]:g} Hz) is not sampled on points of the {self.rate:g} Hz "
+                    f"grid: its sample at t = {self.stamps[name][worst]:.9g} s is {off[worst]:.3g} of a step from "
+                    f"the nearest; nearest=True gives the nearest grid points (values interpolated there), or read "
+                    f"the file at a grid rate its samples fall on",
+                    source=self.source,
+                )
+            return np.unique(np.clip(k, 0, n - 1)).astype(np.intp)
+        return k.astype(np.intp)
 
 
 def _did_you_mean(name: str, known) -> str:
@@ -238,16 +294,47 @@ def _container(top: dict, variable: str | None, channels: Mapping[str, str], src
     return top[structs[0]]
 
 
+def own_time_name(name: str) -> str:
+    """The name of the time vector of channel `name` alone in a MAT or HDF5 file: `t_<name>` beside it (HDF5: in
+    its group, `acc/t_X` for `acc/X`). A channel without one has the file's common time vector."""
+    head, _, leaf = name.strip("/").rpartition("/")
+    return f"{head}/t_{leaf}" if head else f"t_{leaf}"
+
+
+def _stamps_of(channels, names, get, common) -> dict[str, tuple[NDArray, str]]:
+    """Each channel's time vector (our name -> stamps, name): its own (`own_time_name`) if the file has one, else
+    the common one, `common()`, read only when a channel needs it."""
+    stamps, shared = {}, []
+    for ours, theirs in channels.items():
+        own = own_time_name(theirs)
+        if own in names:
+            stamps[ours] = get(own), own
+        else:
+            if not shared:
+                shared.append(common())
+            stamps[ours] = shared[0]
+    return stamps
+
+
 def _collect(container: dict, channels, time, rate, src) -> dict[str, _Raw]:
     names = list(container)
     first = next(iter(channels.values()), None)
     n = np.size(container[first]) if first in container else 0
-    t, tname = _time_vector(time, [c for c in TIME_NAMES if c in container], container.__getitem__, names, src, rate, n)
-    raw = {}
+    declared = container.get("units") if isinstance(container.get("units"), dict) else {}
+
+    def common():
+        found = [c for c in TIME_NAMES if c in container]
+        return _time_vector(time, found, container.__getitem__, names, src, rate, n)
+
     for ours, theirs in channels.items():
         if theirs not in container:
             raise _missing("channel", theirs, names, src, key=ours)
-        raw[ours] = _Raw(t, _numeric(container[theirs], src, f"channel '{theirs}'"), time=tname)
+    stamps = _stamps_of(channels, names, lambda k: _numeric(container[k], src, f"time vector '{k}'"), common)
+    raw = {}
+    for ours, theirs in channels.items():
+        t, tname = stamps[ours]
+        y = _numeric(container[theirs], src, f"channel '{theirs}'")
+        raw[ours] = _Raw(t, y, str(declared.get(theirs, "")), time=tname)
     return raw
 
 
@@ -289,13 +376,20 @@ def _read_hdf5(path, channels, time, rate, variable, matlab: bool = False) -> di
 
         first = next(iter(channels.values()), None)
         n = group[first].size if first in datasets else 0
-        t, tname = _time_vector(time, [c for c in TIME_NAMES if c in datasets], get, datasets, src, rate, n)
+
+        def common():
+            found = [c for c in TIME_NAMES if c in datasets]
+            return _time_vector(time, found, get, datasets, src, rate, n)
+
+        keys = {ours: theirs.strip("/") for ours, theirs in channels.items()}
+        for ours, theirs in channels.items():
+            if keys[ours] not in datasets:
+                raise _missing("dataset" if not matlab else "channel", theirs, datasets, src, key=ours)
+        stamps = _stamps_of(keys, datasets, lambda k: _numeric(get(k), src, f"time vector '{k}'"), common)
         raw = {}
         for ours, theirs in channels.items():
-            key = theirs.strip("/")
-            if key not in datasets:
-                raise _missing("dataset" if not matlab else "channel", theirs, datasets, src, key=ours)
-            raw[ours] = _Raw(t, _numeric(get(key), src, f"channel '{theirs}'"), unit(key), time=tname)
+            t, tname = stamps[ours]
+            raw[ours] = _Raw(t, _numeric(get(keys[ours]), src, f"channel '{theirs}'"), unit(keys[ours]), time=tname)
         return raw
 
 
@@ -371,21 +465,70 @@ def _rate(raw: _Raw, dt: float) -> float:
     return float(f"{rate:.9g}")
 
 
+def _grid_slice(raw: _Raw, dt: float, grid: NDArray) -> slice | None:
+    """The run of the channel's samples that lies on the grid (each stamp within UNIFORM_TOLERANCE of a step of
+    its grid point), None if there is none: the channel is then resampled."""
+    first = int(round((grid[0] - raw.t[0]) / dt))
+    keep = slice(first, first + grid.size)
+    if first < 0 or keep.stop > raw.t.size:
+        return None
+    return keep if np.allclose(raw.t[keep], grid, rtol=0, atol=UNIFORM_TOLERANCE * dt) else None
+
+
 def _onto(raw: _Raw, dt: float, grid: NDArray, rate: float) -> NDArray:
-    """A channel on the grid: anti-alias low-pass first when its rate is above the grid's, then a cubic spline."""
+    """A channel on the grid: its own samples when they lie on the grid (`_grid_slice`); else an anti-alias
+    low-pass first when its rate is above the grid's, then a cubic spline."""
     from scipy.interpolate import CubicSpline
     from scipy.signal import butter, sosfiltfilt
 
     t, y = raw.t, raw.y
     own = 1.0 / dt
+    if own <= rate * (1 + RATE_MATCH) and (keep := _grid_slice(raw, dt, grid)) is not None:
+        return y[keep].copy()
     if own > rate * (1 + RATE_MATCH):
         if not _uniform(t, dt):  # filter on a uniform grid: resample the jittered stamps at their median rate first
             tu = t[0] + np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1) * dt
             y, t = CubicSpline(t, y)(tu), tu
         sos = butter(DOWNSAMPLE_ORDER, DOWNSAMPLE_CUTOFF * rate, fs=own, output="sos")
         y = sosfiltfilt(sos, y)
-    on_grid = t.size == grid.size and np.allclose(t, grid, rtol=0, atol=UNIFORM_TOLERANCE * dt)
-    return y.copy() if on_grid else CubicSpline(t, y)(grid)
+    return CubicSpline(t, y)(grid)
+
+
+RESAMPLE_HINT = "allow resampling to read it (resample=True; config key data.resample)"
+
+
+def _refuse_resampling(raw, channels, steps, rates, rate, src) -> None:
+    """`resample=False`: every channel uniform and at one rate (within RATE_MATCH), that of `rate` if given."""
+    for ours, r in raw.items():
+        if not _uniform(r.t, steps[ours]):
+            steps_ = np.diff(r.t)
+            raise InputError(
+                f"channel '{ours}' ('{channels[ours]}'): time stamps{_named(r.time, ' in')} jitter (steps "
+                f"{steps_.min():.6g} to {steps_.max():.6g} s about the median {steps[ours]:.6g} s): reading them "
+                f"means resampling at the median rate; {RESAMPLE_HINT}",
+                source=src,
+            )
+    reference = rate if rate is not None else max(rates.values())
+    if any(abs(f - reference) > RATE_MATCH * reference for f in rates.values()):
+        listed = ", ".join(f"'{ours}' ('{channels[ours]}') {f:g} Hz" for ours, f in rates.items())
+        what = f"differ from the grid rate {rate:g} Hz" if rate is not None else "differ"
+        raise InputError(
+            f"the channels' rates {what}: {listed}; one grid for them means resampling; {RESAMPLE_HINT}",
+            source=src,
+        )
+
+
+def _refuse_off_grid(ours: str, theirs: str, raw: _Raw, dt: float, grid: NDArray, src: str) -> None:
+    """`resample=False`: a channel at the grid rate whose samples are not on the common grid (a phase between
+    grid points, or a rate within 1 % of the grid's that drifts off it)."""
+    if _grid_slice(raw, dt, grid) is None:
+        k = int(np.argmin(np.abs(raw.t - grid[0])))
+        raise InputError(
+            f"channel '{ours}' ('{theirs}'): its samples are not on the common grid ({grid.size} samples from "
+            f"{grid[0]:.9g} s at {1 / (grid[1] - grid[0]):g} Hz; its nearest sample to the start is at "
+            f"{raw.t[k]:.9g} s, its step {dt:.9g} s): reading it means resampling; {RESAMPLE_HINT}",
+            source=src,
+        )
 
 
 def read_record(
@@ -399,6 +542,7 @@ def read_record(
     variable: str | None = None,
     time_unit: str = "s",
     nominal_rate: float | None = None,
+    resample: bool = True,
 ) -> Record:
     """Read the `channels` (our name -> the name in the file) of a logger file as one Record in SI units.
 
@@ -412,7 +556,10 @@ def read_record(
     struct (or HDF5 group) that holds the channels when there is more than one. `time_unit` (bench.UNITS['time'])
     is the unit of a numeric time column/vector (CSV, MAT, HDF5; MDF4 stamps are seconds). `nominal_rate` [Hz]
     declares stamps printed with too few digits to be uniform: each step must be within 5 % of 1 / rate, and the
-    stamps are rebuilt as t0 + k / rate with the samples kept as they are (NominalRateError otherwise)."""
+    stamps are rebuilt as t0 + k / rate with the samples kept as they are (NominalRateError otherwise).
+    `resample=False` reads samples as they are, never resampled: channels at different rates (beyond 1 %), a grid
+    `rate` other than theirs, jittered stamps or samples between the grid points are an InputError naming the
+    channels and rates. The Record keeps each channel's own rate and sample times (`Record.native_samples`)."""
     path = Path(path)
     src = str(path)
     units = dict(units or {})
@@ -461,7 +608,10 @@ def read_record(
             _on_nominal_rate(ours, channels[ours], r, nominal_rate, src)
             steps[ours] = 1.0 / nominal_rate
 
-    grid_rate = rate if rate is not None else max(_rate(r, steps[ours]) for ours, r in raw.items())
+    rates = {ours: _rate(r, steps[ours]) for ours, r in raw.items()}
+    if not resample:
+        _refuse_resampling(raw, channels, steps, rates, rate, src)
+    grid_rate = rate if rate is not None else max(rates.values())
     start = max(float(r.t[0]) for r in raw.values())
     stop = min(float(r.t[-1]) for r in raw.values())
     n = int(math.floor((stop - start) * grid_rate + 1e-6)) + 1  # 1e-6: a sample at `stop` despite round-off
@@ -471,6 +621,9 @@ def read_record(
             source=src,
         )
     grid = start + np.arange(n) / grid_rate
+    if not resample:
+        for ours, r in raw.items():
+            _refuse_off_grid(ours, channels[ours], r, steps[ours], grid, src)
     values = {ours: _onto(r, steps[ours], grid, grid_rate) for ours, r in raw.items()}
     t = np.arange(n) / grid_rate
     if window is not None:
@@ -483,7 +636,10 @@ def read_record(
             )
         t = t[keep]
         values = {k: v[keep] for k, v in values.items()}
-    return Record(t=t, channels=values, source=src)
+    near = NATIVE_MATCH / grid_rate
+    stamps = {ours: r.t - start for ours, r in raw.items()}
+    stamps = {ours: s[(s >= t[0] - near) & (s <= t[-1] + near)] for ours, s in stamps.items()}
+    return Record(t=t, channels=values, source=src, rates=rates, stamps=stamps)
 
 
 def remove_offset(record: Record, names: Sequence[str], mode: str = "mean") -> Record:
