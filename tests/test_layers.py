@@ -21,7 +21,8 @@ PACKAGE = ROOT / "vehid_cli"
 # the package (a package's __init__ is the package's name); a prefix ending in "." covers a subpackage.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("__init__", "errors", "provenance", "locking", "progress", "interrupt"),  # foundations
-    ("data", "h5io", "bench", "logger", "noise", "optimizers", "optimizers."),  # files, bench motions, noise, solvers
+    # files (logger files read and written), bench motions, noise, solvers
+    ("data", "h5io", "bench", "logger", "logger_write", "noise", "optimizers", "optimizers."),
     ("models", "models."),  # force laws and matrices: own their parameter tables and defaults
     ("sim", "sim."),  # the generic kernel and the car/bench adapters beside it
     ("config", "config."),  # validated configs: one module per system around a shared identify
