@@ -190,3 +190,73 @@ def test_a_window_outside_the_record_names_the_window_and_the_span(files):
 def test_an_unknown_suffix_and_a_missing_file(tmp_path):
     raises(tmp_path / "run.xlsx", "run.xlsx", ".mf4", channels={"a": "A"})
     raises(tmp_path / "none.mf4", "none.mf4", "not found", channels={"a": "A"})
+
+
+# ------------------------------------------------------------------------------------------ native samples
+
+
+def test_rates_and_native_samples_of_a_200hz_channel_on_the_1khz_grid(files):
+    rec = read(files, "mf4")
+    assert rec.rates == {"acc_fl": 1000.0, "acc_hf": 1000.0, "acc_rr": 200.0, "disp_fl": 200.0}
+    assert np.array_equal(rec.native_samples("acc_fl"), np.arange(rec.t.size))
+    k = rec.native_samples("acc_rr")
+    assert np.array_equal(k, np.arange(0, rec.t.size, 5))  # every 5th grid point: 0, 5 ms, ..., 3.995 s
+    t200 = np.arange(800) / 200  # the written 200 Hz stamps
+    for ours in ("acc_rr", "disp_fl"):
+        # the file's samples, to round-off (between them a spline errs up to 1e-3 of the amplitude)
+        assert np.max(np.abs(rec.channels[ours][k] - truth(ours, t200))) < 1e-12 * amplitude(ours)
+
+
+def test_native_samples_after_a_window_and_an_offset_removal_refer_to_the_windowed_grid(files):
+    rec = remove_offset(read(files, "mf4", window=(1.0021, 2.5)), ["acc_rr"])
+    assert rec.t[0] == pytest.approx(1.003) and rec.rates["acc_rr"] == 200.0
+    k = rec.native_samples("acc_rr")
+    assert rec.t[k[0]] == pytest.approx(1.005) and np.all(np.diff(k) == 5)
+    assert rec.t[k[-1]] == pytest.approx(2.495)
+    t200 = np.arange(201, 500) / 200
+    shifted = truth("acc_rr", t200) - np.mean(truth("acc_rr", rec.t))  # the offset removed: the window's mean
+    assert np.max(np.abs(rec.channels["acc_rr"][k] - shifted)) < 1e-3 * amplitude("acc_rr")
+    assert np.max(np.abs(np.diff(rec.channels["acc_rr"][k]) - np.diff(truth("acc_rr", t200)))) < 1e-12
+
+
+def test_native_samples_off_the_grid_are_an_error_unless_nearest(files):
+    rec = read(files, "mf4", channels={"acc_fl": "ACC_FL_Z", "acc_rr": "ACC_RR_Z"}, rate=300.0)
+    assert rec.rates["acc_rr"] == 200.0  # 200 Hz does not divide 300 Hz: every other sample is between grid points
+    with pytest.raises(InputError, match=r"acc_rr.*200 Hz.*300 Hz grid.*nearest=True"):
+        rec.native_samples("acc_rr")
+    k = rec.native_samples("acc_rr", nearest=True)
+    t200 = np.arange(800) / 200
+    t200 = t200[t200 <= rec.t[-1]]
+    assert k.size == t200.size and np.max(np.abs(rec.t[k] - t200)) <= 0.5 / 300 + 1e-12
+
+
+# ------------------------------------------------------------------------------------------ resample=False
+
+
+def test_without_resampling_different_rates_are_an_error_naming_each_channel_and_rate(files):
+    msg = raises(
+        (files, "mf4"), str(files["mf4"]), "'acc_fl' ('ACC_FL_Z') 1000 Hz", "'acc_rr' ('ACC_RR_Z') 200 Hz",
+        "data.resample", channels={"acc_fl": "ACC_FL_Z", "acc_rr": "ACC_RR_Z"}, resample=False,
+    )  # fmt: skip
+    assert "resampl" in msg
+    raises((files, "mf4"), "grid rate 500 Hz", channels={"acc_fl": "ACC_FL_Z"}, rate=500.0, resample=False)
+    # one rate: read as the file's samples, exactly
+    rec = read(files, "mf4", channels={"acc_fl": "ACC_FL_Z", "acc_hf": "ACC_HF_Z"}, resample=False)
+    assert rec.t.size == 4000 and np.max(np.abs(rec.channels["acc_fl"] - truth("acc_fl", rec.t))) < 1e-15
+
+
+def test_without_resampling_jittered_stamps_are_an_error(files):
+    raises((files, "csv"), str(files["csv"]), "acc_fl", "jitter", "resample=True", channels={"acc_fl": "ACC_FL_Z"},
+           resample=False)  # fmt: skip
+
+
+def test_without_resampling_a_channel_between_the_grid_points_is_an_error(tmp_path):
+    path = tmp_path / "phase.mat"
+    t = np.arange(100) / 100
+    scipy.io.savemat(path, {"t": t, "A": np.sin(t), "B": np.cos(t), "t_B": t + 0.004})  # B 4 ms after A
+    # the grid starts at the latest first sample, B's: A's samples fall 4 ms after grid points
+    raises(path, str(path), "'a' ('A')", "not on the common grid", channels={"a": "A", "b": "B"}, resample=False)
+    rec = read_record(path, {"a": "A", "b": "B"})  # resampled: A's spline at B's stamps
+    assert rec.t.size == 99 and rec.rates == {"a": 100.0, "b": 100.0}
+    assert np.array_equal(rec.channels["b"], np.cos(t[:99]))  # B's own samples, on the grid
+    assert np.max(np.abs(rec.channels["a"] - np.sin(rec.t + 0.004))) < 1e-6
