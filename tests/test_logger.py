@@ -260,3 +260,15 @@ def test_without_resampling_a_channel_between_the_grid_points_is_an_error(tmp_pa
     assert rec.t.size == 99 and rec.rates == {"a": 100.0, "b": 100.0}
     assert np.array_equal(rec.channels["b"], np.cos(t[:99]))  # B's own samples, on the grid
     assert np.max(np.abs(rec.channels["a"] - np.sin(rec.t + 0.004))) < 1e-6
+
+
+def test_the_bench_reader_passes_resample_false_on(tmp_path):
+    from vehid_cli.systems.damper import read_bench
+
+    path = tmp_path / "bench.csv"
+    t = csv_times()[:50]  # jittered stamps
+    path.write_text("t,x,F\n" + "".join(f"{float(s)!r},{float(np.sin(s))!r},1.0\n" for s in t))
+    columns = {"time": "t", "displacement": "x", "force": "F"}
+    assert read_bench(path, columns, {}).t.size > 3  # resampled by default
+    with pytest.raises(InputError, match="jitter.*data.resample"):
+        read_bench(path, columns, {}, resample=False)

@@ -114,6 +114,11 @@ class DamperData(_Section):
     variable: str | None = Field(
         None, description="the MAT struct (or HDF5 group) holding the channels, when the file has more than one"
     )
+    resample: bool = Field(
+        True,
+        description="put channels at different rates or with jittered time stamps on one grid (logger.read_record); "
+        "false: read the samples as they are, and such a file is an error",
+    )
     validate_files: tuple[str, ...] = Field((), alias="validate", description="held-out runs, same columns")
 
     model_config = ConfigDict(extra="forbid", frozen=True, strict=False, populate_by_name=True)

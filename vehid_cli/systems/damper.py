@@ -123,6 +123,7 @@ def read_bench(
     source_key: str = "data",
     sample_rate: float | None = None,
     variable: str | None = None,
+    resample: bool = True,
 ) -> BenchHistory:
     """A measured bench run, read by `logger.read_record` (one reader for every format: CSV with numeric or ISO
     8601 time stamps, MDF4, MAT v5/v7.3, HDF5): the columns/channels named by the config (time, displacement,
@@ -133,7 +134,8 @@ def read_bench(
     HDF5), else SI. Jittered time stamps are resampled at their median rate (logger.py). `sample_rate` [Hz]
     declares the rate of a file whose time column was printed with too few digits to be uniform: the column must
     then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it (the samples kept as they
-    are). `variable` names the MAT struct / HDF5 group holding the channels."""
+    are). `variable` names the MAT struct / HDF5 group holding the channels. `resample=False` refuses channels
+    at different rates, jittered stamps and samples off the grid (`read_record`)."""
     for role in ("time", "displacement", "force"):
         if not columns.get(role):
             raise InputError(f"no column given for the {role}", key=f"{source_key}.columns.{role}")
@@ -142,7 +144,7 @@ def read_bench(
     try:
         record = read_record(
             path, channels, given, time=str(columns["time"]), time_unit=units.get("time", "s"),
-            nominal_rate=sample_rate, variable=variable,
+            nominal_rate=sample_rate, variable=variable, resample=resample,
         )  # fmt: skip
     except NominalRateError as exc:
         raise InputError(exc.detail, source=exc.source, key=f"{source_key}.sample_rate") from None
@@ -167,7 +169,8 @@ def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
         window, step = data.window, data.decimate
     rate = None if data is None else data.sample_rate
     variable = None if data is None else data.variable
-    history = read_bench(path, columns, units, sample_rate=rate, variable=variable)
+    resample = True if data is None else data.resample
+    history = read_bench(path, columns, units, sample_rate=rate, variable=variable, resample=resample)
     if window is not None:
         history = history.window(history.t[0] + window[0], history.t[0] + window[1])
     if step > 1:
