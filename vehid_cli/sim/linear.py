@@ -37,8 +37,8 @@ class Response:
     q: NDArray  # (..., n, 7) coordinates [m, rad]
     qd: NDArray  # (..., n, 7) velocities
     qdd: NDArray  # (..., n, 7) accelerations
-    disp: NDArray  # (..., n, 4) vertical displacement of the body points z1..z4 [m]
-    acc: NDArray  # (..., n, 4) vertical acceleration of the body points [m/s²]
+    disp: NDArray  # (..., n, nb) vertical displacement of the body points (default z1..z4 above the corners) [m]
+    acc: NDArray  # (..., n, nb) vertical acceleration of the body points [m/s²]
 
     @property
     def bounce(self) -> NDArray:
@@ -56,15 +56,19 @@ class Response:
         return self.q[..., 2]
 
 
-def simulate(mats: FullCarMatrices, road: NDArray, dt: float, integrator: Integrator = "exact") -> Response:
-    """Respond to the road (n, 4) [m] sampled every dt [s]: one call for the whole batch of cars."""
+def simulate(
+    mats: FullCarMatrices, road: NDArray, dt: float, integrator: Integrator = "exact", points: NDArray | None = None
+) -> Response:
+    """Respond to the road (n, 4) [m] sampled every dt [s]: one call for the whole batch of cars. `points`
+    (..., nb, 3), rows [1, y, -x], are the body points whose motion `disp` and `acc` give (default the corners',
+    mats.G; models.sensors.Layout.points)."""
     road = np.asarray(road, dtype=float)
     if road.ndim < 2 or road.shape[-1] != 4:
         raise ValueError(f"road must be (..., n, 4), got {road.shape}")
     n = road.shape[-2]
     t = np.arange(n) * dt
     if integrator == "exact":
-        q, qd, qdd, disp, acc = modal_foh(mats, road, dt)
+        q, qd, qdd, disp, acc = modal_foh(mats, road, dt, points)
         return Response(t=t, q=q, qd=qd, qdd=qdd, disp=disp, acc=acc)
     if integrator == "exact-reference":
         q, qd, qdd = _exact_foh(mats, road, dt)
@@ -72,7 +76,8 @@ def simulate(mats: FullCarMatrices, road: NDArray, dt: float, integrator: Integr
         q, qd, qdd = _newmark(mats, road, dt)
     else:
         raise ValueError(f"unknown integrator {integrator!r}")
-    Gt = np.swapaxes(mats.G, -1, -2)[..., None, :, :]  # (..., 1, 3, 4)
+    G = mats.G if points is None else np.asarray(points, dtype=float)
+    Gt = np.swapaxes(G, -1, -2)[..., None, :, :]  # (..., 1, 3, nb)
     disp = (q[..., None, :3] @ Gt)[..., 0, :]
     acc = (qdd[..., None, :3] @ Gt)[..., 0, :]
     return Response(t=t, q=q, qd=qd, qdd=qdd, disp=disp, acc=acc)

@@ -29,7 +29,6 @@ from numpy.typing import NDArray
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
 
 N_STATE = 2 * N_DOF
-N_OUT = 3 * N_DOF + 2 * N_CORNERS  # output columns: q, qd, qdd (7 each), disp, acc (4 each)
 COND_MAX = 1e8  # 1-norm condition number of V above which a candidate leaves the modal path (error ~ cond * 1e-16)
 _SERIES_BELOW = 1e-2  # |lam dt| below which phi1, phi2 come from Taylor series (truncation < 1e-15 relative there)
 
@@ -136,9 +135,11 @@ def _statespace_recursion(Phi, G1, G2, s0, u, out):  # pragma: no cover - compil
 Outputs = tuple[NDArray, NDArray, NDArray, NDArray, NDArray]
 
 
-def _flatten(mats: FullCarMatrices, road: NDArray):
-    """The batch flattened to P cars: batch shape, A (P, 14, 14), Bs (P, 14, 4), G (P, 4, 3), q0 (P, 7), u."""
-    batch = np.broadcast_shapes(mats.batch_shape, road.shape[:-2])
+def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None):
+    """The batch flattened to P cars: batch shape, A (P, 14, 14), Bs (P, 14, 4), body points G (P, nb, 3) (the
+    corners' when `points` is None), q0 (P, 7), u."""
+    G = mats.G if points is None else np.asarray(points, dtype=float)
+    batch = np.broadcast_shapes(mats.batch_shape, road.shape[:-2], G.shape[:-2])
     P = int(np.prod(batch, dtype=int))
     n = road.shape[-2]
 
@@ -146,41 +147,47 @@ def _flatten(mats: FullCarMatrices, road: NDArray):
         return np.broadcast_to(X, batch + X.shape[-2:]).reshape((P,) + X.shape[-2:])
 
     A, Bs = mats.state_space()
-    A, Bs, G, K, B = flat(A), flat(Bs), flat(mats.G), flat(mats.K), flat(mats.B)
+    A, Bs, G, K, B = flat(A), flat(Bs), flat(G), flat(mats.K), flat(mats.B)
     # A writeable C-contiguous copy whatever the caller passed: one array type for numba to compile.
     u = np.array(road.reshape(1, n, N_CORNERS) if road.ndim == 2 else flat(road), dtype=float, order="C")
     q0 = np.broadcast_to(np.linalg.solve(K, B @ u[:, 0, :, None])[..., 0], (P, N_DOF))  # static equilibrium
     return batch, A, Bs, G, q0, u
 
 
+def _n_out(G: NDArray) -> int:
+    """Output columns for nb body points: q, qd, qdd (7 each), disp and acc (nb each)."""
+    return 3 * N_DOF + 2 * G.shape[-2]
+
+
 def _input_rows(Bs: NDArray, G: NDArray) -> NDArray:
-    """Rows (P, 4, 29) of the output projection fed by the road y: qdd gets Bs y, acc gets G (Bs y)[:3]."""
-    P = Bs.shape[0]
-    rows = np.zeros((P, N_CORNERS, N_OUT))
+    """Rows (P, 4, 21 + 2 nb) of the output projection fed by the road y: qdd gets Bs y, acc gets G (Bs y)[:3]."""
+    P, nb = Bs.shape[0], G.shape[-2]
+    rows = np.zeros((P, N_CORNERS, _n_out(G)))
     Bq = Bs[:, N_DOF:, :]  # (P, 7, 4)
     rows[:, :, 2 * N_DOF : 3 * N_DOF] = np.swapaxes(Bq, -1, -2)
-    rows[:, :, 3 * N_DOF + 4 :] = np.swapaxes(G @ Bq[:, :3, :], -1, -2)
+    rows[:, :, 3 * N_DOF + nb :] = np.swapaxes(G @ Bq[:, :3, :], -1, -2)
     return rows
 
 
 def _statespace_projection(A: NDArray, Bs: NDArray, G: NDArray) -> NDArray:
-    """(P, 18, 29): [s, y] -> [q, qd, qdd, disp, acc] with qdd = (A s + Bs y)[7:], disp = G q[:3], acc = G qdd[:3]."""
-    P = A.shape[0]
-    proj = np.zeros((P, N_STATE + N_CORNERS, N_OUT))
+    """(P, 18, 21 + 2 nb): [s, y] -> [q, qd, qdd, disp, acc] with qdd = (A s + Bs y)[7:], disp = G q[:3],
+    acc = G qdd[:3]."""
+    P, nb = A.shape[0], G.shape[-2]
+    proj = np.zeros((P, N_STATE + N_CORNERS, _n_out(G)))
     proj[:, :N_STATE, :N_STATE] = np.eye(N_STATE)
     Aq = A[:, N_DOF:, :]  # (P, 7, 14)
     proj[:, :N_STATE, N_STATE : 3 * N_DOF] = np.swapaxes(Aq, -1, -2)
-    proj[:, :N_DOF, 3 * N_DOF : 3 * N_DOF + 4][:, :3, :] = np.swapaxes(G, -1, -2)
-    proj[:, :N_STATE, 3 * N_DOF + 4 :] = np.swapaxes(G @ Aq[:, :3, :], -1, -2)
+    proj[:, :N_DOF, 3 * N_DOF : 3 * N_DOF + nb][:, :3, :] = np.swapaxes(G, -1, -2)
+    proj[:, :N_STATE, 3 * N_DOF + nb :] = np.swapaxes(G @ Aq[:, :3, :], -1, -2)
     proj[:, N_STATE:, :] = _input_rows(Bs, G)
     return proj
 
 
 def _split(Y: NDArray, batch: tuple[int, ...]) -> Outputs:
-    """(P, n, 29) -> q, qd, qdd (batch..., n, 7), disp, acc (batch..., n, 4)."""
+    """(P, n, 21 + 2 nb) -> q, qd, qdd (batch..., n, 7), disp, acc (batch..., n, nb)."""
     Y = Y.reshape(batch + Y.shape[-2:])
-    d = N_DOF
-    return Y[..., :d], Y[..., d : 2 * d], Y[..., 2 * d : 3 * d], Y[..., 3 * d : 3 * d + 4], Y[..., 3 * d + 4 :]
+    d, nb = N_DOF, (Y.shape[-1] - 3 * N_DOF) // 2
+    return Y[..., :d], Y[..., d : 2 * d], Y[..., 2 * d : 3 * d], Y[..., 3 * d : 3 * d + nb], Y[..., 3 * d + nb :]
 
 
 def foh_discretisation(A: NDArray, Bs: NDArray, dt: float) -> tuple[NDArray, NDArray, NDArray]:
@@ -200,7 +207,7 @@ def foh_discretisation(A: NDArray, Bs: NDArray, dt: float) -> tuple[NDArray, NDA
 
 
 def _statespace_outputs(A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDArray, dt: float) -> NDArray:
-    """(P, n, 29) outputs of the real state-space recursion for P cars."""
+    """(P, n, 21 + 2 nb) outputs of the real state-space recursion for P cars."""
     P, n = A.shape[0], u.shape[1]
     Phi, G1, G2 = foh_discretisation(A, Bs, dt)
     s0 = np.zeros((P, N_STATE))
@@ -210,23 +217,25 @@ def _statespace_outputs(A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDA
     return out @ _statespace_projection(A, Bs, G)
 
 
-def statespace_foh(mats: FullCarMatrices, road: NDArray, dt: float) -> Outputs:
-    """q, qd, qdd (batch..., n, 7), disp, acc (batch..., n, 4): exact FOH via scipy's expm, real 14-state recursion.
+def statespace_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray | None = None) -> Outputs:
+    """q, qd, qdd (batch..., n, 7), disp, acc (batch..., n, nb) at the body `points` (..., nb, 3) (default the
+    corners'): exact FOH via scipy's expm, real 14-state recursion.
 
     The same discretisation as the NumPy reference, with the time loop compiled; kept as the modal
     path's fallback and as a benchmark competitor.
     """
-    batch, A, Bs, G, q0, u = _flatten(mats, road)
+    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
     return _split(_statespace_outputs(A, Bs, G, q0, u, dt), batch)
 
 
-def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float) -> Outputs:
-    """q, qd, qdd (batch..., n, 7) [m, rad, /s, /s²], disp, acc (batch..., n, 4): the exact FOH, mode by mode.
+def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray | None = None) -> Outputs:
+    """q, qd, qdd (batch..., n, 7) [m, rad, /s, /s²], disp, acc (batch..., n, nb) at the body `points` (..., nb, 3)
+    (rows [1, y, -x]; default the four corners'): the exact FOH, mode by mode.
 
     Candidates whose eigenvector matrix has a 1-norm condition number above COND_MAX go through the
     real state-space recursion instead; the answer is the same discretisation either way.
     """
-    batch, A, Bs, G, q0, u = _flatten(mats, road)
+    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
     P, n = A.shape[0], u.shape[1]
     lam, V = np.linalg.eig(A)  # (P, 14), (P, 14, 14); LAPACK returns conjugate pairs exactly conjugate
     lam, V = lam.astype(complex), V.astype(complex)
@@ -258,9 +267,9 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float) -> Outputs:
     # Output j-th mode column: w_j [V_j, lam_j V_j[7:], G V_j[:3], G lam_j V_j[7:10]]; Re(c z) = Re c Re z - Im c Im z.
     qdd_modes = lam_k[:, None, :] * V_k[:, N_DOF:, :]
     c = np.concatenate([V_k, qdd_modes, G @ V_k[:, :3, :], G @ qdd_modes[:, :3, :]], axis=1) * w_k[:, None, :]
-    ct = np.swapaxes(c, -1, -2)  # (P, m, 29)
+    ct = np.swapaxes(c, -1, -2)  # (P, m, 21 + 2 nb)
     proj = np.concatenate([ct.real, -ct.imag, _input_rows(Bs, G)], axis=1)
-    Y = np.matmul(out.transpose(1, 0, 2), proj)  # (P, n, 29); each car's rows are strided views, BLAS takes them
+    Y = np.matmul(out.transpose(1, 0, 2), proj)  # (P, n, 21 + 2 nb); each car's rows are strided views, BLAS takes them
     if not good.all():
         bad = np.flatnonzero(~good)
         ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[bad])

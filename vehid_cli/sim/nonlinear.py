@@ -90,21 +90,23 @@ def simulate_effects(
     dt: float,
     method: Literal["rk4", "newmark"] = "rk4",
     substeps: int = 1,
+    points: ArrayLike | None = None,
 ) -> Response:
     """Responses of a batch of cars with effects to the road (n, 4) [m] sampled every dt [s].
 
     cf, cr: the configured linear damping [N s/m] of each car (backlash and lag act on that damper);
     effects: effect name -> {parameter: value (scalar or array of the batch shape)}. The batch is the
     broadcast of the matrices' batch and the effect values' shapes; arrays come back as (batch..., n, k)
-    like ``sim.linear.simulate``.
+    like ``sim.linear.simulate``; `disp` and `acc` at the body `points` (..., nb, 3) (default the corners').
     """
+    G = mats.G if points is None else np.asarray(points, dtype=float)
     road = np.asarray(road, dtype=float)
     if road.ndim != 2 or road.shape[-1] != N_CORNERS:
         raise ValueError(f"road must be (n, 4), got {road.shape}")
     if int(substeps) < 1:
         raise ValueError(f"substeps must be >= 1, got {substeps}")
     substeps = int(substeps)
-    shapes = [mats.batch_shape, np.shape(cf), np.shape(cr)]
+    shapes = [mats.batch_shape, np.shape(cf), np.shape(cr), G.shape[:-2]]
     shapes += [np.shape(v) for params in effects.values() for v in params.values()]
     batch = np.broadcast_shapes(*shapes)
     P = int(np.prod(batch, dtype=int))
@@ -113,7 +115,7 @@ def simulate_effects(
     def flat(X: NDArray) -> NDArray:
         return np.broadcast_to(X, batch + X.shape[-2:]).reshape((P,) + X.shape[-2:])
 
-    M, C, K, B, G = (flat(X) for X in (mats.M, mats.C, mats.K, mats.B, mats.G))
+    M, C, K, B, G = (flat(X) for X in (mats.M, mats.C, mats.K, mats.B, G))
     D = flat(fullcar_struts(mats))
     E = np.zeros((N_CORNERS, N_CORNERS))
     if es.tyres:
