@@ -10,13 +10,11 @@ from vehid_cli.config import load_config
 from vehid_cli.experiment import build_experiment, run_streams
 from vehid_cli.noise import add_noise, estimate_noise_sigma, noise_sigma, sigma_from_level
 from vehid_cli.objectives import Objective, objective_families
-from vehid_cli.sim.linear import Response
 
 
 def fake_response(acc, disp):
-    n = acc.shape[-2]
-    z = np.zeros(acc.shape[:-1] + (7,))
-    return Response(t=np.arange(n), q=z, qd=z, qdd=z, disp=disp, acc=acc)
+    """Simulated channels by family, as Experiment.outputs gives them."""
+    return {"acc": acc, "disp": disp}
 
 
 def test_f2_is_eq8_sum_of_norms_over_sum_of_norms():
@@ -57,3 +55,30 @@ def test_noise_estimated_from_data_alone(clean_paper_response, family, level):
     true_sigma = noise_sigma(clean, level)
     np.testing.assert_allclose(estimate_noise_sigma(noisy), true_sigma, rtol=0.08)
     np.testing.assert_allclose(sigma_from_level(noisy, level), true_sigma, rtol=0.03)
+
+
+def test_profiled_offsets_make_costs_blind_to_constant_offsets_and_equal_the_centred_fit():
+    rng = np.random.default_rng(5)
+    ref = rng.standard_normal((50, 3))
+    sim = rng.standard_normal((2, 50, 3))
+    offset = np.array([0.3, -2.0, 7.0])
+    for name in ("wls", "f2"):
+        plain = Objective(name, {"acc": ref}, {"acc": np.ones(3)}, offsets=True)
+        shifted = Objective(name, {"acc": ref + offset}, {"acc": np.ones(3)}, offsets=True)
+        np.testing.assert_allclose(plain.costs({"acc": sim}), shifted.costs({"acc": sim}), rtol=1e-12)
+    # wls with the offsets profiled = the least-squares offset fitted explicitly (closed form: the mean error)
+    obj = Objective("wls", {"acc": ref + offset}, {"acc": np.ones(3)}, offsets=True)
+    best = (ref + offset - sim).mean(axis=1, keepdims=True)
+    np.testing.assert_allclose(obj.costs({"acc": sim}), np.mean((ref + offset - sim - best) ** 2, axis=(1, 2)))
+
+
+def test_observed_samples_only_enter_the_residuals():
+    ref = np.arange(12.0).reshape(4, 3)
+    sim = np.zeros((1, 4, 3))
+    observed = np.ones((4, 3), dtype=bool)
+    observed[1::2, 2] = False  # channel 3 sampled at half the rate
+    obj = Objective("wls", {"acc": ref}, {"acc": np.ones(3)}, observed={"acc": observed})
+    r = obj.residuals({"acc": sim})
+    assert r.shape == (1, 10) and obj.size == 10
+    np.testing.assert_array_equal(np.sort(r[0]), np.sort(ref[observed]))
+    assert obj.costs({"acc": sim})[0] == pytest.approx(np.mean(ref[observed] ** 2))

@@ -48,20 +48,50 @@ def sensitivities(
     families: Sequence[str],
     rel_step: float = 1e-5,
 ) -> dict[str, NDArray]:
-    """d response / d (theta_j / values_j) for each family: (n, 4, D), by central differences."""
+    """d channel / d (theta_j / values_j) for each family: (n, k, D), by central differences."""
     values = np.asarray(values, dtype=float)
     D = values.size
     h = rel_step * np.abs(values)
     X = np.repeat(values[None, :], 2 * D, axis=0)
     X[np.arange(D), np.arange(D)] += h
     X[D + np.arange(D), np.arange(D)] -= h
-    response = experiment.simulate({n: X[:, j] for j, n in enumerate(names)})
+    outputs = experiment.outputs({n: X[:, j] for j, n in enumerate(names)})
     out = {}
     for family in families:
-        z = getattr(response, family)  # (2D, n, 4)
-        dz = (z[:D] - z[D:]) / (2 * h[:, None, None])  # (D, n, 4) per unit of theta_j
+        z = outputs[family]  # (2D, n, k)
+        dz = (z[:D] - z[D:]) / (2 * h[:, None, None])  # (D, n, k) per unit of theta_j
         out[family] = np.moveaxis(dz * np.abs(values)[:, None, None], 0, -1)  # per relative change
     return out
+
+
+def information(
+    experiment: Experiment,
+    names: Sequence[str],
+    values: NDArray,
+    sigma: Mapping[str, NDArray],
+    observed: Mapping[str, NDArray] | None = None,
+    offsets: bool = False,
+    rel_step: float = 1e-5,
+) -> NDArray:
+    """Fisher information (D, D) of the relative unknowns theta_j / values_j carried by the channels of `sigma`
+    (family -> (k,)), counted at their `observed` samples (family -> (n, k) bool; None: all). With `offsets`, each
+    channel has an unknown constant offset: the information left once it is estimated too (the Schur complement),
+    which is the information of the sensitivities with their per-channel mean removed."""
+    values = np.asarray(values, dtype=float)
+    sens = sensitivities(experiment, names, values, list(sigma), rel_step)
+    D = values.size
+    F = np.zeros((D, D))
+    for family, S in sens.items():
+        mask = None if observed is None else np.asarray(observed[family], dtype=float)[:, :, None]
+        if offsets:
+            mean = S.mean(axis=0) if mask is None else (S * mask).sum(axis=0) / mask.sum(axis=0)
+            S = S - mean[None]
+        W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
+        if mask is not None:
+            W = W * mask
+        W = W.reshape(-1, D)
+        F += W.T @ W
+    return F
 
 
 def cramer_rao(
@@ -70,16 +100,12 @@ def cramer_rao(
     values: NDArray,
     sigma: Mapping[str, NDArray],
     rel_step: float = 1e-5,
+    observed: Mapping[str, NDArray] | None = None,
+    offsets: bool = False,
 ) -> CramerRao:
-    """The bound for the unknowns `names` at `values`, channels and noise given by `sigma` (family -> (4,))."""
-    values = np.asarray(values, dtype=float)
-    sens = sensitivities(experiment, names, values, list(sigma), rel_step)
-    D = values.size
-    F = np.zeros((D, D))
-    for family, S in sens.items():
-        W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
-        W = W.reshape(-1, D)
-        F += W.T @ W
+    """The bound for the unknowns `names` at `values`, channels and noise given by `sigma` (family -> (k,)); see
+    `information` for `observed` and `offsets`."""
+    F = information(experiment, names, values, sigma, observed, offsets, rel_step)
     return bound_from_information(names, values, F)
 
 

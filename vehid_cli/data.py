@@ -424,7 +424,11 @@ def write_measurement_csv(
         if data is not None:
             names += list(family)
             cols.append(data)
-    table = np.hstack(cols)
+    write_csv(path, names, np.hstack(cols), comments)
+
+
+def write_csv(path: str | Path, names: Sequence[str], table: NDArray, comments: Sequence[str] = ()) -> None:
+    """Write a numeric table (n, len(names)) as CSV atomically: `#` comment lines, a header, shortest exact values."""
     buf = io.StringIO()
     for line in comments:
         for part in str(line).splitlines() or [""]:

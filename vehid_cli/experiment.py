@@ -22,7 +22,8 @@ from .data import read_measurement, time_grid
 from .errors import InputError
 from .models.effects import check_names
 from .models.fullcar import FullCarMatrices, assemble, parameter_batch
-from .noise import add_noise
+from .models.sensors import Layout
+from .noise import add_channel_noise, channel_sigma
 from .road import road_function
 from .sim.linear import Response, simulate
 from .sim.nonlinear import simulate_effects
@@ -60,6 +61,11 @@ class Experiment:
     t: NDArray  # (n,) [s]
     road: NDArray  # (n, 4) [m]
     road_source: str  # "config" or the measurement file the road came from
+
+    @property
+    def layout(self) -> Layout:
+        """The sensors (config.layout, or the paper's four corners)."""
+        return self.config.sensor_layout()
 
     @property
     def dt(self) -> float:
@@ -100,14 +106,34 @@ class Experiment:
         sim = self.config.simulation
         effects = self.effects(values)
         substeps = sim.substeps or 1
+        p = self.parameters(values)
+        points = self.layout.points(p)
         if not effects and sim.integrator != "rk4" and substeps == 1:
-            return simulate(self.matrices(values), self.road, self.dt, sim.integrator)
+            return simulate(assemble(p), self.road, self.dt, sim.integrator, points)
         if sim.integrator not in ("rk4", "newmark"):
             raise ValueError(
                 f"effects {sorted(effects)} need simulation.integrator rk4 or newmark, not '{sim.integrator}'"
             )
-        p = self.parameters(values)
-        return simulate_effects(assemble(p), p["cf"], p["cr"], effects, self.road, self.dt, sim.integrator, substeps)
+        return simulate_effects(
+            assemble(p), p["cf"], p["cr"], effects, self.road, self.dt, sim.integrator, substeps, points
+        )
+
+    def read(self, response: Response) -> dict[str, NDArray]:
+        """The layout's channels of a response: family (acc, disp) -> (..., n, k)."""
+        return self.layout.read(response)
+
+    def outputs(self, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:
+        """The layout's channels of a batch of cars (`simulate`'s values): family -> (..., n, k)."""
+        return self.read(self.simulate(values))
+
+    def noise_floors(self, family: str) -> NDArray:
+        """Absolute noise standard deviation per channel of a family (k,): the sensor's own sigma, else the
+        family's noise.sigma, else NaN (Eq. 15 with noise.level)."""
+        cfg = self.config
+        floor = getattr(cfg.noise.sigma, family)
+        own = {s.name: s.sigma for s in cfg.layout or ()}
+        values = [own.get(name) or floor for name in self.layout.names(family)]
+        return np.array([np.nan if v is None else v for v in values], dtype=float)
 
 
 def split_values(values: Mapping[str, ArrayLike] | None) -> tuple[dict[str, ArrayLike], dict[str, ArrayLike]]:
@@ -173,34 +199,61 @@ def check_time_step(config: Config, dt: float, key: str) -> None:
 
 @dataclass(frozen=True)
 class SimulatedRun:
-    """Clean responses of the configured car and their noisy measurement (Eq. 15)."""
+    """Clean responses of the configured car and their noisy measurement (Eq. 15, or the configured noise floors)."""
 
     experiment: Experiment
     clean: Response
-    acc: NDArray  # (n, 4) noisy [m/s²]
-    disp: NDArray  # (n, 4) noisy [m]
+    clean_channels: dict[str, NDArray]  # family -> (n, k) the layout's channels, clean
+    channels: dict[str, NDArray]  # family -> (n, k) noisy
+    sigma: dict[str, NDArray]  # family -> (k,) the noise standard deviation drawn
     noise_level: float
+
+    @property
+    def acc(self) -> NDArray | None:
+        """Noisy accelerometer channels (n, k) [m/s²], None without accelerometers."""
+        return self.channels.get("acc")
+
+    @property
+    def disp(self) -> NDArray | None:
+        """Noisy displacement and deflection channels (n, k) [m], None without them."""
+        return self.channels.get("disp")
 
 
 DIVERGED_FACTOR = 100.0  # a body moving more than this many times the road's height has diverged
 
 
 def simulate_measurement(experiment: Experiment, rng: np.random.Generator) -> SimulatedRun:
-    """Simulate the configured car and add Eq. 15 noise to each channel (accelerations first, then displacements)."""
+    """Simulate the configured car and add noise to each channel of its layout (accelerations first, then
+    displacements; see `measurement_noise`)."""
     clean = experiment.simulate()
     road = np.max(np.abs(experiment.road)) if np.size(experiment.road) else 0.0
     limit = DIVERGED_FACTOR * max(road, 1e-3)
-    if not (np.all(np.isfinite(clean.disp)) and np.max(np.abs(clean.disp)) <= limit):
-        k = int(np.argmax(~np.isfinite(clean.disp).all(axis=1) | (np.abs(clean.disp) > limit).any(axis=1)))
+    heights = clean.q[:, [0, 3, 4, 5, 6]]  # bounce and wheel hops [m]
+    if not (np.all(np.isfinite(heights)) and np.max(np.abs(heights)) <= limit):
+        k = int(np.argmax(~np.isfinite(heights).all(axis=1) | (np.abs(heights) > limit).any(axis=1)))
         raise InputError(
-            f"the simulation diverged at t = {clean.t[k]:.4g} s (body displacement beyond {limit:.3g} m, "
+            f"the simulation diverged at t = {clean.t[k]:.4g} s (body or wheel displacement beyond {limit:.3g} m, "
             f"{DIVERGED_FACTOR:g} times the road's largest height): the configured effects are too stiff for "
             f"this time step (an effect bottoming out, e.g. a gas column shorter than the strut's stroke); "
             "check vehicle.effects or use a smaller simulation.dt",
             source=experiment.config.source,
             key="simulation.dt",
         )
-    level = experiment.config.noise.level
-    acc = add_noise(clean.acc, level, rng)
-    disp = add_noise(clean.disp, level, rng)
-    return SimulatedRun(experiment=experiment, clean=clean, acc=acc, disp=disp, noise_level=level)
+    channels = experiment.read(clean)
+    sigma = {f: clean_sigma(experiment, f, channels[f]) for f in channels}
+    noisy = measurement_noise(channels, sigma, rng)
+    return SimulatedRun(experiment, clean, channels, noisy, sigma, experiment.config.noise.level)
+
+
+def clean_sigma(experiment: Experiment, family: str, clean: NDArray) -> NDArray:
+    """The noise standard deviation (k,) of a family's clean channels (n, k): Eq. 15 with noise.level, or the
+    configured absolute floors."""
+    return channel_sigma(clean, experiment.config.noise.level, experiment.noise_floors(family))
+
+
+def measurement_noise(
+    clean: dict[str, NDArray], sigma: dict[str, NDArray], rng: np.random.Generator
+) -> dict[str, NDArray]:
+    """Noisy copies of the clean channels, drawn family by family in the order given (acc, then disp: the paper's
+    runs see the same draws as before layouts existed)."""
+    return {f: add_channel_noise(clean[f], sigma[f], rng) for f in clean}

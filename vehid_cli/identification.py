@@ -17,12 +17,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .config import Config
-from .crlb import CramerRao, cramer_rao
-from .data import read_measurement
+from .crlb import CramerRao, bound_from_information, cramer_rao, information
 from .errors import InputError
-from .experiment import Experiment, build_experiment, run_streams
+from .experiment import Experiment, build_experiment, clean_sigma, measurement_noise, run_streams
+from .measured import experiment_of, read_run
 from .models.effects import LIBRARY
-from .noise import add_noise, estimate_noise_sigma, noise_sigma, sigma_from_level
+from .noise import channel_sigma, estimate_noise_sigma, sigma_from_level
 from .objectives import Objective, objective_families
 from .optimizers.base import Problem
 
@@ -40,12 +40,15 @@ class Task:
     upper: NDArray
     nominal: NDArray  # configured values of the unknowns
     truth: NDArray | None  # the true values when known
-    families: tuple[str, ...]  # response families the objective uses
-    clean: dict[str, NDArray] | None  # clean responses of the true car (simulated data)
-    measured: dict[str, NDArray] | None  # responses from a measurement file
-    sigma: dict[str, NDArray]  # noise standard deviation per channel, per family
+    families: tuple[str, ...]  # channel families the objective uses
+    clean: dict[str, NDArray] | None  # clean channels of the true car (simulated data), every family of the layout
+    measured: dict[str, NDArray] | None  # channels from a measurement file
+    sigma: dict[str, NDArray]  # noise standard deviation per channel, per family (the weights)
     sigma_source: str  # how sigma was obtained
     data_file: str | None
+    observed: dict[str, NDArray] | None = None  # family -> (n, k) bool: each channel's own samples (None: all)
+    offsets: bool = False  # one unknown offset per channel, profiled out (data.offsets: identify)
+    drawn: dict[str, NDArray] | None = None  # simulated data: the noise sigma each run's noise is drawn with
 
     @property
     def dim(self) -> int:
@@ -108,23 +111,26 @@ class Task:
         if self.measured is not None:
             return self.measured
         assert self.clean is not None
+        assert self.drawn is not None
         rng = run_streams(self.config.identify.seed, run).noise
-        level = self.config.noise.level
         # Same draw order as `vehid simulate` (accelerations, then displacements): run 0 sees that file.
-        noisy = {family: add_noise(self.clean[family], level, rng) for family in ("acc", "disp")}
+        noisy = measurement_noise(self.clean, self.drawn, rng)
         return {family: noisy[family] for family in self.families}
 
     def objective(self, reference: dict[str, NDArray]) -> Objective:
-        return Objective(name=self.config.identify.objective, reference=reference, sigma=self.sigma)
+        return Objective(
+            name=self.config.identify.objective, reference=reference, sigma=self.sigma, observed=self.observed,
+            offsets=self.offsets,
+        )  # fmt: skip
 
     def problem(self, reference: dict[str, NDArray]) -> Problem:
         """The optimizer's view: batched costs (and weighted residuals) over the unknowns' box."""
         objective = self.objective(reference)
         names = self.names
 
-        def simulate(X: NDArray):
+        def simulate(X: NDArray) -> dict[str, NDArray]:
             with np.errstate(all="ignore"):
-                return self.experiment.simulate({n: X[:, j] for j, n in enumerate(names)})
+                return self.experiment.outputs({n: X[:, j] for j, n in enumerate(names)})
 
         def cost(X: NDArray) -> NDArray:
             return objective.costs(simulate(X))
@@ -136,19 +142,25 @@ class Task:
 
     @property
     def residual_samples(self) -> int:
-        """R: how many weighted residuals the objective's channels give (4 channels per family)."""
-        return int(self.experiment.t.size * 4 * len(self.families))
+        """R: how many weighted residuals the objective's channels give (each channel's observed samples)."""
+        if self.observed is not None:
+            return int(sum(np.count_nonzero(self.observed[f]) for f in self.families))
+        return int(self.experiment.t.size * sum(self.sigma[f].size for f in self.families))
 
     @property
     def noise_free(self) -> bool:
         """Simulated data without noise: the bound is zero (the weights keep a floor only to stay finite)."""
-        return self.measured is None and self.config.noise.level == 0
+        return self.drawn is not None and not any(np.any(s > 0) for s in self.drawn.values())
+
+    def information(self, at: NDArray) -> NDArray:
+        """Fisher information (D, D) of the relative unknowns at `at` (crlb.information)."""
+        return information(self.experiment, self.names, at, self.sigma, self.observed, self.offsets)
 
     def bound(self, at: NDArray | None = None) -> CramerRao:
         """The Cramér–Rao bound of this experiment at `at` (default: the truth, or the nominal car when unknown)."""
         if at is None:
             at = self.truth if self.truth is not None else self.nominal
-        bound = cramer_rao(self.experiment, self.names, at, self.sigma)
+        bound = cramer_rao(self.experiment, self.names, at, self.sigma, observed=self.observed, offsets=self.offsets)
         if self.noise_free:  # the bound scales with sigma, and sigma is zero
             bound = dataclasses.replace(bound, re_sd_percent=np.zeros_like(bound.re_sd_percent), nre_rms_percent=0.0)
         return bound
@@ -180,49 +192,157 @@ def effect_nominal(config: Config, name: str) -> float:
 
 
 def build_task(config: Config, data_file: str | Path | None = None) -> Task:
-    """Sample the experiment, simulate the true car or read the measurement, fix the noise level."""
+    """Sample the experiment, simulate the true car or read the measured run, fix the noise of each channel."""
     ident = config.identify
-    experiment = build_experiment(config, road_file=data_file)
     names = tuple(ident.unknowns)
     box = config.search_box()
     lower = np.array([box[n][0] for n in names])
     upper = np.array([box[n][1] for n in names])
     values = config.parameter_values()
     nominal = np.array([values[n] for n in names])
-    families = objective_families(ident.objective, config.sensors)
+    layout = config.sensor_layout()
+    families = objective_families(ident.objective, config.sensors, layout.families)
     level = config.noise.level
+    offsets = config.data.offsets == "identify"
     if data_file is None:
+        experiment = build_experiment(config)
         truth = None if ident.truth == "none" else nominal
-        response = experiment.simulate()
-        clean = {"acc": response.acc, "disp": response.disp}
+        clean = experiment.outputs()
+        drawn = {f: clean_sigma(experiment, f, clean[f]) for f in clean}
         floor = max(level, MIN_SIGMA_FRACTION)
-        sigma = {f: noise_sigma(clean[f], floor) for f in families}
+        sigma = {f: channel_sigma(clean[f], floor, experiment.noise_floors(f)) for f in families}
+        floors = any(np.any(~np.isnan(experiment.noise_floors(f))) for f in families)
         source = f"Eq. 15 with Np = {level:g}" if level > 0 else f"noise-free data: weights of Np = {floor:g}"
-        return Task(config, experiment, names, lower, upper, nominal, truth, families, clean, None, sigma, source, None)
-    m = read_measurement(data_file)
-    measured = {}
+        if floors:
+            source = "the configured noise floors" + (f" and Eq. 15 with Np = {level:g}" if level > 0 else "")
+        return Task(
+            config, experiment, names, lower, upper, nominal, truth, families, clean, None, sigma, source, None,
+            offsets=offsets, drawn=drawn,
+        )  # fmt: skip
+    run = read_run(config, data_file, families)
+    experiment = experiment_of(config, run)
+    sigma = {}
     for family in families:
-        data = getattr(m, family)
-        if data is None:
-            need = f"{family}1..{family}4"
-            raise InputError(
-                f"objective '{ident.objective}' with sensors '{config.sensors}' needs columns {need}, "
-                "which this file lacks",
-                source=str(data_file),
-            )
-        measured[family] = data
+        floors = experiment.noise_floors(family)
+        if level > 0:
+            estimate = _per_channel(lambda y: sigma_from_level(y, level), run.outputs[family], run.observed, family)
+        else:
+            estimate = _per_channel(estimate_noise_sigma, run.outputs[family], run.observed, family)
+        sigma[family] = np.where(np.isnan(floors), estimate, floors)
     if level > 0:
-        sigma = {f: sigma_from_level(measured[f], level) for f in families}
         source = f"Eq. 15 with Np = {level:g} (noise.level)"
     else:
-        sigma = {f: estimate_noise_sigma(measured[f]) for f in families}
         source = "estimated from the data (third differences)"
+    if any(np.any(~np.isnan(experiment.noise_floors(f))) for f in families):
+        source = f"the configured noise floors, elsewhere {source}"
     for family, s in sigma.items():
         if np.any(~(s > 0)):
+            bad = [n for n, v in zip(experiment.layout.names(family), s, strict=True) if not v > 0]
             raise InputError(
-                f"cannot estimate the noise of the {family} channels (are they constant?)", source=str(data_file)
+                f"cannot estimate the noise of the {family} channel(s) {', '.join(bad)} (are they constant?)",
+                source=str(data_file),
             )
     truth = nominal if ident.truth == "config" else None
     return Task(
-        config, experiment, names, lower, upper, nominal, truth, families, None, measured, sigma, source, str(data_file)
-    )
+        config, experiment, names, lower, upper, nominal, truth, families, None, run.outputs, sigma, source,
+        str(data_file), observed=run.observed, offsets=offsets,
+    )  # fmt: skip
+
+
+def _per_channel(estimate, values: NDArray, observed: dict[str, NDArray] | None, family: str) -> NDArray:
+    """A per-channel noise estimate (k,) of (n, k) values, each channel from its own samples only."""
+    if observed is None:
+        return estimate(values)
+    mask = observed[family]
+    return np.array([float(estimate(values[mask[:, c], c][:, None])[0]) for c in range(values.shape[1])])
+
+
+@dataclass(frozen=True)
+class JointTask:
+    """Several runs of one car identified together: one parameter set, each run its own road, noise and offsets.
+
+    The costs combine as one objective over all runs (the sum of the runs' numerators over the sum of their
+    denominators: for wls the mean squared weighted residual over every sample of every run), the residuals are
+    concatenated, and the Fisher information is the sum of the runs' (independent noise)."""
+
+    tasks: tuple[Task, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.tasks) < 2:
+            raise ValueError("a joint task needs at least two runs")
+
+    @property
+    def config(self) -> Config:
+        return self.tasks[0].config
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.tasks[0].names
+
+    @property
+    def lower(self) -> NDArray:
+        return self.tasks[0].lower
+
+    @property
+    def upper(self) -> NDArray:
+        return self.tasks[0].upper
+
+    @property
+    def nominal(self) -> NDArray:
+        return self.tasks[0].nominal
+
+    @property
+    def truth(self) -> NDArray | None:
+        return self.tasks[0].truth
+
+    @property
+    def data_files(self) -> tuple[str, ...]:
+        return tuple(t.data_file for t in self.tasks if t.data_file is not None)
+
+    @property
+    def sigma_source(self) -> str:
+        sources = dict.fromkeys(t.sigma_source for t in self.tasks)
+        return "; ".join(sources)
+
+    @property
+    def residual_samples(self) -> int:
+        return sum(t.residual_samples for t in self.tasks)
+
+    def reference(self, run: int) -> tuple[dict[str, NDArray], ...]:
+        return tuple(t.reference(run) for t in self.tasks)
+
+    def problem(self, references: tuple[dict[str, NDArray], ...]) -> Problem:
+        """One problem over every run: each candidate simulated on each run's road."""
+        objectives = [t.objective(r) for t, r in zip(self.tasks, references, strict=True)]
+        names = self.names
+
+        def outputs(X: NDArray) -> list[dict[str, NDArray]]:
+            values = {n: X[:, j] for j, n in enumerate(names)}
+            with np.errstate(all="ignore"):
+                return [t.experiment.outputs(values) for t in self.tasks]
+
+        def cost(X: NDArray) -> NDArray:
+            parts = [o.parts(y) for o, y in zip(objectives, outputs(X), strict=True)]
+            return sum(p[0] for p in parts) / sum(p[1] for p in parts)
+
+        def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
+            ys = outputs(X)
+            parts = [o.parts(y) for o, y in zip(objectives, ys, strict=True)]
+            residuals = np.concatenate([o.residuals(y) for o, y in zip(objectives, ys, strict=True)], axis=-1)
+            return sum(p[0] for p in parts) / sum(p[1] for p in parts), residuals
+
+        return Problem(self.lower, self.upper, cost, cost_and_residuals, names=names)
+
+    def bound(self, at: NDArray | None = None) -> CramerRao:
+        """The bound of all runs together: the sum of their Fisher information."""
+        if at is None:
+            at = self.truth if self.truth is not None else self.nominal
+        F = sum(t.information(at) for t in self.tasks)
+        return bound_from_information(self.names, at, F)
+
+
+def build_tasks(config: Config, data_files: tuple[str | Path, ...] = ()) -> Task | JointTask:
+    """The task of the simulated run (no files), of one measured run, or of several measured runs together."""
+    if len(data_files) <= 1:
+        return build_task(config, data_files[0] if data_files else None)
+    return JointTask(tuple(build_task(config, f) for f in data_files))

@@ -36,3 +36,23 @@ def estimate_noise_sigma(measured: NDArray) -> NDArray:
 def sigma_from_level(measured: NDArray, level: float) -> NDArray:
     """Eq. 15 noise sigma per channel when only noisy data is at hand: var(noisy) = (1 + level²) var(clean)."""
     return level * np.std(np.asarray(measured, dtype=float), axis=-2) / np.sqrt(1.0 + level**2)
+
+
+def channel_sigma(clean: NDArray, level: float, floors: NDArray | None = None) -> NDArray:
+    """Noise standard deviation per channel (k,) of clean signals (n, k): a channel's absolute floor where `floors`
+    gives one (not NaN), else Eq. 15 (level * std over time)."""
+    sigma = noise_sigma(clean, level)
+    if floors is None:
+        return sigma
+    floors = np.asarray(floors, dtype=float)
+    return np.where(np.isnan(floors), sigma, floors)
+
+
+def add_channel_noise(clean: NDArray, sigma: NDArray, rng: np.random.Generator) -> NDArray:
+    """Noisy copy of clean (n, k): white Gaussian noise of standard deviation sigma (k,) per channel; nothing is
+    drawn from `rng` when every sigma is 0 (as `add_noise` at level 0)."""
+    clean = np.asarray(clean, dtype=float)
+    sigma = np.asarray(sigma, dtype=float)
+    if not np.any(sigma > 0):
+        return clean.copy()
+    return clean + sigma[..., None, :] * rng.standard_normal(clean.shape)

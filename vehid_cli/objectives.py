@@ -1,7 +1,7 @@
 """Objectives: how far computed responses are from the reference (measured) ones.
 
-* ``f1``, ``f2`` (Gökdağ Eq. 8): sum over the four channels of the norm of the error, over the sum of the
-  norms of the reference; f1 on body-point displacements, f2 on accelerations.
+* ``f1``, ``f2`` (Gökdağ Eq. 8): sum over the channels of the norm of the error, over the sum of the
+  norms of the reference; f1 on displacement channels (body points, wheels, deflections), f2 on accelerations.
 * ``wls``: the Gaussian maximum-likelihood objective, residuals weighted by each channel's noise
   standard deviation; reported as chi² per sample (about 1 at the truth when the noise level is right).
 
@@ -13,59 +13,103 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
-
-from .sim.linear import Response
 
 OBJECTIVE_FAMILIES = {"f1": ("disp",), "f2": ("acc",)}
 SENSOR_FAMILIES = {"acc": ("acc",), "disp": ("disp",), "both": ("acc", "disp")}
 
 
-def objective_families(objective: str, sensors: str) -> tuple[str, ...]:
-    """Response families an objective compares: f1 displacements, f2 accelerations, wls what the sensors give."""
-    return OBJECTIVE_FAMILIES.get(objective) or SENSOR_FAMILIES[sensors]
+def objective_families(objective: str, sensors: str, present: tuple[str, ...] = ("acc", "disp")) -> tuple[str, ...]:
+    """Channel families an objective compares: f1 displacements, f2 accelerations, wls what `sensors` selects of
+    the families the layout has (`present`)."""
+    wanted = OBJECTIVE_FAMILIES.get(objective) or SENSOR_FAMILIES[sensors]
+    return tuple(f for f in wanted if f in present)
 
 
 @dataclass(frozen=True)
 class Objective:
-    """An objective bound to its reference data: costs and weighted residuals of a batch of responses."""
+    """An objective bound to its reference data: costs and weighted residuals of a batch of simulated channels.
+
+    `observed` marks the samples each channel was measured at (a slow channel on a faster grid; None: all);
+    with `offsets`, each channel carries an unknown constant offset, profiled out: the residual's mean over the
+    channel's samples is removed (the least-squares offset), in the costs and the residuals alike."""
 
     name: str  # f1, f2 or wls
-    reference: Mapping[str, NDArray]  # family -> (n, 4) measured responses
-    sigma: Mapping[str, NDArray]  # family -> (4,) noise standard deviation per channel
+    reference: Mapping[str, NDArray]  # family -> (n, k) measured channels
+    sigma: Mapping[str, NDArray]  # family -> (k,) noise standard deviation per channel
+    observed: Mapping[str, NDArray] | None = None  # family -> (n, k) bool
+    offsets: bool = False
 
     @property
     def families(self) -> tuple[str, ...]:
         return tuple(self.reference)
 
-    def costs(self, response: Response) -> NDArray:
-        """Cost of each response in the batch (...,)."""
-        if self.name == "wls":
-            return np.mean(self.residuals(response) ** 2, axis=-1)
-        return self._eq8(response)
+    @cached_property
+    def _keep(self) -> dict[str, NDArray]:
+        """Flat indices (time-major) of the observed entries of each family's (n, k) block."""
+        return {f: np.flatnonzero(m) for f, m in (self.observed or {}).items()}
 
-    def _eq8(self, response: Response) -> NDArray:
+    @property
+    def size(self) -> int:
+        """R: the number of weighted residuals."""
+        return sum(int(self._keep[f].size) if f in self._keep else ref.size for f, ref in self.reference.items())
+
+    def error(self, family: str, sim: NDArray) -> NDArray:
+        """ref - sim (..., n, k), without its per-channel mean over the observed samples when offsets are profiled."""
+        d = self.reference[family] - sim
+        return self._centred(family, d) if self.offsets else d
+
+    def _centred(self, family: str, d: NDArray) -> NDArray:
+        if self.observed is None:
+            return d - np.mean(d, axis=-2, keepdims=True)
+        m = self.observed[family]
+        return d - np.sum(d * m, axis=-2, keepdims=True) / np.sum(m, axis=0)
+
+    def _norms(self, family: str, d: NDArray) -> NDArray:
+        """Norm over time of each channel (..., k), over the observed samples only."""
+        if self.observed is not None:
+            d = d * self.observed[family]
+        return np.linalg.norm(d, axis=-2)
+
+    def costs(self, outputs: Mapping[str, NDArray]) -> NDArray:
+        """Cost of each simulated set of channels in the batch (...,); `outputs`: family -> (..., n, k)."""
+        if self.name == "wls":
+            return np.mean(self.residuals(outputs) ** 2, axis=-1)
+        return self._eq8(outputs)
+
+    def parts(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
+        """Numerator and denominator of the cost (wls: sum of squared residuals and their count): several runs'
+        costs combine as the sum of numerators over the sum of denominators."""
+        if self.name == "wls":
+            return np.sum(self.residuals(outputs) ** 2, axis=-1), np.asarray(float(self.size))
+        return self._eq8_parts(outputs)
+
+    def _eq8_parts(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         num = 0.0
         den = 0.0
         for family, ref in self.reference.items():
-            sim = getattr(response, family)
-            num = num + np.sum(np.linalg.norm(ref - sim, axis=-2), axis=-1)
-            den = den + np.sum(np.linalg.norm(ref, axis=-2))
+            num = num + np.sum(self._norms(family, self.error(family, outputs[family])), axis=-1)
+            den = den + np.sum(self._norms(family, self._centred(family, ref) if self.offsets else ref))
+        return num, den
+
+    def _eq8(self, outputs: Mapping[str, NDArray]) -> NDArray:
+        num, den = self._eq8_parts(outputs)
         return num / den
 
-    def residuals(self, response: Response) -> NDArray:
-        """Weighted residuals (ref - sim) / sigma of all channels, flattened (..., R)."""
+    def residuals(self, outputs: Mapping[str, NDArray]) -> NDArray:
+        """Weighted residuals (ref - sim) / sigma of all observed channel samples, flattened (..., R)."""
         parts = []
-        for family, ref in self.reference.items():
-            sim = getattr(response, family)
-            r = (ref - sim) / self.sigma[family]
-            parts.append(r.reshape(r.shape[:-2] + (-1,)))
+        for family in self.reference:
+            r = self.error(family, outputs[family]) / self.sigma[family]
+            r = r.reshape(r.shape[:-2] + (-1,))
+            parts.append(r[..., self._keep[family]] if family in self._keep else r)
         return np.concatenate(parts, axis=-1)
 
-    def costs_and_residuals(self, response: Response) -> tuple[NDArray, NDArray]:
+    def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""
-        residuals = self.residuals(response)
-        costs = np.mean(residuals**2, axis=-1) if self.name == "wls" else self._eq8(response)
+        residuals = self.residuals(outputs)
+        costs = np.mean(residuals**2, axis=-1) if self.name == "wls" else self._eq8(outputs)
         return costs, residuals

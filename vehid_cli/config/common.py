@@ -60,14 +60,6 @@ def _start_alias(value: object) -> object:
 Start = Annotated[Literal["auto", "random", "config"], BeforeValidator(_start_alias)]  # one vocabulary for all systems
 
 
-def _start_alias(value: object) -> object:
-    """`nominal` is the old name of `config` (vehicle configs before the vocabulary was shared)."""
-    return "config" if value == "nominal" else value
-
-
-Start = Annotated[Literal["auto", "random", "config"], BeforeValidator(_start_alias)]  # one vocabulary for all systems
-
-
 def _check_algorithm(algorithm: Algorithm) -> None:
     """The algorithm exists (the optimizers' table of SPEC names is the one list) and its population suffices."""
     if algorithm.name not in ALGORITHMS:

@@ -6,9 +6,12 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from ..bench import UNITS
 from ..errors import InputError
+from ..logger import SI_FACTORS
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
+from ..models.sensors import FAMILY, Layout, Sensor, corner_layout
 from .common import Finite, IdentifyCommon, NonNeg, Pos, SystemConfig, _did_you_mean, _KeyedError, _Section
 
 
@@ -116,6 +119,8 @@ class Vehicle(_Section):
         return out
 
 
+ROAD_CHANNELS = ("road1", "road2", "road3", "road4", "track1", "track2")  # the road's names in data.channels
+
 BumpShape = Literal["step", "cosine_step", "half_sine", "trapezoid"]
 
 
@@ -147,6 +152,9 @@ class RandomRoad(_Section):
         return self
 
 
+RoadInput = Literal["actuators", "tracks", "config"]
+
+
 class Road(_Section):
     """Road input: bumps and/or a random ISO 8608 road, or a road profile from a measurement file."""
 
@@ -155,17 +163,29 @@ class Road(_Section):
     bump: Bump | None = None
     random: RandomRoad | None = None
     file: str | None = Field(None, description="measurement file whose road1..road4 columns and time grid are used")
+    input: RoadInput = Field(
+        "actuators",
+        description="where a measured run's road comes from: actuators (channels road1..road4: a four-post rig's "
+        "actuator displacements, or the road columns of a measurement CSV), tracks (channels track1, track2: one "
+        "measured profile per side, under the front wheels; the rear follows wheelbase/speed later), or config "
+        "(the configured bumps or random road on the run's time grid)",
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> Road:
         if self.speed_kmh is not None and self.speed is not None:
             raise ValueError("give either 'speed_kmh' or 'speed', not both")
-        if self.file is None:
-            if self.bump is None and self.random is None:
-                raise ValueError("give a 'bump', a 'random' road, or a road 'file'")
+        if self.input == "tracks" and self.speed_kmh is None and self.speed is None:
+            raise _KeyedError("road.speed_kmh", "input 'tracks' delays the rear by wheelbase/speed: give the speed")
+        if self.file is None and (self.bump is not None or self.random is not None):
             if self.speed_kmh is None and self.speed is None:
                 raise ValueError("give the forward speed as 'speed_kmh' (km/h) or 'speed' (m/s)")
         return self
+
+    @property
+    def configured(self) -> bool:
+        """A road to simulate on: bumps, a random road or a road file."""
+        return self.file is not None or self.bump is not None or self.random is not None
 
     @property
     def V(self) -> float:
@@ -201,10 +221,115 @@ class Simulation(_Section):
         return self
 
 
+class NoiseSigma(_Section):
+    """Absolute noise floors per sensor family: a real sensor's noise does not grow with the signal."""
+
+    acc: Pos | None = Field(None, description="standard deviation of every acceleration channel [m/s²]")
+    disp: Pos | None = Field(None, description="standard deviation of every displacement/deflection channel [m]")
+
+
 class Noise(_Section):
-    """Measurement noise of Gökdağ Eq. 15: sigma_i = level * std(clean channel i)."""
+    """Measurement noise: Gökdağ Eq. 15 (sigma_i = level * std(clean channel i)) by default; `sigma` gives a family
+    an absolute floor instead (a sensor's own `sigma` in the layout wins over both)."""
 
     level: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = Field(0.0, description="Np, 0.1 = 10 %")
+    sigma: NoiseSigma = NoiseSigma()
+
+    def describe(self) -> str:
+        """The noise in a few words (file comments, figures, summaries)."""
+        units = {"acc": "m/s²", "disp": "m"}
+        parts = [f"sigma_{f} = {v:g} {units[f]}" for f, v in self.sigma.model_dump().items() if v is not None]
+        if self.level > 0 or not parts:
+            parts.insert(0, f"Np = {100 * self.level:g} % (Eq. 15)")
+        return ", ".join(parts)
+
+
+class SensorSpec(_Section):
+    """One sensor of the layout: a body sensor at (x, y) from a reference point, or a wheel or deflection sensor at
+    a corner."""
+
+    name: str = Field(description="channel name (the key of data.channels; the column `vehid simulate` writes)")
+    kind: Literal["body_acc", "body_disp", "wheel_acc", "wheel_disp", "deflection"] = Field(
+        description="body_acc, body_disp: vertical motion of a body point; wheel_acc, wheel_disp: a wheel's hop; "
+        "deflection: suspension deflection at a corner (body point above it minus the wheel, extension +)"
+    )
+    x: Finite | None = Field(None, description="body sensors: forward of `origin` [m]")
+    y: Finite | None = Field(None, description="body sensors: toward side 1 (corners 1, 4) from `origin` [m]")
+    origin: Literal["cg", "corner1", "corner2", "corner3", "corner4", "front_axle", "rear_axle"] | None = Field(
+        None,
+        description="body sensors: the point x, y are measured from (default cg); a corner or axle centre stays "
+        "put when the CG (a1, b1) is identified",
+    )
+    corner: Annotated[int, Field(ge=1, le=4)] | None = Field(None, description="wheel and deflection sensors: 1..4")
+    sigma: Pos | None = Field(None, description="this channel's noise standard deviation [m/s² or m]")
+
+    @model_validator(mode="after")
+    def _where(self) -> SensorSpec:
+        if self.kind.startswith("body"):
+            if self.corner is not None:
+                raise ValueError(f"a {self.kind} sensor is placed by x, y (and origin), not by 'corner'")
+        else:
+            if self.corner is None:
+                raise ValueError(f"a {self.kind} sensor needs its 'corner' (1..4)")
+            given = [k for k in ("x", "y", "origin") if getattr(self, k) is not None]
+            if given:
+                raise ValueError(f"a {self.kind} sensor sits at its corner: remove {', '.join(given)}")
+        return self
+
+    def sensor(self) -> Sensor:
+        return Sensor(
+            name=self.name, kind=self.kind, x=self.x or 0.0, y=self.y or 0.0, origin=self.origin or "cg",
+            corner=self.corner or 0,
+        )  # fmt: skip
+
+
+Offsets = Literal["none", "remove", "identify"]
+
+
+class VehicleData(_Section):
+    """Measured runs as a data logger records them: which channel of the file is which sensor, in which unit."""
+
+    files: tuple[str, ...] = Field(
+        (), description="runs identified jointly (relative to the config); --data replaces them"
+    )
+    channels: dict[str, str] = Field(
+        {},
+        description="our name (a sensor of the layout, road1..road4, track1, track2) -> the channel's name in the "
+        "file; a name left out is looked up as itself",
+    )
+    units: dict[str, str] = Field({}, description="our name -> the unit of its channel in the file (g, mm, ...)")
+    time: str | None = Field(None, description="the time column/vector (CSV, MAT, HDF5; default t or time)")
+    time_unit: str = Field("s", description="unit of a numeric time column")
+    window: tuple[NonNeg, Pos] | None = Field(None, description="use only start <= t < stop [s] of each run")
+    rate: Pos | None = Field(
+        None,
+        description="rate of the common grid [Hz] (default: the fastest channel's; slower channels are "
+        "compared at their own samples only)",
+    )
+    resample: bool = Field(True, description="false: channels at different rates (or jittered stamps) are an error")
+    variable: str | None = Field(None, description="the MAT struct (or HDF5 group) holding the channels")
+    offsets: Offsets = Field(
+        "none",
+        description="sensor offsets (bias, gravity, a potentiometer's zero): none; remove (each channel's mean over "
+        "the first second, the car at rest); identify (one nuisance offset per channel and run, profiled out of the "
+        "fit and the bound)",
+    )
+
+    @model_validator(mode="after")
+    def _checks(self) -> VehicleData:
+        for ours, unit in self.units.items():
+            if unit not in SI_FACTORS:
+                raise _KeyedError(
+                    f"data.units.{ours}",
+                    f"unknown unit '{unit}'{_did_you_mean(unit, SI_FACTORS)} (known: {', '.join(SI_FACTORS)})",
+                )
+        if self.time_unit not in UNITS["time"]:
+            raise _KeyedError(
+                "data.time_unit", f"unknown time unit '{self.time_unit}' (known: {', '.join(UNITS['time'])})"
+            )
+        if self.window is not None and not self.window[0] < self.window[1]:
+            raise _KeyedError("data.window", f"start {self.window[0]:g} s must be before stop {self.window[1]:g} s")
+        return self
 
 
 class Identify(IdentifyCommon):
@@ -222,9 +347,50 @@ class Config(SystemConfig):
     vehicle: Vehicle
     road: Road
     simulation: Simulation = Simulation()
-    sensors: Literal["acc", "disp", "both"] = "both"
+    sensors: Literal["acc", "disp", "both"] = Field(
+        "both", description="the families wls compares: acc, disp or both (of the layout's channels)"
+    )
+    layout: tuple[SensorSpec, ...] | None = Field(
+        None, description="the sensors (default: the paper's acc1..acc4, disp1..disp4 above the corners)"
+    )
     noise: Noise = Noise()
+    data: VehicleData = VehicleData()
     identify: Identify = Identify()
+
+    def sensor_layout(self) -> Layout:
+        """The configured sensors (models.sensors.Layout), the paper's corner layout when none is given."""
+        return corner_layout() if self.layout is None else Layout(tuple(s.sensor() for s in self.layout))
+
+    @model_validator(mode="after")
+    def _road(self) -> Config:
+        measured = bool(self.data.files or self.data.channels)
+        if not self.road.configured and not measured:
+            raise _KeyedError("road", "give a 'bump', a 'random' road, or a road 'file'")
+        if self.road.input == "config" and not self.road.configured:
+            raise _KeyedError(
+                "road.input", "input 'config' takes the configured road: give a 'bump' or a 'random' road"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _layout(self) -> Config:
+        if self.layout is None:
+            return self
+        names = [s.name for s in self.layout]
+        for i, name in enumerate(names):
+            if name in names[:i]:
+                raise _KeyedError(f"layout.{i}.name", f"sensor name '{name}' is used twice")
+            if name in ROAD_CHANNELS:
+                raise _KeyedError(f"layout.{i}.name", f"'{name}' names a road channel; choose another sensor name")
+        if not self.layout:
+            raise _KeyedError("layout", "an empty layout measures nothing: list at least one sensor, or remove it")
+        families = {FAMILY[s.kind] for s in self.layout}
+        wanted = {"acc": {"acc"}, "disp": {"disp"}, "both": {"acc", "disp"}}[self.sensors]
+        if not families & wanted:
+            raise _KeyedError(
+                "sensors", f"sensors '{self.sensors}' selects no channel of the layout ({', '.join(sorted(families))})"
+            )
+        return self
 
     @model_validator(mode="after")
     def _effects_need_time_stepping(self) -> Config:
@@ -265,6 +431,11 @@ class Config(SystemConfig):
                 raise _KeyedError(
                     "identify.unknowns", f"'{pair[0]}' and '{pair[1]}' cannot both be unknown: their sum is fixed"
                 )
+        families = self.sensor_layout().families
+        if ident.objective == "f1" and "disp" not in families:
+            raise _KeyedError("identify.objective", "f1 compares displacements; the layout has no displacement sensor")
+        if ident.objective == "f2" and "acc" not in families:
+            raise _KeyedError("identify.objective", "f2 compares accelerations; the layout has no accelerometer")
         if ident.objective == "f1" and self.sensors == "acc":
             raise _KeyedError("identify.objective", "f1 compares displacements; set sensors to 'disp' or 'both'")
         if ident.objective == "f2" and self.sensors == "disp":

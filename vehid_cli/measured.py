@@ -1,0 +1,126 @@
+"""A measured vehicle run as the identification needs it: the layout's channels and the road on one time grid.
+
+Two kinds of file are read:
+
+* the SPEC's measurement CSV (t, road1..road4, acc1..acc4, disp1..disp4 in SI units), for the paper's corner
+  layout when the config maps no channels: `data.read_measurement`, as `vehid simulate` writes it;
+* anything a data logger or a test engineer writes (MDF4, MAT v5/v7.3, HDF5, CSV with ISO stamps), through
+  `logger.read_record`: the config's `data.channels` say which channel of the file is which sensor (a name left
+  out is looked up as itself), `data.units` its unit, and channels at different rates meet on one grid.
+
+A channel slower than the grid is compared only at its own samples (`observed`): up-sampled values between them
+carry no new information, and counting them would overstate what the run knows. Sensor offsets are removed
+(each channel's mean over the first second, the car at rest) or left to the fit (`data.offsets: identify`).
+The road is the rig's actuator displacements (road1..road4), one measured profile per side (track1, track2: the
+rear wheels meet it wheelbase/speed later), or the configured road on the run's time grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .config import Config
+from .data import read_measurement
+from .errors import InputError
+from .experiment import Experiment, check_time_step, experiment_rng
+from .logger import Record, read_record, remove_offset
+from .road import road_function
+
+ROAD = ("road1", "road2", "road3", "road4")
+TRACKS = ("track1", "track2")
+
+
+@dataclass(frozen=True)
+class MeasuredRun:
+    """One measured run on a uniform grid: the road under each tyre and the channels of the families used."""
+
+    t: NDArray  # (n,) [s], uniform, from 0 or the file's first stamp
+    road: NDArray  # (n, 4) [m]
+    outputs: dict[str, NDArray]  # family -> (n, k) [m/s² or m], the layout's channels of that family
+    observed: dict[str, NDArray] | None  # family -> (n, k) bool: the channel's own samples (None: every sample)
+    source: str
+
+    @property
+    def dt(self) -> float:
+        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+
+
+def _legacy(config: Config) -> bool:
+    """The SPEC's measurement CSV: the paper's layout, no channel mapping, the road from road1..road4."""
+    data = config.data
+    plain = not (data.channels or data.units or data.window or data.rate or data.time or data.variable)
+    return config.layout is None and plain and config.road.input == "actuators" and data.offsets == "none"
+
+
+def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> MeasuredRun:
+    """Read run `path` for the config's layout: the channels of `families` and the road (config.road.input)."""
+    source = str(path)
+    if Path(path).suffix.lower() in (".csv", ".txt") and _legacy(config):
+        m = read_measurement(path, need_responses=bool(families))
+        outputs = {}
+        for family in families:
+            values = getattr(m, family)
+            if values is None:
+                raise InputError(
+                    f"objective '{config.identify.objective}' with sensors '{config.sensors}' needs columns "
+                    f"{family}1..{family}4, which this file lacks",
+                    source=source,
+                )
+            outputs[family] = values
+        return MeasuredRun(t=m.t, road=m.road, outputs=outputs, observed=None, source=source)
+
+    layout, data = config.sensor_layout(), config.data
+    sensors = [name for family in families for name in layout.names(family)]
+    road_names = {"actuators": ROAD, "tracks": TRACKS, "config": ()}[config.road.input]
+    ours = sensors + list(road_names)
+    channels = {name: data.channels.get(name, name) for name in ours}
+    units = {name: unit for name, unit in data.units.items() if name in channels}
+    record = read_record(
+        path, channels, units, time=data.time, window=data.window, rate=data.rate, variable=data.variable,
+        time_unit=data.time_unit, resample=data.resample,
+    )  # fmt: skip
+    if data.offsets == "remove":
+        record = remove_offset(record, sensors, "first_second")
+    outputs, observed = {}, {}
+    for family in families:
+        names = layout.names(family)
+        outputs[family] = np.column_stack([record.channel(n) for n in names])
+        observed[family] = np.column_stack([_observed(record, n) for n in names])
+    every = all(mask.all() for mask in observed.values())
+    road = _road(config, record, road_names)
+    return MeasuredRun(t=record.t, road=road, outputs=outputs, observed=None if every else observed, source=source)
+
+
+def _observed(record: Record, name: str) -> NDArray:
+    """(n,) bool: the grid samples where channel `name` was sampled itself."""
+    mask = np.zeros(record.t.size, dtype=bool)
+    mask[record.native_samples(name)] = True
+    return mask
+
+
+def _road(config: Config, record: Record, names: tuple[str, ...]) -> NDArray:
+    """The road (n, 4) [m] under corners 1..4 on the record's grid."""
+    t = record.t
+    if config.road.input == "config":
+        return road_function(config.road, config.vehicle.L, experiment_rng(config.identify.seed))(t - t[0])
+    if config.road.input == "actuators":
+        return np.column_stack([record.channel(n) for n in names])
+    # tracks: side 1 under corners 1 (front) and 4 (rear), side 2 under 2 and 3; the rear meets it L / V later
+    delay = config.vehicle.L / config.road.V
+    side1, side2 = record.channel("track1"), record.channel("track2")
+
+    def later(y: NDArray) -> NDArray:
+        return np.interp(t - delay, t, y, left=y[0])
+
+    return np.column_stack([side1, side2, later(side2), later(side1)])
+
+
+def experiment_of(config: Config, run: MeasuredRun) -> Experiment:
+    """The configured car on a measured run's road and time grid (the uniform grid its stamps approximate)."""
+    t = run.t[0] + np.arange(run.t.size) * run.dt
+    check_time_step(config, run.dt, f"{run.source}: the time step")
+    return Experiment(config=config, t=t, road=run.road, road_source=run.source)
