@@ -26,7 +26,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("models", "models."),  # force laws and matrices: own their parameter tables and defaults
     ("sim", "sim."),  # the generic kernel and the car/bench adapters beside it
     ("config", "config."),  # validated configs: one module per system around a shared identify
-    ("road", "experiment", "objectives", "crlb", "identification", "damper_fit"),  # a config made concrete
+    ("road", "experiment", "measured", "objectives", "crlb", "identification", "damper_fit"),  # a config made concrete
     ("records",),  # run records, summaries, campaigns: plain data
     ("systems", "systems."),  # the seam: the car and the damper bench
     ("results", "executor"),  # campaign files; where runs execute

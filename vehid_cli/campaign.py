@@ -36,7 +36,7 @@ from .results import (
     write_campaign_h5,
 )
 from .systems import System, build_system
-from .systems.base import configured_data_file
+from .systems.base import DataFiles, configured_data_file, data_paths
 
 Log = Callable[[str], None]
 
@@ -49,9 +49,13 @@ def identify_run(system: System, index: int) -> RunRecord:
     return system.identify_run(index)
 
 
-def data_digest(data_file: str | Path | None) -> str | None:
-    """SHA-256 of a data file's bytes (None without one)."""
-    return None if data_file is None else hashlib.sha256(Path(data_file).read_bytes()).hexdigest()
+def data_digest(data_file: DataFiles) -> str | None:
+    """SHA-256 of a data file's bytes (None without one); of several files, the SHA-256 of their digests in order."""
+    files = data_paths(data_file)
+    digests = [hashlib.sha256(Path(f).read_bytes()).hexdigest() for f in files]
+    if len(digests) <= 1:
+        return digests[0] if digests else None
+    return hashlib.sha256(" ".join(digests).encode()).hexdigest()
 
 
 def campaign_key(config: AnyConfig, data_files: Sequence[str | Path] = ()) -> str:
@@ -136,7 +140,7 @@ class Checkpoint:
 
 def run_campaign(
     config: AnyConfig,
-    data_file: str | Path | None = None,
+    data_file: DataFiles = None,
     *,
     jobs: int | None = None,
     executor: Executor | None = None,
@@ -189,12 +193,12 @@ def run_campaign(
     return Campaign(
         config=config, data_file=system.data_file, names=box.names, truth=box.truth, nominal=box.nominal,
         lower=box.lower, upper=box.upper, sigma=system.sigma, sigma_source=system.sigma_source, records=records,
-        bound=bound, summary=summary, data_sha256=data_digest(system.data_file), system=system.name,
-        findings=findings,
+        bound=bound, summary=summary, data_sha256=data_digest(system.data_files()), system=system.name,
+        findings=findings, data_files=system.data_files(),
     )  # fmt: skip
 
 
-def check_same_campaign(output: Path, config: AnyConfig, data_file: str | Path | None) -> None:
+def check_same_campaign(output: Path, config: AnyConfig, data_file: DataFiles) -> None:
     """InputError (naming the first differences) if `output` holds a campaign of another config or data file."""
     diffs = config_difference(output, config, data_digest(configured_data_file(config, data_file)))
     if diffs:
@@ -219,7 +223,7 @@ def checkpoint_dir_for(output: Path) -> Path:
     return output.with_name(output.name + ".partial")
 
 
-def finished_campaign(output: Path, config: AnyConfig, data_file: str | Path | None = None) -> Campaign | None:
+def finished_campaign(output: Path, config: AnyConfig, data_file: DataFiles = None) -> Campaign | None:
     """The campaign `output` holds if it is whole (checksum verified) and of this campaign's key: the config (by
     `campaign_file_digest`, the test a sweep skips by), the data file's bytes and the code version; else None."""
     data_file = configured_data_file(config, data_file)
@@ -238,7 +242,7 @@ def finished_campaign(output: Path, config: AnyConfig, data_file: str | Path | N
 def run_campaign_to_file(
     config: AnyConfig,
     output: Path,
-    data_file: str | Path | None = None,
+    data_file: DataFiles = None,
     *,
     jobs: int | None = None,
     executor: Executor | None = None,

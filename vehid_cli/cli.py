@@ -189,7 +189,11 @@ def simulate(
     output: Annotated[
         Path,
         typer.Option(
-            "-o", "--output", metavar="FILE", help="Output file: .csv (measurement format) or .h5.", show_default=False
+            "-o",
+            "--output",
+            metavar="FILE",
+            help="Output file: .csv (measurement format), .h5, or .mf4 (a car's run as a data logger records it).",
+            show_default=False,
         ),
     ],
     road: Annotated[
@@ -208,12 +212,13 @@ def simulate(
 ) -> None:
     """Simulate the configured car on its road and write a vehicle measurement file.
 
-    CSV holds the noisy responses (Eq. 15; --set noise.level=0 for clean ones); HDF5 holds clean and
-    noisy. The noise is the noise stream of run 0 of the campaign with the same seed.
+    CSV holds the noisy channels of the configured sensors (Eq. 15 or noise.sigma; --set noise.level=0 for clean
+    ones); HDF5 holds clean and noisy; MDF4 the noisy channels and the road as a logger records them. The noise
+    is the noise stream of run 0 of the campaign with the same seed.
     """
-    from .systems import write_simulation
+    from .systems import SIMULATION_SUFFIXES, write_simulation
 
-    target = check_writable(output, (".csv", ".h5", ".hdf5"))
+    target = check_writable(output, SIMULATION_SUFFIXES)
     if plot is not None:
         check_writable(plot, (".png",))
     if seed is not None and seed < 0:
@@ -233,8 +238,13 @@ def simulate(
 def identify(
     config: Annotated[Path, typer.Argument(metavar="CONFIG", help="Experiment config (YAML).", show_default=False)],
     data: Annotated[
-        Optional[Path],  # noqa: UP045
-        typer.Option("--data", metavar="FILE", help="Identify from this measurement file instead of simulated data."),
+        Optional[list[Path]],  # noqa: UP045
+        typer.Option(
+            "--data",
+            metavar="FILE",
+            help="Identify from this measured run instead of simulated data; repeat it to identify several runs "
+            "jointly (one parameter set).",
+        ),
     ] = None,
     runs: RunsOption = None,
     seed: SeedOption = None,
@@ -278,7 +288,7 @@ def identify(
         objective = getattr(cfg.identify, "objective", "J")  # the damper's cost is J (Eq. 7)
         bar = progress.add_task(f"{cfg.identify.algorithm.name}/{objective}", total=None)
         campaign = run_campaign_to_file(
-            cfg, target, data, executor=pool, log=_warn, force=force,
+            cfg, target, data or None, executor=pool, log=_warn, force=force,
             on_run=lambda d, n: progress.update(bar, completed=d, total=n),
         )  # fmt: skip
     if json_out is not None:

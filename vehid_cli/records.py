@@ -182,3 +182,4 @@ class Campaign:
     data_sha256: str | None = None  # SHA-256 of the data file's bytes (None: simulated data)
     system: str = "vehicle"  # which system (systems.SYSTEMS) ran it: vehicle or damper
     findings: Any = None
+    data_files: tuple[str, ...] = ()  # every measured run identified from (several: jointly); data_file names them

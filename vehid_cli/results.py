@@ -136,6 +136,7 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
     h5.attrs["noise_level"] = cfg.noise.level
     h5.attrs["data_file"] = campaign.data_file or ""
     h5.attrs["data_sha256"] = campaign.data_sha256 or ""
+    h5.attrs["data_files"] = json.dumps(list(campaign.data_files))
     h5.attrs["sigma_source"] = campaign.sigma_source
     for key, value in provenance().items():
         h5.attrs[key] = value
@@ -337,6 +338,7 @@ def read_campaign_h5(path: str | Path):
                 nominal=h5["nominal"][()], lower=bounds[:, 0], upper=bounds[:, 1], sigma=sigma,
                 sigma_source=str(h5.attrs["sigma_source"]), records=records, bound=bound, summary=summary,
                 data_sha256=str(h5.attrs.get("data_sha256", "")) or None, system=system, findings=findings,
+                data_files=tuple(json.loads(str(h5.attrs.get("data_files", "[]")))),
             )  # fmt: skip
         except (KeyError, ValueError, TypeError, OSError, RuntimeError, yaml.YAMLError) as exc:  # reactions to damage
             raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None

@@ -31,6 +31,14 @@ def diagnose_config(
         raise InputError("diagnose needs --data FILE (the measured run to fit)", source=str(config))
     if len(validate) > 1:
         raise InputError("the full car takes one --validate run", source=str(config))
+    if cfg.layout is not None or cfg.data.channels or cfg.data.files:
+        raise InputError(
+            "diagnose works on the paper's corner layout (acc1..acc4, disp1..disp4) and one measurement CSV so far; "
+            "this config has a sensor layout or logger channels (layout, data.channels, data.files): identify it "
+            "with `vehid identify`",
+            source=str(config),
+            key="layout" if cfg.layout is not None else "data",
+        )
     cfg = load_config(config, [*CAR_DEFAULTS, *overrides])  # the user's --set comes last and wins
     return diagnose(cfg, data, validate[0] if validate else None, log=log)
 

@@ -539,7 +539,7 @@ def estimate_unexplained(
             steps = np.where(at + h <= hi, h, -h)
         X = np.vstack([at[None, :], at[None, :] + np.diag(steps)]) if steps.size else at[None, :]
         resp, d_all, v_all = _trajectories(task, names, X)
-        res = np.asarray(objective.residuals(resp), dtype=float)  # (P, R_all)
+        res = np.asarray(objective.residuals(exp.read(resp)), dtype=float)  # (P, R_all)
         if not np.all(np.isfinite(res[0])):
             raise ValueError("the fitted model's residual is not finite")
         if steps.size:

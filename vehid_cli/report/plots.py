@@ -11,45 +11,68 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from ..data import atomic_path  # noqa: E402
-from ..experiment import SimulatedRun, build_experiment  # noqa: E402
-from ..identification import build_task  # noqa: E402
+from ..experiment import SimulatedRun  # noqa: E402
+from ..identification import JointTask, Task, build_tasks  # noqa: E402
 from . import tables  # noqa: E402
 from .tables import grouped  # noqa: E402
 
+FAMILY_AXES = {"disp": ("mm", 1e3), "acc": ("m/s²", 1.0)}  # the unit each family is drawn in, and its scale from SI
+
 
 def plot_responses(run: SimulatedRun, path: str | Path) -> None:
-    """Road inputs and the body-point displacements and accelerations z1..z4, noisy over clean (Gökdağ Fig. 4)."""
-    t = run.experiment.t
-    fig, axes = plt.subplots(5, 2, figsize=(11, 11), sharex=True, constrained_layout=True)
+    """Road inputs and every channel of the layout, measured (noisy) over clean: displacements left, accelerations
+    right (for the paper's layout, z1..z4 and z1''..z4'': Gökdağ Fig. 4)."""
+    exp = run.experiment
+    t = exp.t
+    families = [f for f in ("disp", "acc") if f in run.channels]
+    rows = max(len(exp.layout.names(f)) for f in families)
+    fig, axes = plt.subplots(
+        rows + 1, 2, figsize=(11, 2.2 * (rows + 1)), sharex=True,
+        constrained_layout=True, squeeze=False,
+    )  # fmt: skip
     for corner in range(4):
-        axes[0, 0].plot(t, 100 * run.experiment.road[:, corner], label=f"road{corner + 1}")
+        axes[0, 0].plot(t, 100 * exp.road[:, corner], label=f"road{corner + 1}")
     axes[0, 0].set_ylabel("road [cm]")
     axes[0, 0].legend(ncol=4, fontsize=8)
     axes[0, 1].axis("off")
     axes[0, 1].text(
         0.0, 0.5,
-        f"{run.experiment.config.source}\nnoise Np = {100 * run.noise_level:g} % (Eq. 15)\n"
-        f"integrator: {run.experiment.config.simulation.integrator}, dt = {1e3 * run.experiment.dt:g} ms",
+        f"{exp.config.source}\nnoise {exp.config.noise.describe()}\n"
+        f"integrator: {exp.config.simulation.integrator}, dt = {1e3 * exp.dt:g} ms",
         va="center", fontsize=10,
     )  # fmt: skip
-    for corner in range(4):
-        for col, (noisy, clean, unit, scale, name) in enumerate(
-            ((run.disp, run.clean.disp, "mm", 1e3, "z"), (run.acc, run.clean.acc, "m/s²", 1.0, "z''"))
-        ):
-            ax = axes[corner + 1, col]
-            if run.noise_level > 0:
-                ax.plot(t, scale * noisy[:, corner], lw=0.5, color="0.6", label="measured (noisy)")
-            ax.plot(t, scale * clean[:, corner], lw=1.2, color="C0", label="clean")
-            ax.set_ylabel(f"{name}{corner + 1} [{unit}]")
-            if corner == 0:
+    for col, family in enumerate(families):
+        unit, scale = FAMILY_AXES[family]
+        names = exp.layout.names(family)
+        for row in range(rows):
+            ax = axes[row + 1, col]
+            if row >= len(names):
+                ax.axis("off")
+                continue
+            noisy, clean = run.channels[family][:, row], run.clean_channels[family][:, row]
+            if not np.array_equal(noisy, clean):
+                ax.plot(t, scale * noisy, lw=0.5, color="0.6", label="measured (noisy)")
+            ax.plot(t, scale * clean, lw=1.2, color="C0", label="clean (configured car)")
+            ax.set_ylabel(f"{names[row]} [{unit}]")
+            if row == 0:
                 ax.legend(fontsize=8, loc="upper right")
+    for col in range(len(families), axes.shape[1]):
+        for row in range(1, rows + 1):
+            axes[row, col].axis("off")
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
-    fig.suptitle("Body-point responses to the road input")
+    fig.suptitle("Responses of the sensors to the road input")
     path = Path(path)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
+
+
+def first_task(campaign) -> Task:
+    """The identification task of a campaign's (first) run, rebuilt from its config and data files."""
+    files = campaign.data_files or (() if campaign.data_file is None else (campaign.data_file,))
+    task = build_tasks(campaign.config, files)
+    return task.tasks[0] if isinstance(task, JointTask) else task
 
 
 # ------------------------------------------------------------------------------------------ campaign figures
@@ -110,8 +133,8 @@ def plot_re_boxes(group, path: str | Path) -> None:
 
 
 def plot_true_vs_estimated(campaign, path: str | Path) -> None:
-    """Bounce, pitch and roll of the true car and of the mean estimate (the paper's Fig. 5)."""
-    exp = build_experiment(campaign.config, road_file=campaign.data_file)
+    """Bounce, pitch and roll of the true car and of the mean estimate (the paper's Fig. 5), on the (first) run."""
+    exp = first_task(campaign).experiment
     values = dict(zip(campaign.names, campaign.summary.mean, strict=True))
     est = exp.simulate({k: [v] for k, v in values.items()})
     ref = exp.simulate()
@@ -130,18 +153,19 @@ def plot_true_vs_estimated(campaign, path: str | Path) -> None:
 
 
 def plot_noisy_vs_clean(campaign, path: str | Path) -> None:
-    """The data run 0 identified from, over the clean responses (the paper's Fig. 4)."""
-    task = build_task(campaign.config, campaign.data_file)
+    """The data run 0 identified from (its first measured run), over the configured car's clean channels (the
+    paper's Fig. 4)."""
+    task = first_task(campaign)
     exp = task.experiment
     clean = exp.simulate()
-    if task.measured is not None:
-        acc = task.measured.get("acc", clean.acc)
-        disp = task.measured.get("disp", clean.disp)
-        level = campaign.config.noise.level
-    else:
-        noisy = {f: v for f, v in task.reference(0).items()}
-        acc, disp, level = noisy.get("acc", clean.acc), noisy.get("disp", clean.disp), campaign.config.noise.level
-    plot_responses(SimulatedRun(experiment=exp, clean=clean, acc=acc, disp=disp, noise_level=level), path)
+    model = exp.read(clean)
+    data = task.measured if task.measured is not None else task.reference(0)
+    channels = {f: data.get(f, model[f]) for f in model}
+    if task.offsets:  # the channels' offsets are unknowns: draw the data with the offsets that fit it best removed
+        objective = task.objective({f: channels[f] for f in task.families})
+        channels.update({f: model[f] + objective.error(f, model[f]) for f in task.families})
+    run = SimulatedRun(exp, clean, model, channels, task.sigma, campaign.config.noise.level)
+    plot_responses(run, path)
 
 
 def write_campaign_plots(campaigns, files, out_dir: str | Path) -> list[Path]:

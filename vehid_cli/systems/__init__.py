@@ -9,11 +9,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..config import AnyConfig, DamperConfig
+from ..errors import InputError
 from .base import Box, Simulated, System
 from .damper import DamperSystem, Findings
 from .vehicle import VehicleSystem
 
 SYSTEMS: dict[str, type[System]] = {VehicleSystem.name: VehicleSystem, DamperSystem.name: DamperSystem}
+SIMULATION_SUFFIXES = tuple(dict.fromkeys(s for c in SYSTEMS.values() for s in c.simulation_suffixes))
 
 
 def system_class(config: AnyConfig) -> type[System]:
@@ -30,10 +32,17 @@ def write_simulation(
     config: AnyConfig, target: Path, seed: int, road: Path | None = None, origin: str = ""
 ) -> Simulated:
     """`vehid simulate`: the configured system simulated with run 0's noise stream of `seed`, written to `target`."""
-    return system_class(config).write_simulation(config, Path(target), seed, road, origin)
+    cls = system_class(config)
+    target = Path(target)
+    if target.suffix.lower() not in cls.simulation_suffixes:
+        raise InputError(
+            f"a {cls.name} simulation is written as {', '.join(cls.simulation_suffixes)}, not '{target.suffix}'",
+            source=str(target),
+        )
+    return cls.write_simulation(config, target, seed, road, origin)
 
 
 __all__ = [
-    "SYSTEMS", "Box", "DamperSystem", "Findings", "Simulated", "System", "VehicleSystem", "build_system",
-    "system_class", "write_simulation",
+    "SIMULATION_SUFFIXES", "SYSTEMS", "Box", "DamperSystem", "Findings", "Simulated", "System", "VehicleSystem",
+    "build_system", "system_class", "write_simulation",
 ]  # fmt: skip

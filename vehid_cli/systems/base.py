@@ -9,6 +9,7 @@ adds to the campaign (the damper's identified model, held-out J, real-time check
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -44,12 +45,33 @@ class Box:
     truth: NDArray | None  # the true values when known
 
 
-def configured_data_file(config: AnyConfig, data_file: str | Path | None) -> str | Path | None:
-    """The data file a campaign identifies from: `--data`, else a damper config's data.file (None: simulated)."""
+DataFiles = str | Path | Sequence[str | Path] | None  # one measured run, several (identified jointly), or none
+
+
+def data_paths(data: DataFiles) -> tuple[str, ...]:
+    """The data files as a tuple of paths (empty: simulated data)."""
+    if data is None:
+        return ()
+    if isinstance(data, (str, Path)):
+        return (str(data),)
+    return tuple(str(p) for p in data)
+
+
+def configured_data_file(config: AnyConfig, data_file: DataFiles) -> DataFiles:
+    """The data a campaign identifies from: `--data` (one file or several), else the config's data.file (a damper)
+    or data.files (the car) (None: simulated)."""
+    if data_paths(data_file):
+        return data_file
     data = getattr(config, "data", None)
-    if data_file is None and data is not None and data.file is not None:
+    if getattr(data, "file", None) is not None:
         return data.file
-    return data_file
+    files = getattr(data, "files", ())
+    return files or None
+
+
+def data_label(files: Sequence[str]) -> str | None:
+    """How results name the data: the file, or the files joined by ' + ' (None: simulated)."""
+    return " + ".join(files) if files else None
 
 
 class System(ABC):
@@ -58,10 +80,11 @@ class System(ABC):
     name: ClassVar[str]  # "vehicle" or "damper": the results file's `system` attribute
     objective: ClassVar[str]  # what `cost` means in the records (f1, f2, wls; J)
     findings_type: ClassVar[Any] = None  # what `conclude` returns: a class with write_h5(group), read_h5(group)
+    simulation_suffixes: ClassVar[tuple[str, ...]] = (".csv", ".h5", ".hdf5")  # what `write_simulation` writes
 
     config: AnyConfig
     box: Box
-    data_file: str | None  # the measured run identified from (None: simulated data)
+    data_file: str | None  # the measured run(s) identified from, `data_label` (None: simulated data)
     sigma: dict[str, NDArray]  # noise standard deviation per channel, per family
     sigma_source: str  # how sigma was obtained
 

@@ -33,7 +33,7 @@ from ..noise import estimate_noise_sigma
 from ..optimizers.base import Problem
 from ..provenance import provenance
 from ..records import RunRecord
-from .base import Box, Simulated, System, configured_data_file
+from .base import Box, DataFiles, Simulated, System, configured_data_file, data_paths
 
 BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "u", "force": "force"}
 
@@ -362,11 +362,17 @@ class DamperSystem(System):
     objective: ClassVar[str] = "J"
     findings_type: ClassVar[type] = Findings
 
-    def __init__(self, config: DamperConfig, data_file: str | Path | None = None):
+    def __init__(self, config: DamperConfig, data_file: DataFiles = None):
         cfg = config
-        data_file = configured_data_file(cfg, data_file)
+        files = data_paths(configured_data_file(cfg, data_file))
+        if len(files) > 1:
+            raise InputError(
+                f"a damper is fitted to one bench run at a time, got {len(files)} files ({', '.join(files)}); "
+                "give --data once (held-out runs go to data.validate)",
+                source=cfg.source,
+            )
         self.config = cfg
-        self.data_file = None if data_file is None else str(data_file)
+        self.data_file = files[0] if files else None
         self.spec = configured_spec(cfg)
         names = tuple(cfg.identify.unknowns)
         box = cfg.search_box()

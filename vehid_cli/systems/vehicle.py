@@ -13,31 +13,39 @@ from numpy.typing import NDArray
 from .. import __version__
 from ..config import Config
 from ..crlb import CramerRao
-from ..data import write_measurement_csv
+from ..data import ROAD_COLUMNS as ROAD
+from ..data import write_csv, write_measurement_csv
 from ..experiment import SimulatedRun, build_experiment, run_streams, simulate_measurement
 from ..h5io import h5_file
-from ..identification import Task, build_task
+from ..identification import JointTask, Task, build_tasks
+from ..logger_write import write_record
 from ..models.fullcar import DOF_NAMES
+from ..models.sensors import UNIT
 from ..optimizers.base import Problem
 from ..provenance import provenance
-from .base import Box, Simulated, System
+from .base import Box, DataFiles, Simulated, System, configured_data_file, data_label, data_paths
 
 
 class VehicleSystem(System):
-    """The 7-DOF car on its road: run r identifies from the clean responses plus run r's Eq. 15 noise (or from the
-    measured responses)."""
+    """The 7-DOF car on its road: run r identifies from the clean channels plus run r's noise (or from the measured
+    runs: several are identified jointly, one parameter set for all)."""
 
     name: ClassVar[str] = "vehicle"
     objective: ClassVar[str] = "f1, f2 or wls (identify.objective)"
+    simulation_suffixes: ClassVar[tuple[str, ...]] = (".csv", ".h5", ".hdf5", ".mf4")
 
-    def __init__(self, config: Config, data_file: str | Path | None = None):
-        self.task: Task = build_task(config, data_file)
+    def __init__(self, config: Config, data_file: DataFiles = None):
+        self._files = data_paths(configured_data_file(config, data_file))
+        self.task: Task | JointTask = build_tasks(config, self._files)
         t = self.task
         self.config = config
         self.box = Box(t.names, t.lower, t.upper, t.nominal, t.truth)
-        self.data_file = t.data_file
-        self.sigma = t.sigma
+        self.data_file = data_label(self._files)
+        self.sigma = run_sigma(t)
         self.sigma_source = t.sigma_source
+
+    def data_files(self) -> tuple[str, ...]:
+        return self._files
 
     @property
     def residual_samples(self) -> int:
@@ -47,20 +55,32 @@ class VehicleSystem(System):
     def write_simulation(
         cls, config: Config, target: Path, seed: int, road: Path | None = None, origin: str = ""
     ) -> Simulated:
-        """The car on its road (or on `road`, a measurement file's road and time grid), Eq. 15 noise."""
+        """The car on its road (or on `road`, a measurement file's road and time grid) with its sensors' noise:
+        CSV (the SPEC's columns for the paper's layout; t, road1..road4 and one column per sensor otherwise), HDF5
+        (clean and noisy channels) or MDF4 (one channel per sensor and per road input, SI units)."""
         experiment = build_experiment(config, road_file=road)
         run = simulate_measurement(experiment, run_streams(seed, 0).noise)
-        if target.suffix.lower() == ".csv":
-            comments = [
-                f"vehid {__version__} {origin}".rstrip(),
-                f"config sha256 {config.digest()}",
-                f"noise level Np = {config.noise.level:g} (Eq. 15), seed {seed}, road from {experiment.road_source}",
-            ]
-            write_measurement_csv(target, experiment.t, experiment.road, run.acc, run.disp, comments)
+        comments = [
+            f"vehid {__version__} {origin}".rstrip(),
+            f"config sha256 {config.digest()}",
+            f"noise {config.noise.describe()}, seed {seed}, road from {experiment.road_source}",
+        ]
+        suffix = target.suffix.lower()
+        if suffix == ".csv":
+            layout = experiment.layout
+            if config.layout is None:
+                write_measurement_csv(target, experiment.t, experiment.road, run.acc, run.disp, comments)
+            else:
+                names = ["t", *ROAD, *layout.channel_names]
+                table = np.column_stack([experiment.t, experiment.road, *(run.channels[f] for f in layout.families)])
+                write_csv(target, names, table, comments)
+        elif suffix == ".mf4":
+            write_simulation_mdf(target, run, comments)
         else:
             write_simulation_h5(target, run, seed)
         summary = (
-            f"{experiment.t.size} samples at dt = {experiment.dt * 1e3:g} ms, noise Np = {100 * config.noise.level:g} %"
+            f"{experiment.t.size} samples at dt = {experiment.dt * 1e3:g} ms, "
+            f"{len(experiment.layout.sensors)} channels, noise {config.noise.describe()}"
         )
         return Simulated(run, summary)
 
@@ -74,11 +94,35 @@ class VehicleSystem(System):
         return self.task.bound(at)
 
 
-def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
-    """One simulated run: the road, clean and noisy responses, coordinates, and the resolved config.
+def run_sigma(task: Task | JointTask) -> dict[str, NDArray]:
+    """The noise sigma per family of each run, for the results file: `acc`, `disp` of run 1, `acc.run2`, ..."""
+    if isinstance(task, Task):
+        return task.sigma
+    out = {}
+    for i, t in enumerate(task.tasks, start=1):
+        out.update({(f if i == 1 else f"{f}.run{i}"): s for f, s in t.sigma.items()})
+    return out
 
-    Layout: /t, /road (n, 4); /clean/{acc, disp, q}; /noisy/{acc, disp}; root attributes hold the
-    resolved config (YAML), its SHA-256, the noise level, the seed and provenance.
+
+def write_simulation_mdf(path: str | Path, run: SimulatedRun, comments: list[str]) -> None:
+    """One simulated run as a data logger would record it (ASAM MDF4): the road inputs and every sensor's noisy
+    channel, in SI units, on the simulation's grid."""
+    exp = run.experiment
+    channels = {name: (exp.t, exp.road[:, i]) for i, name in enumerate(ROAD)}
+    units = dict.fromkeys(ROAD, "m")
+    for family in exp.layout.families:
+        for j, name in enumerate(exp.layout.names(family)):
+            channels[name] = (exp.t, run.channels[family][:, j])
+            units[name] = UNIT[family]
+    write_record(path, channels, units=units, comment="\n".join(comments))
+
+
+def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
+    """One simulated run: the road, clean and noisy channels, coordinates, and the resolved config.
+
+    Layout: /t, /road (n, 4); /clean/{acc, disp, q}; /noisy/{acc, disp} (each (n, k) with the channel names in its
+    `columns` attribute); root attributes hold the resolved config (YAML), its SHA-256, the noise level, the seed
+    and provenance.
     """
     exp = run.experiment
     with h5_file(path) as h5:
@@ -93,9 +137,14 @@ def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
         h5.create_dataset("t", data=exp.t).attrs["unit"] = "s"
         h5.create_dataset("road", data=exp.road).attrs["unit"] = "m"
         clean, noisy = h5.create_group("clean"), h5.create_group("noisy")
-        for group, acc, disp in ((clean, run.clean.acc, run.clean.disp), (noisy, run.acc, run.disp)):
-            group.create_dataset("acc", data=acc).attrs["unit"] = "m/s^2"
-            group.create_dataset("disp", data=disp).attrs["unit"] = "m"
+        for group, channels in ((clean, run.clean_channels), (noisy, run.channels)):
+            for family, values in channels.items():
+                ds = group.create_dataset(family, data=values)
+                ds.attrs["unit"] = UNIT[family]
+                ds.attrs["columns"] = np.array(exp.layout.names(family), dtype=h5py.string_dtype())
+        noisy.create_group("sigma")
+        for family, sigma in run.sigma.items():
+            noisy["sigma"].create_dataset(family, data=sigma).attrs["unit"] = UNIT[family]
         q = clean.create_dataset("q", data=run.clean.q)
         q.attrs["columns"] = np.array(DOF_NAMES, dtype=h5py.string_dtype())
         q.attrs["unit"] = "m (bounce, wheels), rad (roll, pitch)"
