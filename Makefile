@@ -23,7 +23,7 @@ demo: $(STAMP)
 
 ## test: lint and the fast test suite (what CI runs)
 test: $(STAMP)
-	$(BIN)/ruff check vehid_cli tests benchmarks
+	$(BIN)/ruff check vehid_cli tests benchmarks examples
 	$(BIN)/python -m pytest -q -m "not slow"
 
 ## test-all: the whole suite, long checks included
@@ -31,8 +31,8 @@ test-all: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check vehid_cli tests benchmarks
-	$(BIN)/ruff format --check vehid_cli tests benchmarks
+	$(BIN)/ruff check vehid_cli tests benchmarks examples
+	$(BIN)/ruff format --check vehid_cli tests benchmarks examples
 
 ## bench: speed benchmarks (not tests); results are recorded in benchmarks/RESULTS.md
 bench: $(STAMP)
