@@ -181,3 +181,39 @@ def test_logger_runs_reach_the_bound_over_30_noise_seeds_alone_and_jointly(tmp_p
     assert bounds["joint"] < min(bounds["mf4"], bounds["mat"])
     print("NRE/CRLB over 30 noise seeds:", {k: round(r, 3) for k, r in ratios.items()}, "bounds:", bounds)
     assert all(0.8 <= ratio <= 1.2 for ratio in ratios.values()), ratios
+
+
+def test_data_files_in_the_config_are_relative_to_it_and_identified_jointly(runs, tmp_path):
+    (tmp_path / "runs").mkdir()
+    for f in runs.values():
+        (tmp_path / "runs" / f.name).symlink_to(f)
+    text = RIG.read_text().replace(
+        "  offsets: identify", "  offsets: identify\n  files: [runs/run_mf4.mf4, runs/run_mat.mat]"
+    )
+    (tmp_path / "rig.yaml").write_text(text)
+    cfg = load_config(tmp_path / "rig.yaml", SHORT)
+    assert cfg.data.files == tuple(str(tmp_path / "runs" / f.name) for f in runs.values())
+    system = build_system(cfg)
+    assert system.data_files() == cfg.data.files and system.runs == 1
+
+
+def test_road_from_two_measured_tracks_delays_the_rear_by_wheelbase_over_speed(tmp_path):
+    """track1 under corners 1 and 4, track2 under 2 and 3; the rear meets each track L / V later."""
+    from vehid_cli.logger_write import write_record
+    from vehid_cli.measured import read_run
+
+    t = np.arange(4000) * 1e-3
+    tracks = {"track1": 0.01 * np.sin(2 * np.pi * 1.5 * t) * (t > 0.1), "track2": 0.02 * (t > 0.5)}
+    channels = {k: (t, v) for k, v in tracks.items()}
+    channels["acc1"] = (t, np.zeros_like(t))
+    write_record(tmp_path / "tracks.mf4", channels)
+    cfg = load_config(RIG, ["road.input=tracks", "road.speed_kmh=null", "road.speed=13", "layout=[{name: acc1, kind: body_acc}]",
+                            "data.channels={}", "data.units={}", "sensors=acc", "identify.objective=wls"])  # fmt: skip
+    run = read_run(cfg, tmp_path / "tracks.mf4", ("acc",))
+    delay = 2.6 / 13
+    np.testing.assert_allclose(run.road[:, 0], tracks["track1"], atol=1e-12)
+    np.testing.assert_allclose(run.road[:, 1], tracks["track2"], atol=1e-12)
+    later = t - delay
+    np.testing.assert_allclose(run.road[:, 3], np.interp(later, t, tracks["track1"], left=0.0), atol=1e-12)
+    k = int(np.searchsorted(t, 0.5 + delay + 0.01))
+    assert run.road[k, 2] == pytest.approx(0.02) and run.road[int(np.searchsorted(t, 0.5 + delay - 0.01)), 2] == 0.0

@@ -29,6 +29,7 @@ from .sim.linear import Response, simulate
 from .sim.nonlinear import simulate_effects
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
+CHUNK_BYTES = 64 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs)
 
 
 @dataclass(frozen=True)
@@ -123,8 +124,25 @@ class Experiment:
         return self.layout.read(response)
 
     def outputs(self, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:
-        """The layout's channels of a batch of cars (`simulate`'s values): family -> (..., n, k)."""
-        return self.read(self.simulate(values))
+        """The layout's channels of a batch of cars (`simulate`'s values): family -> (..., n, k).
+
+        A long record simulates a one-dimensional batch in chunks of cars, so that the full response of a chunk
+        (coordinates, velocities, accelerations and every body point, about 45 columns per sample) stays within
+        CHUNK_BYTES: a 60 s run at 1 kHz holds 20 MB of it per car. Each car's numbers are the same either way."""
+        arrays = [np.asarray(v) for v in (values or {}).values()]
+        sizes = {a.shape[0] for a in arrays if a.ndim == 1}
+        if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
+            return self.read(self.simulate(values))
+        (P,) = sizes
+        per_car = self.t.size * (3 * 7 + 2 * len(self.layout.sensors) + 8) * 8
+        chunk = max(1, CHUNK_BYTES // per_car)
+        if P <= chunk:
+            return self.read(self.simulate(values))
+        parts = []
+        for start in range(0, P, chunk):
+            part = {k: (v[start : start + chunk] if np.ndim(v) == 1 else v) for k, v in (values or {}).items()}
+            parts.append(self.read(self.simulate(part)))
+        return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
 
     def noise_floors(self, family: str) -> NDArray:
         """Absolute noise standard deviation per channel of a family (k,): the sensor's own sigma, else the

@@ -60,13 +60,16 @@ class Objective:
     def error(self, family: str, sim: NDArray) -> NDArray:
         """ref - sim (..., n, k), without its per-channel mean over the observed samples when offsets are profiled."""
         d = self.reference[family] - sim
-        return self._centred(family, d) if self.offsets else d
+        return self._centre(family, d) if self.offsets else d
 
-    def _centred(self, family: str, d: NDArray) -> NDArray:
+    def _centre(self, family: str, d: NDArray) -> NDArray:
+        """d (..., n, k) without each channel's mean over its observed samples, in place (d is returned)."""
         if self.observed is None:
-            return d - np.mean(d, axis=-2, keepdims=True)
+            d -= np.mean(d, axis=-2, keepdims=True)
+            return d
         m = self.observed[family]
-        return d - np.sum(d * m, axis=-2, keepdims=True) / np.sum(m, axis=0)
+        d -= np.sum(d * m, axis=-2, keepdims=True) / np.sum(m, axis=0)
+        return d
 
     def _norms(self, family: str, d: NDArray) -> NDArray:
         """Norm over time of each channel (..., k), over the observed samples only."""
@@ -92,7 +95,7 @@ class Objective:
         den = 0.0
         for family, ref in self.reference.items():
             num = num + np.sum(self._norms(family, self.error(family, outputs[family])), axis=-1)
-            den = den + np.sum(self._norms(family, self._centred(family, ref) if self.offsets else ref))
+            den = den + np.sum(self._norms(family, self._centre(family, ref.copy()) if self.offsets else ref))
         return num, den
 
     def _eq8(self, outputs: Mapping[str, NDArray]) -> NDArray:
@@ -103,7 +106,8 @@ class Objective:
         """Weighted residuals (ref - sim) / sigma of all observed channel samples, flattened (..., R)."""
         parts = []
         for family in self.reference:
-            r = self.error(family, outputs[family]) / self.sigma[family]
+            r = self.error(family, outputs[family])
+            r /= self.sigma[family]  # in place: a long record's residuals are tens of MB per copy
             r = r.reshape(r.shape[:-2] + (-1,))
             parts.append(r[..., self._keep[family]] if family in self._keep else r)
         return np.concatenate(parts, axis=-1)

@@ -77,6 +77,10 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
         resolved = (path.parent / cfg.road.file).as_posix()
         cfg = cfg.model_copy(update={"road": cfg.road.model_copy(update={"file": resolved})})
         cfg._source = source
+    if cfg.data.files:  # runs named relative to the config file
+        files = tuple(f if Path(f).is_absolute() else (path.parent / f).as_posix() for f in cfg.data.files)
+        cfg = cfg.model_copy(update={"data": cfg.data.model_copy(update={"files": files})})
+        cfg._source = source
     return cfg
 
 

@@ -38,7 +38,9 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         step = np.where(x + h <= hi, h, -h)  # step inward at the upper bound
         X = x[None, :] + np.diag(step)
         R = run.evaluate_residuals(X)
-        return ((R - r0[None, :]) / step[:, None]).T
+        R -= r0[None, :]  # in place: a long record's Jacobian is tens of MB per copy
+        R /= step[:, None]
+        return R.T
 
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
     result = least_squares(
