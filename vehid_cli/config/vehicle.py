@@ -340,6 +340,9 @@ class Identify(IdentifyCommon):
     objective: Literal["f1", "f2", "wls"] = "f2"
 
 
+from .design import Design  # noqa: E402 - it uses BumpShape and SensorSpec above
+
+
 class Config(SystemConfig):
     """A whole experiment: the car, the road, the time grid, the sensors, the noise, the identification."""
 
@@ -356,6 +359,7 @@ class Config(SystemConfig):
     noise: Noise = Noise()
     data: VehicleData = VehicleData()
     identify: Identify = Identify()
+    design: Design | None = Field(None, description="limits of the test `vehid design` plans (config/design.py)")
 
     def sensor_layout(self) -> Layout:
         """The configured sensors (models.sensors.Layout), the paper's corner layout when none is given."""
