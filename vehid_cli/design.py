@@ -406,7 +406,7 @@ class DesignResult:
     proposals: tuple[Proposal, ...]  # cheapest first
     sweeps: tuple[Sweep, ...]
     evaluations: int
-    wall_s: float
+    wall_s: float  # the design (search, sweeps, proposals), without --verify's campaigns [s]
     jobs: int
     noise_note: str
     verification: Verification | None = None
@@ -666,6 +666,7 @@ def design_test(
         progress("figures", 0, None)
         sweeps = _sweeps(scorer, space, {"designed": designed.plan, "configured": configured.plan}, design.search.grid)
         proposals = _proposals(scorer, config, space, configured, design.search.grid)
+        wall_s = time.perf_counter() - start
         verification = None
         if verify > 0:
             verification = _verify(config, configured.config, designed.config, verify, executor, progress)
@@ -673,7 +674,7 @@ def design_test(
     return DesignResult(
         criterion=design.criterion, configured=configured, designed=designed, space=space,
         unidentifiable=tuple(configured.bound.unidentifiable()), proposals=tuple(proposals), sweeps=tuple(sweeps),
-        evaluations=evaluations, wall_s=time.perf_counter() - start, jobs=n_jobs, noise_note=noise_note(config),
+        evaluations=evaluations, wall_s=wall_s, jobs=n_jobs, noise_note=noise_note(config),
         verification=verification,
     )  # fmt: skip
 

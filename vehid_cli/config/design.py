@@ -13,8 +13,8 @@ from typing import Annotated
 
 from pydantic import Field, model_validator
 
-from .common import NonNeg, Pos, _KeyedError, _Section
-from .vehicle import BumpShape, SensorSpec
+from .common import BumpShape, NonNeg, Pos, _KeyedError, _Section
+from .sensors import SensorSpec
 
 CRITERIA = ("nre", "d_optimal", "worst")  # worst: the largest bound; worst:<param>: that parameter's
 CRITERION = re.compile(r"^(nre|d_optimal|worst)(?::(\S+))?$")
