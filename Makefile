@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-all lint bench bench-sweep paper close-the-loop clean
+.PHONY: demo test test-all lint bench bench-sweep paper close-the-loop design clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +40,7 @@ bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_damper.py
 	$(BIN)/python benchmarks/bench_campaign.py --repeats 3
 	$(BIN)/python benchmarks/bench_diagnose.py --repeats 3 --long
+	$(BIN)/python benchmarks/bench_design.py --repeats 3
 
 ## bench-sweep: also time the whole Table 1 + 2 sweep (about 2-4 minutes)
 bench-sweep: $(STAMP)
@@ -57,6 +58,10 @@ paper: $(STAMP)
 	$(BIN)/vehid sweep configs/gokdag2015/base.yaml -o $(SEED_SWEEP) --runs 100 \
 	    --set identify.objective=wls --set identify.algorithm.name=hybrid --vary sensors=acc,disp --vary identify.seed=7,99
 	$(BIN)/python docs/results/make_gokdag2015.py $(PAPER_SWEEP) $(CRLB_SWEEP) $(SEED_SWEEP) docs/results/gokdag2015.md
+
+## design: vehid design on the paper's car (with 30-run campaigns checking the bound) -> docs/results/design.md
+design: $(STAMP)
+	$(BIN)/python docs/results/make_design.py docs/results/design.md
 
 ## close-the-loop: vehid diagnose on the bump runs and the two real dampers -> docs/results/close-the-loop.md
 close-the-loop: $(STAMP)

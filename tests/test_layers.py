@@ -30,7 +30,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("records",),  # run records, summaries, campaigns: plain data
     ("systems", "systems."),  # the seam: the car and the damper bench
     ("results", "executor"),  # campaign files; where runs execute
-    ("campaign", "sweep"),  # the runner; families of campaigns
+    ("campaign", "sweep", "design"),  # the runner; families of campaigns; test design (bounds and campaigns)
     ("diagnose", "diagnose."),  # the closed loop
     ("report", "report."),  # tables and figures
     ("cli", "__main__"),  # the command line

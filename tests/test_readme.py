@@ -35,6 +35,7 @@ SKIPPED = {
     "make test": "a make target (the test suite itself)",
     "make paper": "a make target (two full sweeps)",
     "make dampers": "a make target (all of configs/dampers/)",
+    "make design": "a make target (three designs and two 30-run campaigns)",
     "dask scheduler --port 8786": "not vehid: starts a Dask scheduler",
     "dask worker tcp://SCHEDULER:8786 --nworkers 8 --nthreads 1": "not vehid: a Dask worker on a cluster host",
     "vehid sweep configs/gokdag2015/base.yaml -o runs/sweep --vary identify.algorithm.name=ga,cpso,abc "

@@ -19,6 +19,7 @@ from ..optimizers import ALGORITHMS, algorithm_class
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+BumpShape = Literal["step", "cosine_step", "half_sine", "trapezoid"]  # road.bump.shape, design.shapes
 
 
 class _Section(BaseModel):

@@ -11,8 +11,10 @@ from ..errors import InputError
 from ..logger import SI_FACTORS
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
-from ..models.sensors import FAMILY, Layout, Sensor, corner_layout
-from .common import Finite, IdentifyCommon, NonNeg, Pos, SystemConfig, _did_you_mean, _KeyedError, _Section
+from ..models.sensors import FAMILY, Layout, corner_layout
+from .common import BumpShape, Finite, IdentifyCommon, NonNeg, Pos, SystemConfig, _did_you_mean, _KeyedError, _Section
+from .design import Design
+from .sensors import SensorSpec
 
 
 class Vehicle(_Section):
@@ -120,8 +122,6 @@ class Vehicle(_Section):
 
 
 ROAD_CHANNELS = ("road1", "road2", "road3", "road4", "track1", "track2")  # the road's names in data.channels
-
-BumpShape = Literal["step", "cosine_step", "half_sine", "trapezoid"]
 
 
 class Bump(_Section):
@@ -244,45 +244,6 @@ class Noise(_Section):
         return ", ".join(parts)
 
 
-class SensorSpec(_Section):
-    """One sensor of the layout: a body sensor at (x, y) from a reference point, or a wheel or deflection sensor at
-    a corner."""
-
-    name: str = Field(description="channel name (the key of data.channels; the column `vehid simulate` writes)")
-    kind: Literal["body_acc", "body_disp", "wheel_acc", "wheel_disp", "deflection"] = Field(
-        description="body_acc, body_disp: vertical motion of a body point; wheel_acc, wheel_disp: a wheel's hop; "
-        "deflection: suspension deflection at a corner (body point above it minus the wheel, extension +)"
-    )
-    x: Finite | None = Field(None, description="body sensors: forward of `origin` [m]")
-    y: Finite | None = Field(None, description="body sensors: toward side 1 (corners 1, 4) from `origin` [m]")
-    origin: Literal["cg", "corner1", "corner2", "corner3", "corner4", "front_axle", "rear_axle"] | None = Field(
-        None,
-        description="body sensors: the point x, y are measured from (default cg); a corner or axle centre stays "
-        "put when the CG (a1, b1) is identified",
-    )
-    corner: Annotated[int, Field(ge=1, le=4)] | None = Field(None, description="wheel and deflection sensors: 1..4")
-    sigma: Pos | None = Field(None, description="this channel's noise standard deviation [m/s² or m]")
-
-    @model_validator(mode="after")
-    def _where(self) -> SensorSpec:
-        if self.kind.startswith("body"):
-            if self.corner is not None:
-                raise ValueError(f"a {self.kind} sensor is placed by x, y (and origin), not by 'corner'")
-        else:
-            if self.corner is None:
-                raise ValueError(f"a {self.kind} sensor needs its 'corner' (1..4)")
-            given = [k for k in ("x", "y", "origin") if getattr(self, k) is not None]
-            if given:
-                raise ValueError(f"a {self.kind} sensor sits at its corner: remove {', '.join(given)}")
-        return self
-
-    def sensor(self) -> Sensor:
-        return Sensor(
-            name=self.name, kind=self.kind, x=self.x or 0.0, y=self.y or 0.0, origin=self.origin or "cg",
-            corner=self.corner or 0,
-        )  # fmt: skip
-
-
 Offsets = Literal["none", "remove", "identify"]
 
 
@@ -356,6 +317,7 @@ class Config(SystemConfig):
     noise: Noise = Noise()
     data: VehicleData = VehicleData()
     identify: Identify = Identify()
+    design: Design | None = Field(None, description="limits of the test `vehid design` plans (config/design.py)")
 
     def sensor_layout(self) -> Layout:
         """The configured sensors (models.sensors.Layout), the paper's corner layout when none is given."""

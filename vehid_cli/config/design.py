@@ -1,0 +1,124 @@
+"""The `design:` section of a car's config: the limits within which `vehid design` plans the test.
+
+Every range is optional: a variable without a range keeps its configured value (it is not designed). Units: speeds
+in km/h, heights and lengths in m, durations in s. The checks here are those of the section alone; the ones
+against the rest of the config (a bump to design, a criterion's parameter among the unknowns, sensor families the
+objective uses) are in `vehid_cli.design.check_design`.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated
+
+from pydantic import Field, model_validator
+
+from .common import BumpShape, NonNeg, Pos, _KeyedError, _Section
+from .sensors import SensorSpec
+
+CRITERIA = ("nre", "d_optimal", "worst")  # worst: the largest bound; worst:<param>: that parameter's
+CRITERION = re.compile(r"^(nre|d_optimal|worst)(?::(\S+))?$")
+
+
+def _check_range(key: str, pair: tuple[float, float] | None, unit: str) -> None:
+    if pair is not None and not pair[0] <= pair[1]:
+        raise _KeyedError(key, f"empty range: min {pair[0]:g} {unit} is above max {pair[1]:g} {unit}")
+
+
+class DesignHeights(_Section):
+    """Bump heights: the highest corner at `max`, every corner at least `min`; the design variables are the ratio
+    of the two sides (b2 over b1) and, with `per_axle`, of the rear axle over the front."""
+
+    max: float = Field(description="highest allowed bump height [m]")
+    min: NonNeg = Field(0.0, description="lowest allowed bump height under any corner [m] (0: that side flat)")
+    per_axle: bool = Field(
+        False,
+        description="also design the rear axle's heights apart from the front's (two bumps, or a rig); false: the "
+        "rear tyres meet the front's bump, as on a road",
+    )
+
+    @model_validator(mode="after")
+    def _limits(self) -> DesignHeights:
+        if not self.max > 0:
+            raise _KeyedError("design.heights.max", f"the highest bump must be above 0 m, got {self.max:g}")
+        if self.min > self.max:
+            raise _KeyedError("design.heights.min", f"min {self.min:g} m is above max {self.max:g} m")
+        return self
+
+
+class DesignSensors(_Section):
+    """Choose `count` sensors among `candidates` (specs as in `layout`): every subset when there are few, else a
+    greedy choice improved by exchanges."""
+
+    count: int = Field(description="how many sensors to mount")
+    candidates: tuple[SensorSpec, ...] = Field(description="the allowed mounting points (sensor specs of `layout`)")
+
+    @model_validator(mode="after")
+    def _count(self) -> DesignSensors:
+        if self.count < 1:
+            raise _KeyedError(
+                "design.sensors.count", f"zero sensors measure nothing: count must be >= 1, got {self.count}"
+            )
+        if not self.candidates:
+            raise _KeyedError("design.sensors.candidates", "no candidate mounting points")
+        if self.count > len(self.candidates):
+            raise _KeyedError(
+                "design.sensors.count", f"{self.count} sensors but only {len(self.candidates)} candidates"
+            )
+        names = [c.name for c in self.candidates]
+        for i, name in enumerate(names):
+            if name in names[:i]:
+                raise _KeyedError(f"design.sensors.candidates.{i}.name", f"sensor name '{name}' is used twice")
+        return self
+
+
+class DesignSearch(_Section):
+    """The global optimizer (scipy differential_evolution, deferred updating: bit-identical for any job count)."""
+
+    population: Annotated[int, Field(ge=4)] = Field(15, description="candidates per generation")
+    iterations: Annotated[int, Field(ge=1)] = Field(25, description="generations at most")
+    seed: Annotated[int, Field(ge=0)] = Field(2015, description="seed of the optimizer's stream")
+    grid: Annotated[int, Field(ge=3, le=201)] = Field(
+        21, description="points per variable of the figures' sweeps and of the single-variable changes"
+    )
+
+
+class Design(_Section):
+    """Limits of the test `vehid design` plans, and what 'best' means."""
+
+    speed_kmh: tuple[Pos, Pos] | None = Field(None, description="forward speed range [km/h]")
+    heights: DesignHeights | None = None
+    shapes: tuple[BumpShape, ...] | None = Field(None, description="bump shapes to choose from")
+    length: tuple[Pos, Pos] | None = Field(None, description="bump (ramp) length range [m]")
+    duration: tuple[Pos, Pos] | None = Field(None, description="record length range [s]")
+    sensors: DesignSensors | None = None
+    criterion: str = Field(
+        "nre",
+        description="nre: the bound on the per-run NRE RMS; d_optimal: the largest log det of the Fisher "
+        "information; worst: the largest per-parameter bound; worst:<param>: that parameter's bound",
+    )
+    search: DesignSearch = DesignSearch()
+
+    @model_validator(mode="after")
+    def _limits(self) -> Design:
+        _check_range("design.speed_kmh", self.speed_kmh, "km/h")
+        _check_range("design.length", self.length, "m")
+        _check_range("design.duration", self.duration, "s")
+        if self.shapes is not None and not self.shapes:
+            raise _KeyedError("design.shapes", "no bump shape to choose from")
+        if CRITERION.match(self.criterion) is None:
+            raise _KeyedError(
+                "design.criterion",
+                f"unknown criterion '{self.criterion}' (known: nre, d_optimal, worst, worst:<param>)",
+            )
+        return self
+
+    @property
+    def criterion_kind(self) -> str:
+        """nre, d_optimal or worst."""
+        return CRITERION.match(self.criterion).group(1)
+
+    @property
+    def criterion_parameter(self) -> str | None:
+        """The parameter of worst:<param> (None: every unknown)."""
+        return CRITERION.match(self.criterion).group(2)
