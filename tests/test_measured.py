@@ -207,8 +207,9 @@ def test_road_from_two_measured_tracks_delays_the_rear_by_wheelbase_over_speed(t
     channels = {k: (t, v) for k, v in tracks.items()}
     channels["acc1"] = (t, np.zeros_like(t))
     write_record(tmp_path / "tracks.mf4", channels)
-    cfg = load_config(RIG, ["road.input=tracks", "road.speed_kmh=null", "road.speed=13", "layout=[{name: acc1, kind: body_acc}]",
-                            "data.channels={}", "data.units={}", "sensors=acc", "identify.objective=wls"])  # fmt: skip
+    sets = ["road.input=tracks", "road.speed_kmh=null", "road.speed=13", "layout=[{name: acc1, kind: body_acc}]"]
+    sets += ["data.channels={}", "data.units={}", "sensors=acc", "identify.objective=wls"]
+    cfg = load_config(RIG, sets)
     run = read_run(cfg, tmp_path / "tracks.mf4", ("acc",))
     delay = 2.6 / 13
     np.testing.assert_allclose(run.road[:, 0], tracks["track1"], atol=1e-12)

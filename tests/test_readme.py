@@ -201,5 +201,12 @@ def check_output(path: Path, line: str) -> None:
             [r for r in path.read_text().splitlines() if not r.startswith("#")], delimiter=",", names=True
         )
         assert table.dtype.names[0] == "t" and table.size > 100 and np.isfinite(table["t"]).all(), line
+    elif path.suffix == ".mf4":
+        from asammdf import MDF
+
+        with MDF(path) as mdf:
+            assert len(mdf.channels_db) > 4 and mdf.get("road1").samples.size > 100, line
+    elif path.suffix == ".yaml":
+        assert load_config(path), line
     else:
         assert path.suffix == ".md" and path.read_text().count("|") > 10, line
