@@ -179,6 +179,16 @@ def test_unexplained_force_on_the_rig_layout(rig):
 # ------------------------------------------------------------------------------------ input
 
 
+def test_the_config_runs_are_diagnosed_when_no_data_is_given(rig, monkeypatch):
+    """data.files names the runs as for identify (--data wins); a run that is not there: exit 2 naming it."""
+    code, _, err = invoke("diagnose", RIG, "--data", rig["clean"].with_name("missing.mf4"))
+    assert code == 2 and "missing.mf4" in err
+    monkeypatch.setattr("vehid_cli.diagnose.diagnose", lambda cfg, data, validate, log=None: data)
+    files = f"data.files=[{rig['clean']},{rig['spring']}]"
+    assert diagnose_config(RIG, [files]) == (str(rig["clean"]), str(rig["spring"]))
+    assert diagnose_config(RIG, [files], data=rig["spring"]) == rig["spring"]
+
+
 def test_a_damper_takes_one_data_run():
     damper = ROOT / "configs" / "dampers" / "brfd_bingham.yaml"
     with pytest.raises(InputError, match="one --data run"):

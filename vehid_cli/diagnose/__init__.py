@@ -23,9 +23,9 @@ def diagnose_config(
     log: Callable[[str], None] | None = None,
 ) -> Diagnosis:
     """`vehid diagnose`: the config's system closes the loop on `data` (the car: one run, or several fitted
-    jointly; a damper: one run, or its config's data.file), judged on the `validate` runs (the car takes one; a
-    damper's default is its data.validate). The car's run may be any sensor layout and a logger file
-    (config layout and data sections)."""
+    jointly, else the config's data.files; a damper: one run, or its config's data.file), judged on the `validate`
+    runs (the car takes one; a damper's default is its data.validate). The car's runs may be any sensor layout
+    and logger files (config layout and data sections)."""
     cfg = load_config(config, overrides)
     files = () if data is None else ((data,) if isinstance(data, (str, Path)) else tuple(data))
     if isinstance(cfg, DamperConfig):
@@ -33,8 +33,9 @@ def diagnose_config(
             raise InputError("a damper is diagnosed on one --data run (its validation runs: --validate)",
                              source=str(config))  # fmt: skip
         return diagnose_damper(cfg, files[0] if files else None, tuple(validate) or None, log=log)
+    files = files or tuple(cfg.data.files)  # --data wins over the config's runs, as for identify
     if not files:
-        raise InputError("diagnose needs --data FILE (the measured run to fit)", source=str(config))
+        raise InputError("diagnose needs --data FILE (the measured run to fit) or data.files", source=str(config))
     if len(validate) > 1:
         raise InputError("the full car takes one --validate run", source=str(config))
     cfg = load_config(config, [*CAR_DEFAULTS, *overrides])  # the user's --set comes last and wins
