@@ -608,11 +608,12 @@ def diagnose(
         Path, typer.Argument(metavar="CONFIG", help="Experiment config (YAML): the declared model.", show_default=False)
     ],
     data: Annotated[
-        Optional[Path],  # noqa: UP045
+        Optional[list[Path]],  # noqa: UP045
         typer.Option(
             "--data",
             metavar="FILE",
-            help="Measurement file to fit and diagnose (a damper config may name it in data.file).",
+            help="Measurement file to fit and diagnose (a damper config may name it in data.file); repeat it to "
+            "diagnose several runs of the car jointly (one parameter set).",
         ),
     ] = None,
     validate: Annotated[
@@ -637,10 +638,12 @@ def diagnose(
     add the best, re-fit; say whether the residual is now at the noise.
 
     Full car: J is wls (chi2 per sample); the noise is estimated from the data unless --set noise.level=Np
-    gives it; the integrator is rk4 unless the config sets newmark. Damper on a bench: J is Eq. 7; the
-    validation runs are --validate, else the config's data.validate. A candidate is accepted when its
-    likelihood-ratio test is significant (p below 1e-3 / number of candidates), it lowers the validation J,
-    and the data tell it from the runner-up; a known parameter that explains as much wins over an effect.
+    (or the config's noise.sigma) gives it; the integrator is rk4 unless the config sets newmark; any sensor
+    layout and logger file the config describes; --data repeated fits several runs jointly. Damper on a
+    bench: J is Eq. 7; the validation runs are --validate, else the config's data.validate. A candidate is
+    accepted when its likelihood-ratio test is significant (p below 1e-3 / number of candidates), it lowers
+    the validation J, and the data tell it from the runner-up; a known parameter that explains as much wins
+    over an effect.
     The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
@@ -653,7 +656,7 @@ def diagnose(
     if plots is not None:
         check_output_dir(plots, "--plots")
     say = lambda msg: err.print(msg, markup=False)  # noqa: E731
-    result = diagnose_config(config, set_ or (), data, validate or (), log=say)
+    result = diagnose_config(config, set_ or (), data or None, validate or (), log=say)
     doc = result.to_json()
     out.print(diagnosis_tables(result))
     for step in result.steps:
@@ -665,7 +668,7 @@ def diagnose(
         out.print(f"note: {note}", markup=False)
     out.print(f"verdict: {result.verdict} ({result.wall_s:.1f} s)")
     if plots is not None:
-        for path in plot_diagnosis_files(result, plots, (data or config).stem):
+        for path in plot_diagnosis_files(result, plots, (data[0] if data else config).stem):
             out.print(f"wrote {path}")
     if json_out is not None:
         write_json(json_out, doc)

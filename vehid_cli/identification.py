@@ -296,6 +296,19 @@ class JointTask:
         return self.tasks[0].truth
 
     @property
+    def families(self) -> tuple[str, ...]:
+        return self.tasks[0].families
+
+    def with_unknowns(
+        self,
+        extra: tuple[str, ...] | list[str],
+        limits: Mapping[str, tuple[float, float]] | None = None,
+        start: Mapping[str, float] | None = None,
+    ) -> JointTask:
+        """Every run with the same further unknowns (Task.with_unknowns)."""
+        return JointTask(tuple(t.with_unknowns(extra, limits=limits, start=start) for t in self.tasks))
+
+    @property
     def data_files(self) -> tuple[str, ...]:
         return tuple(t.data_file for t in self.tasks if t.data_file is not None)
 

@@ -52,6 +52,25 @@ class Objective:
         """Flat indices (time-major) of the observed entries of each family's (n, k) block."""
         return {f: np.flatnonzero(m) for f, m in (self.observed or {}).items()}
 
+    def entries(self, family: str) -> NDArray | None:
+        """Flat indices (time-major, into the family's (n, k) block) of the residual entries of `family`, in the
+        residual vector's order; None when every sample of every channel is one."""
+        return self._keep.get(family)
+
+    def sample_times(self) -> NDArray:
+        """(R,) the time sample (row of the reference) of each weighted residual entry, in `residuals`' order."""
+        parts = []
+        for family, ref in self.reference.items():
+            n, k = ref.shape[-2:]
+            flat = self._keep.get(family)
+            parts.append((np.arange(n * k) if flat is None else flat) // k)
+        return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
+
+    def project(self, family: str, d: NDArray) -> NDArray:
+        """d (..., n, k) without what the profiled offsets absorb (its per-channel mean over the observed samples),
+        in place; d itself without offsets. The residual's linear response to a change of the model's output."""
+        return self._centre(family, d) if self.offsets else d
+
     @property
     def size(self) -> int:
         """R: the number of weighted residuals."""

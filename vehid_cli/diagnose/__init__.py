@@ -18,29 +18,28 @@ CAR_DEFAULTS = ("identify.objective=wls", "noise.level=0")  # the car's loop: wl
 def diagnose_config(
     config: str | Path,
     overrides: Sequence[str] = (),
-    data: str | Path | None = None,
+    data: str | Path | Sequence[str | Path] | None = None,
     validate: Sequence[str | Path] = (),
     log: Callable[[str], None] | None = None,
 ) -> Diagnosis:
-    """`vehid diagnose`: the config's system closes the loop on `data` (a damper config may name it in data.file),
-    judged on the `validate` runs (the car takes one; a damper's default is its data.validate)."""
+    """`vehid diagnose`: the config's system closes the loop on `data` (the car: one run, or several fitted
+    jointly, else the config's data.files; a damper: one run, or its config's data.file), judged on the `validate`
+    runs (the car takes one; a damper's default is its data.validate). The car's runs may be any sensor layout
+    and logger files (config layout and data sections)."""
     cfg = load_config(config, overrides)
+    files = () if data is None else ((data,) if isinstance(data, (str, Path)) else tuple(data))
     if isinstance(cfg, DamperConfig):
-        return diagnose_damper(cfg, data, tuple(validate) or None, log=log)
-    if data is None:
-        raise InputError("diagnose needs --data FILE (the measured run to fit)", source=str(config))
+        if len(files) > 1:
+            raise InputError("a damper is diagnosed on one --data run (its validation runs: --validate)",
+                             source=str(config))  # fmt: skip
+        return diagnose_damper(cfg, files[0] if files else None, tuple(validate) or None, log=log)
+    files = files or tuple(cfg.data.files)  # --data wins over the config's runs, as for identify
+    if not files:
+        raise InputError("diagnose needs --data FILE (the measured run to fit) or data.files", source=str(config))
     if len(validate) > 1:
         raise InputError("the full car takes one --validate run", source=str(config))
-    if cfg.layout is not None or cfg.data.channels or cfg.data.files:
-        raise InputError(
-            "diagnose works on the paper's corner layout (acc1..acc4, disp1..disp4) and one measurement CSV so far; "
-            "this config has a sensor layout or logger channels (layout, data.channels, data.files): identify it "
-            "with `vehid identify`",
-            source=str(config),
-            key="layout" if cfg.layout is not None else "data",
-        )
     cfg = load_config(config, [*CAR_DEFAULTS, *overrides])  # the user's --set comes last and wins
-    return diagnose(cfg, data, validate[0] if validate else None, log=log)
+    return diagnose(cfg, files[0] if len(files) == 1 else files, validate[0] if validate else None, log=log)
 
 
 __all__ = ["Diagnosis", "diagnose", "diagnose_config", "diagnose_damper"]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,7 +29,7 @@ from scipy import stats
 
 from ..config import Config, config_from_dict
 from ..experiment import run_streams
-from ..identification import Task, build_task
+from ..identification import JointTask, Task, build_task, build_tasks
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
 from .attribution import (
@@ -93,6 +93,7 @@ class ModelReport:
     validation_per_file: dict[str, float] | None = None
     fixed: tuple[str, ...] = ()  # shape parameters the data could not tell, held at their start value
     nre_bound_percent: float | None = None  # the NRE's Cramér–Rao bound for this model (RSS of relative sds)
+    run_analyses: tuple[tuple[str, ResidualAnalysis], ...] = ()  # several runs: (file, its analysis) each
 
     def to_json(self, validation_from_file: bool = True) -> dict:
         def ci(v, h):
@@ -114,6 +115,8 @@ class ModelReport:
             out["holdout_J"] = self.validation_J
         if self.validation_per_file:
             out["validation_J_per_file"] = dict(self.validation_per_file)
+        if self.run_analyses:
+            out["residual_per_file"] = {f: a.summary() for f, a in self.run_analyses}
         return out
 
 
@@ -158,6 +161,7 @@ class Diagnosis:
     validation_from_file: bool = True
     chi2_limit: float | None = None  # residual power per sample above which the residual is not noise
     unexplained: Unexplained | None = None  # the non-parametric strut force left unexplained (car, incomplete)
+    data_files: tuple[str, ...] = ()  # several runs fitted jointly (empty: one run)
 
     @property
     def residual_ratio(self) -> float | None:
@@ -213,7 +217,7 @@ class Diagnosis:
             "noise": self.sigma_source,
             "wall_s": self.wall_s,
             "notes": list(self.notes),
-        }
+        } | ({"data_files": list(self.data_files)} if self.data_files else {})
 
 
 @dataclass(frozen=True)
@@ -458,9 +462,24 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
     return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names)
 
 
+def holdout_mask(task: Task | JointTask, reference) -> NDArray:
+    """(R,) True on the residual entries of held-out samples (holdout_blocks of each run), in the objective's
+    residual layout (per run: per family, time-major, observed entries only)."""
+    tasks = task.tasks if isinstance(task, JointTask) else (task,)
+    refs = reference if isinstance(task, JointTask) else (reference,)
+    return np.concatenate(
+        [holdout_blocks(t.experiment.t.size)[t.objective(r).sample_times()] for t, r in zip(tasks, refs, strict=True)]
+    )
+
+
+def run_files(data: str | Path | Sequence[str | Path]) -> tuple[str | Path, ...]:
+    """The measured runs named by `data`: one file, or several fitted jointly."""
+    return (data,) if isinstance(data, (str, Path)) else tuple(data)
+
+
 def diagnose(
     config: Config,
-    data_file: str | Path,
+    data_file: str | Path | Sequence[str | Path],
     validate_file: str | Path | None = None,
     *,
     alpha: float = ALPHA,
@@ -470,11 +489,16 @@ def diagnose(
     analyse_residuals: bool = True,
     log=None,
 ) -> Diagnosis:
-    """Close the loop on measured data `data_file` (see the module doc)."""
+    """Close the loop on the measured run `data_file`, or on several runs jointly (one parameter set; each run its
+    own road, noise and offsets; J the wls over every run's residuals, the residual analysis per run); see the
+    module doc."""
     t_start = time.perf_counter()
     say = log or (lambda _msg: None)
     config = prepare_config(config)
-    task = build_task(config, data_file)
+    files = run_files(data_file)
+    task = build_tasks(config, files)
+    joint = isinstance(task, JointTask)
+    names_of = " + ".join(str(f) for f in files)
     ref = task.reference(0)
     R_total = task.residual_samples
     if validate_file is not None:
@@ -484,17 +508,19 @@ def diagnose(
         vsource = f"--validate {validate_file}"
     else:
         vtask, vref = task, ref
-        n = task.experiment.t.size
-        held = holdout_blocks(n)
-        per_sample = np.tile(np.repeat(held, 4), len(task.families))  # residual layout: family, time, channel
-        keep, vkeep = ~per_sample, per_sample
-        vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {block_size(n)} samples)"
+        held = holdout_mask(task, ref)
+        keep, vkeep = ~held, held
+        runs = task.tasks if joint else (task,)
+        sizes = sorted({block_size(t.experiment.t.size) for t in runs})
+        vsource = (
+            f"held-out blocks of {names_of} (every {HOLDOUT_EVERY}th block of {' or '.join(map(str, sizes))} samples)"
+        )
     R_train = int(R_total if keep is None else keep.sum())
 
-    def problem_of(t: Task, reference, mask) -> Problem:
+    def problem_of(t: Task | JointTask, reference, mask) -> Problem:
         return masked(t.problem(reference), mask)
 
-    def augmented(t: Task, names: tuple[str, ...], extra_task: dict) -> Task:
+    def augmented(t, names: tuple[str, ...], extra_task: dict):
         """`t` with the unknowns `names` (the task's own first), their ranges from the candidates' specs."""
         extra = [n for n in names if n not in t.names]
         return t.with_unknowns(extra, limits=extra_task["limits"], start=extra_task["start"]) if extra else t
@@ -529,6 +555,12 @@ def diagnose(
         evaluations = fit.evaluations
     say(f"declared model: J = {fit.J:.4g} ({evaluations} evaluations)")
 
+    def analyses(t, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
+        """The residual analysis of each run (its file and its analysis)."""
+        if not joint:
+            return ((str(files[0]), analyse(t, ref, f.names, f.x)),)
+        return tuple((str(file), analyse(tk, r, f.names, f.x)) for file, tk, r in zip(files, t.tasks, ref, strict=True))
+
     def report(f: Fit, effs) -> ModelReport:
         t = augmented(task, f.names, ranges)
         ci = fit_intervals(problem_of(t, ref, keep), f, f.J)
@@ -538,17 +570,23 @@ def diagnose(
             nre = float(np.linalg.norm(100.0 * (f.x[idx] - task.truth) / task.truth))
             bound = float(np.linalg.norm(100.0 * ci[idx] / Z95 / task.truth))
         vJ, _ = validation_J(f.names, f.x)
-        an = analyse(t, ref, f.names, f.x) if analyse_residuals else None
-        chi2 = an.chi2_per_sample if an is not None else f.J
+        per_run = analyses(t, f) if analyse_residuals else ()
+        an = per_run[0][1] if per_run else None
+        chi2 = f.J if an is None else (joint_chi2([a for _, a in per_run]) if joint else an.chi2_per_sample)
         return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an, fixed=f.fixed,
-                           nre_bound_percent=bound)  # fmt: skip
+                           nre_bound_percent=bound, run_analyses=per_run if joint else ())  # fmt: skip
 
     before = report(fit, ())
     quality = assess_vehicle(task, ref, before, pre)
     missing, order = None, ()
+    notes: tuple[str, ...] = ()
     if quality.ok:  # the strut force the declared model misses, non-parametrically: which candidates to fit first
-        missing = estimate_unexplained(task, ref, fit.names, fit.x, keep=keep)
+        first, first_ref = (task.tasks[0], ref[0]) if joint else (task, ref)
+        first_keep = None if keep is None else keep[: first.residual_samples]
+        missing = estimate_unexplained(first, first_ref, fit.names, fit.x, keep=first_keep)
         order = tuple(candidate_order(missing, tuple(specs)))
+        if joint:
+            notes = (f"the unexplained strut force is estimated from the first run ({files[0]}) alone",)
     subject = Subject(
         specs=specs, declared=frozenset(declared), problem_for=problem_for, validation_J=validation_J,
         residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train), scale=lambda f: f.J,
@@ -558,8 +596,17 @@ def diagnose(
         subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
         refit_budget=refit_budget, say=say, t_start=t_start, order=order, unexplained=missing,
         chi2_residuals=R_total, validation_source=vsource, sigma_source=task.sigma_source,
-        validation_from_file=validate_file is not None,
+        validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if joint else (),
+        extra_notes=notes,
     )  # fmt: skip
+
+
+def joint_chi2(analyses: Sequence[ResidualAnalysis]) -> float:
+    """The residual power per sample over several runs' analyses: every run's squared weighted residuals over
+    their count (each channel's own samples)."""
+    total = sum(float(np.nansum(a.residual**2)) for a in analyses)
+    count = sum(int(np.count_nonzero(np.isfinite(a.residual))) for a in analyses)
+    return total / max(count, 1)
 
 
 def close(
@@ -578,6 +625,7 @@ def close(
     chi2_residuals: int,
     order: tuple[str, ...] = (),
     unexplained: Unexplained | None = None,
+    extra_notes: tuple[str, ...] = (),
     **fields,
 ) -> Diagnosis:
     """Run the loop from the declared fit (no claims when the data fail `quality`) and report the outcome;
@@ -603,7 +651,7 @@ def close(
         wall_s=time.perf_counter() - t_start,
         steps=loop.steps,
         quality=quality,
-        notes=loop.notes,
+        notes=loop.notes + extra_notes,
         chi2_limit=limit,
         unexplained=left,
         **fields,

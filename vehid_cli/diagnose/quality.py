@@ -77,26 +77,44 @@ def _checks(samples: int, noise_ratio: float, names, x: NDArray, ci: NDArray, ex
     return Quality(tuple(reasons), int(samples), float(noise_ratio), worst)
 
 
-def precheck_vehicle(task, reference: dict[str, NDArray]) -> Quality:
-    """The car's checks that need no fit: samples of the run, sigma over each channel's std, roll excitation."""
+def _channel_std(ref: NDArray, observed: NDArray | None) -> NDArray:
+    """Standard deviation (k,) of each channel of `ref` (n, k) over its own samples (`observed`; None: all)."""
+    if observed is None:
+        return np.std(ref, axis=0)
+    return np.array([np.std(ref[observed[:, c], c]) for c in range(ref.shape[1])])
+
+
+def precheck_vehicle(task, reference) -> Quality:
+    """The car's checks that need no fit: samples of the run, sigma over each channel's std (over its own samples),
+    roll excitation. Several runs (a JointTask and its tuple of references): the samples of all runs, the median
+    ratio over every run's channels, roll excited on at least one run's road."""
+    tasks = getattr(task, "tasks", (task,))
+    refs = reference if isinstance(reference, tuple) else (reference,)
     ratios = np.concatenate(
         [
-            np.asarray(task.sigma[f], dtype=float) / np.maximum(np.std(ref, axis=0), 1e-300)
-            for f, ref in reference.items()
+            np.asarray(t.sigma[f], dtype=float)
+            / np.maximum(_channel_std(ref, None if t.observed is None else t.observed[f]), 1e-300)
+            for t, r in zip(tasks, refs, strict=True)
+            for f, ref in r.items()
         ]
     )
-    y = np.asarray(task.experiment.road, dtype=float)  # corners 1, 2 front; 4, 3 rear; 1 and 4 on side b1
-    pairs = ((0, 1), (3, 2))
-    roll = max(np.linalg.norm(y[:, a] - y[:, b]) / max(np.linalg.norm(y[:, a] + y[:, b]), 1e-300) for a, b in pairs)
+    roll, moving = 0.0, False
+    for t in tasks:
+        y = np.asarray(t.experiment.road, dtype=float)  # corners 1, 2 front; 4, 3 rear; 1 and 4 on side b1
+        pairs = ((0, 1), (3, 2))
+        moving = moving or bool(np.any(y))
+        roll = max(roll, *(np.linalg.norm(y[:, a] - y[:, b]) / max(np.linalg.norm(y[:, a] + y[:, b]), 1e-300)
+                           for a, b in pairs))  # fmt: skip
     extra = []
-    if not np.any(y):
+    if not moving:
         extra.append("not excited: the road input is zero")
     elif roll < MIN_ROLL_RATIO:
         extra.append(
             f"not excited enough: the road is the same left and right (difference {100 * roll:.2g} % of the sum), "
             "so roll is not excited"
         )
-    q = _checks(int(task.experiment.t.size), float(np.median(ratios)), (), np.zeros(0), np.zeros(0), extra)
+    samples = sum(int(t.experiment.t.size) for t in tasks)
+    q = _checks(samples, float(np.median(ratios)), (), np.zeros(0), np.zeros(0), extra)
     return replace(q, before_fit=not q.ok)
 
 

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,10 +105,11 @@ def bin_residual(variable: NDArray, residual: NDArray, name: str, bins: int = 12
 
 @dataclass(frozen=True)
 class ResidualAnalysis:
-    """Everything the residual of one fit says (channels: acc1..4 then disp1..4, as the objective orders them)."""
+    """Everything the residual of one fit on one run says (channels: the layout's, acc then disp, as the objective
+    orders them; the paper's acc1..4 then disp1..4)."""
 
     channels: tuple[str, ...]
-    residual: NDArray  # (n, channels) weighted residual (data - model) / sigma
+    residual: NDArray  # (n, channels) weighted residual (data - model) / sigma; NaN where a channel has no sample
     chi2_per_sample: float
     chi2_channel: NDArray  # (channels,)
     whiteness: tuple[Whiteness, ...]  # per channel
@@ -127,8 +129,10 @@ class ResidualAnalysis:
             "acf_outside_band": dict(zip(self.channels, (w.outside for w in self.whiteness), strict=True)),
             "road_xcorr_max": float(np.max(self.road_xcorr_max)),
             "band": self.band,
-            "spectrum_peak": None if self.psd is None else float(np.max(self.psd)),
-            "spectrum_peak_hz": None if self.psd is None else float(self.freq[np.argmax(np.max(self.psd, axis=0))]),
+            "spectrum_peak": None if self.psd is None else float(np.nanmax(self.psd)),
+            "spectrum_peak_hz": None
+            if self.psd is None
+            else float(self.freq[np.nanargmax(np.nanmax(self.psd, axis=0))]),
             "fingerprint_max_z": [
                 {"velocity": float(np.nanmax(np.abs(v.z))), "deflection": float(np.nanmax(np.abs(d.z)))}
                 for v, d in self.fingerprint
@@ -137,49 +141,100 @@ class ResidualAnalysis:
 
 
 def spectrum(residual: NDArray, dt: float) -> tuple[NDArray, NDArray]:
-    """Welch PSD of each column of a weighted residual (n, channels), over the white level 2 dt of unit noise."""
+    """Welch PSD of each column of a weighted residual (n, channels), over the white level 2 dt of unit noise.
+
+    A column that is NaN between its own samples (a slow channel on a faster grid) is taken at its own samples
+    and rate, and its PSD interpolated onto the grid's frequencies (NaN above its own Nyquist frequency)."""
     from scipy.signal import welch
 
     n = residual.shape[0]
-    f, p = welch(residual, fs=1.0 / dt, nperseg=min(256, n), axis=0)
-    return f, (p / (2.0 * dt)).T
+    f, p = welch(np.nan_to_num(residual), fs=1.0 / dt, nperseg=min(256, n), axis=0)
+    out = (p / (2.0 * dt)).T
+    for j in np.flatnonzero(~np.all(np.isfinite(residual), axis=0)):
+        at = np.flatnonzero(np.isfinite(residual[:, j]))
+        if at.size < 2:
+            out[j] = np.nan
+            continue
+        dt_j = dt * float(np.median(np.diff(at)))
+        fj, pj = welch(residual[at, j], fs=1.0 / dt_j, nperseg=min(256, at.size))
+        out[j] = np.where(f <= fj[-1], np.interp(f, fj, pj / (2.0 * dt_j)), np.nan)
+    return f, out
+
+
+def fingerprint_channels(layout, p: dict[str, float], names: tuple[str, ...]) -> tuple[int, ...]:
+    """For corners 1..4, the channel (index into `names`, channels of `layout`) whose residual is binned against
+    that corner's strut motion: the body accelerometer nearest the corner (the paper's acc1..acc4 above them), else
+    the corner's deflection sensor, else its wheel accelerometer, else the nearest body displacement sensor, else
+    its wheel displacement, else channel 0. `p`: the car's a1, a2, b1, b2 [m]."""
+    kinds = {s.name: s for s in layout.sensors}
+    xy = layout.body_xy(p)
+    corner_xy = {1: (p["a1"], p["b1"]), 2: (p["a1"], -p["b2"]), 3: (-p["a2"], -p["b2"]), 4: (-p["a2"], p["b1"])}
+    out = []
+    for c in range(1, 5):
+        cx, cy = corner_xy[c]
+
+        def nearest(kind: str, cx=cx, cy=cy) -> str | None:
+            found = [n for n in names if kinds[n].kind == kind]
+            return min(found, key=lambda n: math.hypot(xy[n][0] - cx, xy[n][1] - cy), default=None)
+
+        def at_corner(kind: str, c=c) -> str | None:
+            return next((n for n in names if kinds[n].kind == kind and kinds[n].corner == c), None)
+
+        choice = (
+            nearest("body_acc") or at_corner("deflection") or at_corner("wheel_acc") or nearest("body_disp")
+            or at_corner("wheel_disp")
+        )  # fmt: skip
+        out.append(names.index(choice) if choice is not None else 0)
+    return tuple(out)
 
 
 def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 20, bins: int = 12):
-    """Residual analysis of the car `names` = x on the task's experiment against `reference`."""
+    """Residual analysis of the car `names` = x on the task's experiment (one run) against `reference`.
+
+    The residual is the task's objective's (offsets profiled out when they are identified), per channel of the
+    layout; a channel slower than the grid is analysed at its own samples (NaN elsewhere in `residual`)."""
     exp = task.experiment
+    objective = task.objective(reference)
     values = {n: np.asarray(v, dtype=float) for n, v in zip(names, x, strict=True)}
     with np.errstate(all="ignore"):
         resp = exp.simulate(values)
+    sim = exp.read(resp)
     parts, channels = [], []
-    for family, ref in reference.items():
-        parts.append((ref - getattr(resp, family)) / task.sigma[family])
-        channels += [f"{family}{i + 1}" for i in range(ref.shape[1])]
+    for family in reference:
+        r = objective.error(family, sim[family]) / task.sigma[family]
+        if task.observed is not None:
+            r = np.where(task.observed[family], r, np.nan)
+        parts.append(r)
+        channels += list(exp.layout.names(family))
     residual = np.concatenate(parts, axis=1)
     n = residual.shape[0]
-    white = tuple(ljung_box(residual[:, j], lags) for j in range(residual.shape[1]))
+    full = bool(np.all(np.isfinite(residual)))
+    own = [np.isfinite(residual[:, j]) for j in range(residual.shape[1])]
+    white = tuple(ljung_box(residual[ok, j], lags) for j, ok in enumerate(own))
     road_v = np.gradient(exp.road, exp.dt, axis=0)
     xc = np.array(
-        [[np.max(np.abs(cross_correlation(residual[:, j], road_v[:, i], lags))) for i in range(4)]
-         for j in range(residual.shape[1])]
+        [[np.max(np.abs(cross_correlation(residual[ok, j], road_v[ok, i], lags))) for i in range(4)]
+         for j, ok in enumerate(own)]
     )  # fmt: skip
     G = exp.matrices(values).G
     q, qd = resp.q, resp.qd
     defl = q[:, :3] @ G.T - q[:, 3:]
     vel = qd[:, :3] @ G.T - qd[:, 3:]
-    col = channels.index("acc1") if "acc1" in channels else 0
+    p = {k: float(np.asarray(v)) for k, v in exp.parameters(values).items()}
+    picks = fingerprint_channels(exp.layout, p, tuple(channels))
     fingerprint = tuple(
         (
-            bin_residual(vel[:, i], residual[:, col + i], "velocity", bins),
-            bin_residual(defl[:, i], residual[:, col + i], "deflection", bins),
+            bin_residual(vel[own[j], i], residual[own[j], j], "velocity", bins),
+            bin_residual(defl[own[j], i], residual[own[j], j], "deflection", bins),
         )
-        for i in range(4)
+        for i, j in enumerate(picks)
     )
+    square = residual**2
     return ResidualAnalysis(
         channels=tuple(channels),
         residual=residual,
-        chi2_per_sample=float(np.mean(residual**2)),
-        chi2_channel=np.mean(residual**2, axis=0),
+        chi2_per_sample=float(np.mean(square) if full else np.nanmean(square)),
+        chi2_channel=np.mean(square, axis=0) if full else np.nanmean(square, axis=0),
         whiteness=white,
         road_xcorr_max=xc,
         band=float(BAND_Z / np.sqrt(n)),

@@ -9,12 +9,14 @@ M qdd + C qd + K q + D' f = B y), with g(0) = h(0) = 0 so the car still starts a
   constrained to vanish at 0, with the integrated squared second derivative as roughness penalty (its null
   space, the straight line through 0, is free: a linear stiffness or damping costs nothing).
 * Each basis function, applied at the corners of its axle along the trajectory, is an input force history
-  to the LINEAR part (M, C, K) of the fitted car; its body-point responses (acc, disp: the task's families,
-  weighted by the task's sigma like the objective) come from one exact first-order-hold recursion for all
-  basis inputs at once. These are the columns of S; the fitted unknowns' own sensitivities (forward
-  differences, one batched simulation) are unpenalised nuisance columns, so what the fit already absorbed
-  is not credited to the missing force; when their step moves the trajectory the unknowns are updated and
-  re-simulated (Gauss-Newton inside the task's box): the unknowns and the force are fitted jointly.
+  to the LINEAR part (M, C, K) of the fitted car; its responses at the layout's channels (body points, wheel
+  hops, deflections, in the task's families, weighted by the task's sigma and laid out like the objective's
+  residual: observed samples only, each channel's mean removed when offsets are profiled) come from one exact
+  first-order-hold recursion for all basis inputs at once. These are the columns of S; the fitted unknowns'
+  own sensitivities (forward differences, one batched simulation) are unpenalised nuisance columns, so what
+  the fit already absorbed is not credited to the missing force; when their step moves the trajectory the
+  unknowns are updated and re-simulated (Gauss-Newton inside the task's box): the unknowns and the force are
+  fitted jointly.
 * Penalised weighted least squares min |r - J dx - S theta|² + sum_j lambda_j theta_j' P_j theta_j over the
   kept residual entries, one lambda per function chosen by REML (or GCV, ``criterion``; GCV undersmooths
   more often on pure noise).
@@ -27,6 +29,10 @@ M qdd + C qd + K q + D' f = B y), with g(0) = h(0) = 0 so the car still starts a
   columns only, edf the trace of the hat matrix H and df = tr(2 H - H H) of the force part (Hastie-Tibshirani's
   reference degrees of freedom, >= edf: a smoothing parameter chosen on the same data makes the plain-edf test
   anti-conservative; on pure noise about 8 % of p-values fall below 0.05, none below 0.001 in 60 seeds).
+* When an axle's stiffness (kf, kr) or damping (cf, cr) is among the fitted unknowns, its re-fit and the curve's
+  line through 0 are one and the same force: that curve is reported modulo lines (the unknown's re-fit added, then
+  the line through 0 projected out on its grid, bands from the joint covariance; its explained power without what
+  the unknown's own column absorbs), and compared with the shapes modulo lines too.
 * Each estimated curve is compared with the library's shapes by a one-parameter weighted least-squares fit
   (weights: inverse band variance; uncentred R², the curves all pass through 0).
 
@@ -49,12 +55,17 @@ from scipy import stats
 from scipy.interpolate import BSpline
 
 from ..models.fullcar import N_CORNERS, N_DOF
+from ..models.sensors import corner_layout
 from ..sim.modal import foh_discretisation
 from ..sim.nonlinear import fullcar_struts
 
 Z95 = 1.959963984540054
 ALPHA = 1e-3  # significance level below which candidate_order reorders (attribution's family-wise level)
 AXLES = (("front", (0, 1)), ("rear", (2, 3)))
+# The unknown whose change is a line through 0 of each axle's curve (a stiffness over deflection, a damping over
+# velocity): when it is fitted, the curve's line is not identifiable apart from it (see estimate_unexplained).
+LINE_UNKNOWN = {("front", "deflection"): "kf", ("front", "velocity"): "cf", ("rear", "deflection"): "kr",
+                ("rear", "velocity"): "cr"}  # fmt: skip
 VARIABLES = ("deflection", "velocity")
 UNITS = {"deflection": "m", "velocity": "m/s"}
 SIGNIFICANCE = 1e-3  # the F test's level for "the residual holds a strut force" (the loop's alpha)
@@ -321,30 +332,87 @@ def _basis(values: NDArray, n_knots: int) -> _Basis:
 
 @dataclass(frozen=True)
 class _LinearCar:
-    """The fitted car's linear part, discretised for strut-force inputs u (4 corners) with a first-order hold."""
+    """The fitted car's linear part, discretised for strut-force inputs u (4 corners) with a first-order hold,
+    with the output rows of the layout's channels."""
 
     Phi: NDArray
     G1: NDArray
     G2: NDArray
-    out_s: dict[str, NDArray]  # family -> (4, 14): body-point output from the state
-    out_u: dict[str, NDArray]  # family -> (4, 4): direct feed-through of the strut forces
+    out_s: dict[str, NDArray]  # family -> (k, 14): the family's channels from the state
+    out_u: dict[str, NDArray]  # family -> (k, 4): direct feed-through of the strut forces
     D: NDArray  # (4, 7) strut deflection from q
 
 
-def _linear_car(mats, dt: float) -> _LinearCar:
+def _output_rows(layout, family: str, points: NDArray) -> tuple[NDArray, NDArray]:
+    """(k, 3) body rows and (k, 4) wheel rows giving each channel of `family` from the body coordinates
+    (x_b, phi, theta) and the wheel hops (or their accelerations): a body sensor reads its point's row of `points`
+    (Layout.points, (nb, 3)), a wheel sensor its wheel, a deflection sensor the point above its corner minus the
+    wheel."""
+    index = {pt: i for i, pt in enumerate(layout._points)}
+    sensors = layout.of(family)
+    body = np.zeros((len(sensors), 3))
+    wheel = np.zeros((len(sensors), N_CORNERS))
+    for j, s in enumerate(sensors):
+        if s.point is not None:
+            body[j] = points[index[s.point]]
+        if s.kind.startswith("wheel"):
+            wheel[j, s.corner - 1] = 1.0
+        elif s.kind == "deflection":
+            wheel[j, s.corner - 1] = -1.0
+    return body, wheel
+
+
+def _linear_car(mats, dt: float, layout=None, points: NDArray | None = None) -> _LinearCar:
+    """The car `mats` (one set of matrices) discretised at dt [s], its outputs the channels of `layout` with body
+    point rows `points` (Layout.points of the car, (nb, 3)); None: the body points above the corners (rows of G),
+    acc and disp."""
     A, _ = mats.state_space()
     D = fullcar_struts(mats)
     Minv = np.linalg.inv(mats.M)
     Bf = np.zeros((2 * N_DOF, N_CORNERS))
     Bf[N_DOF:, :] = -Minv @ D.T  # generalised force -D' f
     Phi, G1, G2 = foh_discretisation(A, Bf, dt)
-    G = mats.G
-    acc_s = G @ A[N_DOF : N_DOF + 3, :]  # qdd_body = -M^-1 (K q + C qd)_body ...
-    acc_u = G @ Bf[N_DOF : N_DOF + 3, :]  # ... - (M^-1 D' f)_body
-    disp_s = np.zeros((N_CORNERS, 2 * N_DOF))
-    disp_s[:, :3] = G
-    return _LinearCar(Phi, G1, G2, {"acc": acc_s, "disp": disp_s},
-                      {"acc": acc_u, "disp": np.zeros((N_CORNERS, N_CORNERS))}, D)  # fmt: skip
+    if layout is None:
+        G = mats.G
+        acc_s = G @ A[N_DOF : N_DOF + 3, :]  # qdd_body = -M^-1 (K q + C qd)_body ...
+        acc_u = G @ Bf[N_DOF : N_DOF + 3, :]  # ... - (M^-1 D' f)_body
+        disp_s = np.zeros((N_CORNERS, 2 * N_DOF))
+        disp_s[:, :3] = G
+        return _LinearCar(Phi, G1, G2, {"acc": acc_s, "disp": disp_s},
+                          {"acc": acc_u, "disp": np.zeros((N_CORNERS, N_CORNERS))}, D)  # fmt: skip
+    out_s, out_u = {}, {}
+    for family in layout.families:
+        body, wheel = _output_rows(layout, family, points)
+        if family == "acc":  # accelerations: the rows of qdd = A_qdd s + B_qdd f
+            out_s[family] = body @ A[N_DOF : N_DOF + 3, :] + wheel @ A[N_DOF + 3 :, :]
+            out_u[family] = body @ Bf[N_DOF : N_DOF + 3, :] + wheel @ Bf[N_DOF + 3 :, :]
+        else:  # displacements: the rows of q
+            rows = np.zeros((body.shape[0], 2 * N_DOF))
+            rows[:, :3], rows[:, 3:N_DOF] = body, wheel
+            out_s[family] = rows
+            out_u[family] = np.zeros((body.shape[0], N_CORNERS))
+    return _LinearCar(Phi, G1, G2, out_s, out_u, D)
+
+
+def _car_at(exp, values: dict[str, float], dt: float, paper: bool) -> _LinearCar:
+    """The linear car `values` at dt [s] with the experiment's layout's outputs (`paper`: the corner points, G)."""
+    mats = exp.matrices(values)
+    if paper:
+        return _linear_car(mats, dt)
+    layout = exp.layout
+    return _linear_car(mats, dt, layout, layout.points(exp.parameters(values)))
+
+
+def _channel_columns(objective, family: str, car: _LinearCar, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
+    """The weighted residual entries of `family` (the objective's layout: time-major, observed entries only) that
+    the K input histories U (n, 4, K) with states s (n, 14, K) explain, (R_family, K): the channels' responses over
+    sigma, without what the profiled offsets absorb."""
+    Y = (car.out_s[family] @ s + car.out_u[family] @ U) / sigma[None, :, None]  # (n, k, K)
+    if objective.offsets:
+        objective.project(family, np.moveaxis(Y, -1, 0))  # in place, through the (K, n, k) view
+    Y = Y.reshape(Y.shape[0] * Y.shape[1], -1)
+    rows = objective.entries(family)
+    return Y if rows is None else Y[rows]
 
 
 def _responses(car: _LinearCar, U: NDArray) -> NDArray:
@@ -460,8 +528,10 @@ def _shape_columns(variable: str, x: NDArray) -> dict[str, list[tuple[NDArray, i
     }
 
 
-def resemblance(variable: str, x: NDArray, f: NDArray, se: NDArray) -> Resemblance:
-    """Best one-parameter match of the library's shapes to the curve f(x) [N] with standard errors se [N]."""
+def resemblance(variable: str, x: NDArray, f: NDArray, se: NDArray, free_line: bool = False) -> Resemblance:
+    """Best one-parameter match of the library's shapes to the curve f(x) [N] with standard errors se [N];
+    `free_line`: f is known modulo a line through 0 (and given without its projection on x), and so is each
+    shape (a linear stiffness or damping then matches nothing)."""
     floor = 1e-2 * max(float(np.median(se[se > 0])) if np.any(se > 0) else 1.0, 1e-300)
     w = 1.0 / np.maximum(se, floor) ** 2
     total = float(np.sum(w * f * f))
@@ -469,6 +539,8 @@ def resemblance(variable: str, x: NDArray, f: NDArray, se: NDArray) -> Resemblan
     for name, options in _shape_columns(variable, x).items():
         best = (-np.inf, 0.0, "")
         for s, sign, text in options:
+            if free_line:
+                s = s - x * float(x @ s) / float(x @ x)
             ss = float(np.sum(w * s * s))
             a = float(np.sum(w * f * s)) / ss if ss > 0 else 0.0
             if sign and a * sign < 0:
@@ -513,15 +585,17 @@ def estimate_unexplained(
     criterion: str = "reml",
 ) -> Unexplained:
     """Estimate the strut force F(d, v) = g(d) + h(v) [N] per axle that the car `names` = x (fitted on
-    `task`) misses in `reference` ({'acc', 'disp'}: (n, 4) [m/s², m]); `keep` masks the residual entries the
-    fit used (layout family, time, channel). With `nuisance` the unknowns are re-fitted jointly with the force
-    (Gauss-Newton steps inside the task's box), else they stay at x. At most `iterations` trajectory corrections
-    (and re-simulations when the unknowns move). See the module doc."""
+    `task`, one run) misses in `reference` (family -> (n, k) [m/s², m], the layout's channels); `keep` masks the
+    residual entries the fit used (the objective's layout: family, time, channel; observed entries only). With
+    `nuisance` the unknowns are re-fitted jointly with the force (Gauss-Newton steps inside the task's box), else
+    they stay at x. At most `iterations` trajectory corrections (and re-simulations when the unknowns move).
+    See the module doc."""
     names = tuple(names)
     x = np.asarray(x, dtype=float).ravel()
     if x.size != len(names):
         raise ValueError(f"{len(names)} names but {x.size} values")
     exp = task.experiment
+    paper = exp.layout == corner_layout() and all(ref.shape[1] == N_CORNERS for ref in reference.values())
     n, dt = exp.t.size, exp.dt
     families = tuple(reference)
     objective = task.objective(reference)
@@ -548,7 +622,7 @@ def estimate_unexplained(
             dv = (v_all[1:] - v_all[0]) / steps[:, None, None]
         else:
             Jm, dd, dv = np.zeros((res.shape[1], 0)), np.zeros((0, n, 4)), np.zeros((0, n, 4))
-        car = _linear_car(exp.matrices({m: at[j] for j, m in enumerate(names)}), dt)
+        car = _car_at(exp, {m: at[j] for j, m in enumerate(names)}, dt, paper)
         return res[0], Jm, d_all[0], v_all[0], dd, dv, car
 
     r, Jm, d0, v0, dd, dv, car = linearise(x)
@@ -588,10 +662,7 @@ def estimate_unexplained(
                 cols.append(U)
         U = np.concatenate(cols, axis=2)  # (n, 4, K)
         s = _responses(car, U)
-        S = np.concatenate(
-            [((car.out_s[f] @ s + car.out_u[f] @ U) / sigma[f][None, :, None]).reshape(n * N_CORNERS, -1)
-             for f in families], axis=0,
-        )  # fmt: skip
+        S = np.concatenate([_channel_columns(objective, f, car, s, U, sigma[f]) for f in families], axis=0)
         A = np.hstack([Jk, S[keep]])
         blocks, k0 = [], p
         for b in bases:
@@ -635,9 +706,20 @@ def estimate_unexplained(
             sl = slice(k0, k0 + b.size)
             grid = np.linspace(float(np.min(traj[:, corners])), float(np.max(traj[:, corners])), grid_points)
             Bg = b(grid)
-            f = Bg @ sol.coef[sl]
-            se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bg, V[sl, sl], Bg), 0.0))
-            contrib = A[:, sl] @ sol.coef[sl]
+            own = LINE_UNKNOWN[(axle, var)]
+            if own in names[:p]:  # its line and the unknown's re-fit are one: the curve modulo lines
+                rows = np.zeros((grid.size, sol.coef.size))
+                rows[:, sl], rows[:, names.index(own)] = Bg, grid
+                rows -= np.outer(grid, grid @ rows) / float(grid @ grid)
+                f = rows @ sol.coef
+                se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, V, rows), 0.0))
+                line = A[:, names.index(own)]  # its response, and the part of the curve's the unknown absorbs
+                contrib = A[:, sl] @ sol.coef[sl]
+                contrib = contrib - line * float(line @ contrib) / max(float(line @ line), 1e-300)
+            else:
+                f = Bg @ sol.coef[sl]
+                se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bg, V[sl, sl], Bg), 0.0))
+                contrib = A[:, sl] @ sol.coef[sl]
             i_peak = int(np.argmax(np.abs(f)))
             z = np.abs(f) / np.maximum(se, 1e-300)
             curves.append(
@@ -645,7 +727,7 @@ def estimate_unexplained(
                     variable=var, grid=grid, force=f, band=np.vstack([f - Z95 * se, f + Z95 * se]),
                     peak_force=float(abs(f[i_peak])), peak_at=float(grid[i_peak]),
                     z_max=float(np.max(np.where(se > 0, z, 0.0))), chi2_explained=float(np.mean(contrib**2)),
-                    lam=float(sol.lam[j]), resembles=resemblance(var, grid, f, se),
+                    lam=float(sol.lam[j]), resembles=resemblance(var, grid, f, se, free_line=own in names[:p]),
                 )
             )  # fmt: skip
             j += 1

@@ -120,6 +120,15 @@ class Layout:
             return np.zeros(a1.shape + (0, 3))
         return np.stack(rows, axis=-2)
 
+    def body_xy(self, p: Mapping[str, float]) -> dict[str, tuple[float, float]]:
+        """(x, y) [m] from the CG of each body sensor's point (x forward, y toward side 1), for one car."""
+        out = {}
+        for s in self.sensors:
+            if s.kind.startswith("body"):
+                ox, oy = _origin(s.origin, p)
+                out[s.name] = (float(ox) + s.x, float(oy) + s.y)
+        return out
+
     def read(self, response) -> dict[str, NDArray]:
         """Family -> (..., n, k) channel values of a response simulated at `points` (sim.linear.Response)."""
         index = {pt: i for i, pt in enumerate(self._points)}

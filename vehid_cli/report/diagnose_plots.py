@@ -38,7 +38,7 @@ def plot_diagnosis(diagnosis, directory: str | Path, stem: str = "diagnose") -> 
     sides = [("before", diagnosis.before, before, "0.55")] + (
         [("after", diagnosis.after, after, "C3")] if changed else []
     )
-    # the channel that the declared model misses most
+    # the channel that the declared model misses most (of the first run, when several were fitted jointly)
     ch = int(np.argmax(before.chi2_channel))
     name = before.channels[ch]
     paths = []
@@ -46,7 +46,8 @@ def plot_diagnosis(diagnosis, directory: str | Path, stem: str = "diagnose") -> 
     fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
     t = np.arange(before.residual.shape[0]) * (before.dt or 1.0)
     for side, report, an, colour in sides:
-        ax.plot(t, an.residual[:, ch], lw=0.6, color=colour, label=_label(report, side))
+        own = np.isfinite(an.residual[:, ch])  # a slow channel: its own samples
+        ax.plot(t[own], an.residual[own, ch], lw=0.6, color=colour, label=_label(report, side))
     ax.axhspan(-1, 1, color="C0", alpha=0.12, label="±1 sigma (the noise)")
     ax.set_xlabel("t [s]" if before.dt else "sample")
     ax.set_ylabel(f"residual {name} [sigma]")
