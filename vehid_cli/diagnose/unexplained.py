@@ -55,7 +55,6 @@ from scipy import stats
 from scipy.interpolate import BSpline
 
 from ..models.fullcar import N_CORNERS, N_DOF
-from ..models.sensors import corner_layout
 from ..sim.modal import foh_discretisation
 from ..sim.nonlinear import fullcar_struts
 
@@ -362,24 +361,15 @@ def _output_rows(layout, family: str, points: NDArray) -> tuple[NDArray, NDArray
     return body, wheel
 
 
-def _linear_car(mats, dt: float, layout=None, points: NDArray | None = None) -> _LinearCar:
+def _linear_car(mats, dt: float, layout, points: NDArray) -> _LinearCar:
     """The car `mats` (one set of matrices) discretised at dt [s], its outputs the channels of `layout` with body
-    point rows `points` (Layout.points of the car, (nb, 3)); None: the body points above the corners (rows of G),
-    acc and disp."""
+    point rows `points` (Layout.points of the car, (nb, 3); the paper's layout: the rows of G)."""
     A, _ = mats.state_space()
     D = fullcar_struts(mats)
     Minv = np.linalg.inv(mats.M)
     Bf = np.zeros((2 * N_DOF, N_CORNERS))
     Bf[N_DOF:, :] = -Minv @ D.T  # generalised force -D' f
     Phi, G1, G2 = foh_discretisation(A, Bf, dt)
-    if layout is None:
-        G = mats.G
-        acc_s = G @ A[N_DOF : N_DOF + 3, :]  # qdd_body = -M^-1 (K q + C qd)_body ...
-        acc_u = G @ Bf[N_DOF : N_DOF + 3, :]  # ... - (M^-1 D' f)_body
-        disp_s = np.zeros((N_CORNERS, 2 * N_DOF))
-        disp_s[:, :3] = G
-        return _LinearCar(Phi, G1, G2, {"acc": acc_s, "disp": disp_s},
-                          {"acc": acc_u, "disp": np.zeros((N_CORNERS, N_CORNERS))}, D)  # fmt: skip
     out_s, out_u = {}, {}
     for family in layout.families:
         body, wheel = _output_rows(layout, family, points)
@@ -394,13 +384,10 @@ def _linear_car(mats, dt: float, layout=None, points: NDArray | None = None) -> 
     return _LinearCar(Phi, G1, G2, out_s, out_u, D)
 
 
-def _car_at(exp, values: dict[str, float], dt: float, paper: bool) -> _LinearCar:
-    """The linear car `values` at dt [s] with the experiment's layout's outputs (`paper`: the corner points, G)."""
-    mats = exp.matrices(values)
-    if paper:
-        return _linear_car(mats, dt)
+def _car_at(exp, values: dict[str, float], dt: float) -> _LinearCar:
+    """The linear car `values` at dt [s] with the outputs of the experiment's layout."""
     layout = exp.layout
-    return _linear_car(mats, dt, layout, layout.points(exp.parameters(values)))
+    return _linear_car(exp.matrices(values), dt, layout, layout.points(exp.parameters(values)))
 
 
 def _channel_columns(objective, family: str, car: _LinearCar, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
@@ -595,7 +582,6 @@ def estimate_unexplained(
     if x.size != len(names):
         raise ValueError(f"{len(names)} names but {x.size} values")
     exp = task.experiment
-    paper = exp.layout == corner_layout() and all(ref.shape[1] == N_CORNERS for ref in reference.values())
     n, dt = exp.t.size, exp.dt
     families = tuple(reference)
     objective = task.objective(reference)
@@ -622,7 +608,7 @@ def estimate_unexplained(
             dv = (v_all[1:] - v_all[0]) / steps[:, None, None]
         else:
             Jm, dd, dv = np.zeros((res.shape[1], 0)), np.zeros((0, n, 4)), np.zeros((0, n, 4))
-        car = _car_at(exp, {m: at[j] for j, m in enumerate(names)}, dt, paper)
+        car = _car_at(exp, {m: at[j] for j, m in enumerate(names)}, dt)
         return res[0], Jm, d_all[0], v_all[0], dd, dv, car
 
     r, Jm, d0, v0, dd, dv, car = linearise(x)
