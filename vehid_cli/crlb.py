@@ -41,6 +41,15 @@ class CramerRao:
         return [n for n, ok in zip(self.names, self.identifiable, strict=True) if not ok]
 
 
+def _central_points(values: NDArray, h: NDArray) -> NDArray:
+    """(2D, D) candidates: values with +h_j on parameter j (rows 0..D-1), then with -h_j (rows D..2D-1)."""
+    D = values.size
+    X = np.repeat(values[None, :], 2 * D, axis=0)
+    X[np.arange(D), np.arange(D)] += h
+    X[D + np.arange(D), np.arange(D)] -= h
+    return X
+
+
 def sensitivities(
     experiment: Experiment,
     names: Sequence[str],
@@ -52,15 +61,38 @@ def sensitivities(
     values = np.asarray(values, dtype=float)
     D = values.size
     h = rel_step * np.abs(values)
-    X = np.repeat(values[None, :], 2 * D, axis=0)
-    X[np.arange(D), np.arange(D)] += h
-    X[D + np.arange(D), np.arange(D)] -= h
+    X = _central_points(values, h)
     outputs = experiment.outputs({n: X[:, j] for j, n in enumerate(names)})
     out = {}
     for family in families:
         z = outputs[family]  # (2D, n, k)
         dz = (z[:D] - z[D:]) / (2 * h[:, None, None])  # (D, n, k) per unit of theta_j
         out[family] = np.moveaxis(dz * np.abs(values)[:, None, None], 0, -1)  # per relative change
+    return out
+
+
+def weighted_sensitivities(
+    experiment: Experiment,
+    names: Sequence[str],
+    values: NDArray,
+    sigma: Mapping[str, NDArray],
+    observed: Mapping[str, NDArray] | None = None,
+    offsets: bool = False,
+    rel_step: float = 1e-5,
+) -> dict[str, NDArray]:
+    """Sensitivities over the noise, W (n, k, D) per family of `sigma` (family -> (k,)): zero where a channel has no
+    sample (`observed`: family -> (n, k) bool; None: all). With `offsets`, each channel has an unknown constant
+    offset: its sensitivities lose their mean over the channel's samples, which leaves the information that remains
+    once the offsets are estimated too (the Schur complement)."""
+    values = np.asarray(values, dtype=float)
+    out = {}
+    for family, S in sensitivities(experiment, names, values, list(sigma), rel_step).items():
+        mask = None if observed is None else np.asarray(observed[family], dtype=float)[:, :, None]
+        if offsets:
+            mean = S.mean(axis=0) if mask is None else (S * mask).sum(axis=0) / mask.sum(axis=0)
+            S = S - mean[None]
+        W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
+        out[family] = W if mask is None else W * mask
     return out
 
 
@@ -74,21 +106,10 @@ def information(
     rel_step: float = 1e-5,
 ) -> NDArray:
     """Fisher information (D, D) of the relative unknowns theta_j / values_j carried by the channels of `sigma`
-    (family -> (k,)), counted at their `observed` samples (family -> (n, k) bool; None: all). With `offsets`, each
-    channel has an unknown constant offset: the information left once it is estimated too (the Schur complement),
-    which is the information of the sensitivities with their per-channel mean removed."""
-    values = np.asarray(values, dtype=float)
-    sens = sensitivities(experiment, names, values, list(sigma), rel_step)
-    D = values.size
+    (family -> (k,)), counted at their `observed` samples, offsets estimated alongside (`weighted_sensitivities`)."""
+    D = np.asarray(values).size
     F = np.zeros((D, D))
-    for family, S in sens.items():
-        mask = None if observed is None else np.asarray(observed[family], dtype=float)[:, :, None]
-        if offsets:
-            mean = S.mean(axis=0) if mask is None else (S * mask).sum(axis=0) / mask.sum(axis=0)
-            S = S - mean[None]
-        W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
-        if mask is not None:
-            W = W * mask
+    for W in weighted_sensitivities(experiment, names, values, sigma, observed, offsets, rel_step).values():
         W = W.reshape(-1, D)
         F += W.T @ W
     return F
@@ -157,9 +178,7 @@ def cramer_rao_outputs(
     values = np.asarray(values, dtype=float)
     D = values.size
     h = rel_step * np.maximum(np.abs(values), 1e-12)
-    X = np.repeat(values[None, :], 2 * D, axis=0)
-    X[np.arange(D), np.arange(D)] += h
-    X[D + np.arange(D), np.arange(D)] -= h
+    X = _central_points(values, h)
     y = np.asarray(simulate(X), dtype=float)
     S = (y[:D] - y[D:]) / (2 * h[:, None]) * np.abs(values)[:, None]  # (D, m) per relative change
     W = S / np.asarray(sigma, dtype=float)

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from .campaign import run_campaign
 from .config import Config, config_from_dict
 from .config.design import Design
-from .crlb import CramerRao, bound_from_information, sensitivities
+from .crlb import CramerRao, bound_from_information, weighted_sensitivities
 from .errors import InputError
 from .executor import Executor, LocalExecutor
 from .identification import Task, build_task
@@ -297,12 +297,9 @@ def channel_information(task: Task) -> dict[str, NDArray]:
     """Fisher information (D, D) of each channel of the task's objective, by sensor name: they add up to
     `task.information` (independent noise per channel; offsets profiled per channel)."""
     at = task.truth if task.truth is not None else task.nominal
-    sens = sensitivities(task.experiment, task.names, at, list(task.sigma))
+    weighted = weighted_sensitivities(task.experiment, task.names, at, task.sigma, task.observed, task.offsets)
     out = {}
-    for family, S in sens.items():
-        if task.offsets:
-            S = S - S.mean(axis=0)[None]
-        W = S / task.sigma[family][None, :, None]
+    for family, W in weighted.items():
         for c, name in enumerate(task.experiment.layout.names(family)):
             out[name] = W[:, c, :].T @ W[:, c, :]
     return out
