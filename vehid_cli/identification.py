@@ -22,7 +22,7 @@ from .errors import InputError
 from .experiment import Experiment, build_experiment, clean_sigma, measurement_noise, run_streams
 from .measured import experiment_of, read_run
 from .models.effects import LIBRARY
-from .noise import channel_sigma, estimate_noise_sigma, sigma_from_level
+from .noise import channel_sigma, estimate_noise_sigma, per_channel, sigma_from_level, with_floors
 from .objectives import Objective, objective_families
 from .optimizers.base import Problem
 
@@ -210,10 +210,10 @@ def build_task(config: Config, data_file: str | Path | None = None) -> Task:
         clean = experiment.outputs()
         drawn = {f: clean_sigma(experiment, f, clean[f]) for f in clean}
         floor = max(level, MIN_SIGMA_FRACTION)
-        sigma = {f: channel_sigma(clean[f], floor, experiment.noise_floors(f)) for f in families}
-        floors = any(np.any(~np.isnan(experiment.noise_floors(f))) for f in families)
+        floors = {f: experiment.noise_floors(f) for f in families}
+        sigma = {f: channel_sigma(clean[f], floor, floors[f]) for f in families}
         source = f"Eq. 15 with Np = {level:g}" if level > 0 else f"noise-free data: weights of Np = {floor:g}"
-        if floors:
+        if any(np.any(~np.isnan(v)) for v in floors.values()):
             source = "the configured noise floors" + (f" and Eq. 15 with Np = {level:g}" if level > 0 else "")
         return Task(
             config, experiment, names, lower, upper, nominal, truth, families, clean, None, sigma, source, None,
@@ -221,19 +221,18 @@ def build_task(config: Config, data_file: str | Path | None = None) -> Task:
         )  # fmt: skip
     run = read_run(config, data_file, families)
     experiment = experiment_of(config, run)
-    sigma = {}
-    for family in families:
-        floors = experiment.noise_floors(family)
-        if level > 0:
-            estimate = _per_channel(lambda y: sigma_from_level(y, level), run.outputs[family], run.observed, family)
-        else:
-            estimate = _per_channel(estimate_noise_sigma, run.outputs[family], run.observed, family)
-        sigma[family] = np.where(np.isnan(floors), estimate, floors)
+    floors = {f: experiment.noise_floors(f) for f in families}
     if level > 0:
+        statistic = lambda y: sigma_from_level(y, level)  # noqa: E731
         source = f"Eq. 15 with Np = {level:g} (noise.level)"
     else:
+        statistic = estimate_noise_sigma
         source = "estimated from the data (third differences)"
-    if any(np.any(~np.isnan(experiment.noise_floors(f))) for f in families):
+    sigma = {}
+    for family in families:
+        mask = None if run.observed is None else run.observed[family]
+        sigma[family] = with_floors(per_channel(statistic, run.outputs[family], mask), floors[family])
+    if any(np.any(~np.isnan(v)) for v in floors.values()):
         source = f"the configured noise floors, elsewhere {source}"
     for family, s in sigma.items():
         if np.any(~(s > 0)):
@@ -247,14 +246,6 @@ def build_task(config: Config, data_file: str | Path | None = None) -> Task:
         config, experiment, names, lower, upper, nominal, truth, families, None, run.outputs, sigma, source,
         str(data_file), observed=run.observed, offsets=offsets,
     )  # fmt: skip
-
-
-def _per_channel(estimate, values: NDArray, observed: dict[str, NDArray] | None, family: str) -> NDArray:
-    """A per-channel noise estimate (k,) of (n, k) values, each channel from its own samples only."""
-    if observed is None:
-        return estimate(values)
-    mask = observed[family]
-    return np.array([float(estimate(values[mask[:, c], c][:, None])[0]) for c in range(values.shape[1])])
 
 
 @dataclass(frozen=True)
@@ -334,15 +325,17 @@ class JointTask:
             with np.errstate(all="ignore"):
                 return [t.experiment.outputs(values) for t in self.tasks]
 
-        def cost(X: NDArray) -> NDArray:
-            parts = [o.parts(y) for o, y in zip(objectives, outputs(X), strict=True)]
+        def combined(ys: list[dict[str, NDArray]]) -> NDArray:
+            parts = [o.parts(y) for o, y in zip(objectives, ys, strict=True)]
             return sum(p[0] for p in parts) / sum(p[1] for p in parts)
+
+        def cost(X: NDArray) -> NDArray:
+            return combined(outputs(X))
 
         def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
             ys = outputs(X)
-            parts = [o.parts(y) for o, y in zip(objectives, ys, strict=True)]
             residuals = np.concatenate([o.residuals(y) for o, y in zip(objectives, ys, strict=True)], axis=-1)
-            return sum(p[0] for p in parts) / sum(p[1] for p in parts), residuals
+            return combined(ys), residuals
 
         return Problem(self.lower, self.upper, cost, cost_and_residuals, names=names)
 

@@ -38,14 +38,27 @@ def sigma_from_level(measured: NDArray, level: float) -> NDArray:
     return level * np.std(np.asarray(measured, dtype=float), axis=-2) / np.sqrt(1.0 + level**2)
 
 
-def channel_sigma(clean: NDArray, level: float, floors: NDArray | None = None) -> NDArray:
-    """Noise standard deviation per channel (k,) of clean signals (n, k): a channel's absolute floor where `floors`
-    gives one (not NaN), else Eq. 15 (level * std over time)."""
-    sigma = noise_sigma(clean, level)
+def with_floors(sigma: NDArray, floors: NDArray | None) -> NDArray:
+    """Noise standard deviation per channel (k,): a channel's absolute floor where `floors` gives one (not NaN), else
+    `sigma`."""
     if floors is None:
         return sigma
     floors = np.asarray(floors, dtype=float)
     return np.where(np.isnan(floors), sigma, floors)
+
+
+def channel_sigma(clean: NDArray, level: float, floors: NDArray | None = None) -> NDArray:
+    """Noise standard deviation per channel (k,) of clean signals (n, k): a channel's absolute floor where `floors`
+    gives one (not NaN), else Eq. 15 (level * std over time)."""
+    return with_floors(noise_sigma(clean, level), floors)
+
+
+def per_channel(statistic, values: NDArray, observed: NDArray | None) -> NDArray:
+    """A per-channel statistic (k,) of values (n, k) (`statistic` maps (m, k) to (k,), e.g. estimate_noise_sigma),
+    each channel over its own samples only (`observed`: (n, k) bool; None: every sample)."""
+    if observed is None:
+        return statistic(values)
+    return np.array([float(statistic(values[observed[:, c], c][:, None])[0]) for c in range(values.shape[1])])
 
 
 def add_channel_noise(clean: NDArray, sigma: NDArray, rng: np.random.Generator) -> NDArray:

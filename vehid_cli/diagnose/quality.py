@@ -26,6 +26,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from ..noise import per_channel
+
 MIN_SAMPLES = 500
 MIN_REVERSALS = 4
 MAX_NOISE_RATIO = 0.5
@@ -77,11 +79,9 @@ def _checks(samples: int, noise_ratio: float, names, x: NDArray, ci: NDArray, ex
     return Quality(tuple(reasons), int(samples), float(noise_ratio), worst)
 
 
-def _channel_std(ref: NDArray, observed: NDArray | None) -> NDArray:
-    """Standard deviation (k,) of each channel of `ref` (n, k) over its own samples (`observed`; None: all)."""
-    if observed is None:
-        return np.std(ref, axis=0)
-    return np.array([np.std(ref[observed[:, c], c]) for c in range(ref.shape[1])])
+def _std(values: NDArray) -> NDArray:
+    """Standard deviation over time (k,) of values (n, k)."""
+    return np.std(values, axis=0)
 
 
 def precheck_vehicle(task, reference) -> Quality:
@@ -93,7 +93,7 @@ def precheck_vehicle(task, reference) -> Quality:
     ratios = np.concatenate(
         [
             np.asarray(t.sigma[f], dtype=float)
-            / np.maximum(_channel_std(ref, None if t.observed is None else t.observed[f]), 1e-300)
+            / np.maximum(per_channel(_std, ref, None if t.observed is None else t.observed[f]), 1e-300)
             for t, r in zip(tasks, refs, strict=True)
             for f, ref in r.items()
         ]
