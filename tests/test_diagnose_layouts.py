@@ -186,7 +186,7 @@ def test_the_config_runs_are_diagnosed_when_no_data_is_given(rig, monkeypatch):
     monkeypatch.setattr("vehid_cli.diagnose.diagnose", lambda cfg, data, validate, log=None: data)
     files = f"data.files=[{rig['clean']},{rig['spring']}]"
     assert diagnose_config(RIG, [files]) == (str(rig["clean"]), str(rig["spring"]))
-    assert diagnose_config(RIG, [files], data=rig["spring"]) == rig["spring"]
+    assert diagnose_config(RIG, [files], data=rig["spring"]) == str(rig["spring"])  # --data wins, as a path string
 
 
 def test_a_damper_takes_one_data_run():

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..config import DamperConfig, load_config
 from ..errors import InputError
+from ..systems.base import configured_data_file, data_paths
 from .damper import diagnose_damper
 from .loop import Diagnosis, diagnose
 
@@ -27,13 +28,13 @@ def diagnose_config(
     runs (the car takes one; a damper's default is its data.validate). The car's runs may be any sensor layout
     and logger files (config layout and data sections)."""
     cfg = load_config(config, overrides)
-    files = () if data is None else ((data,) if isinstance(data, (str, Path)) else tuple(data))
+    files = data_paths(data)
     if isinstance(cfg, DamperConfig):
         if len(files) > 1:
             raise InputError("a damper is diagnosed on one --data run (its validation runs: --validate)",
                              source=str(config))  # fmt: skip
         return diagnose_damper(cfg, files[0] if files else None, tuple(validate) or None, log=log)
-    files = files or tuple(cfg.data.files)  # --data wins over the config's runs, as for identify
+    files = data_paths(configured_data_file(cfg, files))  # --data wins over the config's runs, as for identify
     if not files:
         raise InputError("diagnose needs --data FILE (the measured run to fit) or data.files", source=str(config))
     if len(validate) > 1:

@@ -32,6 +32,7 @@ from ..experiment import run_streams
 from ..identification import JointTask, Task, build_task, build_tasks
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
+from ..systems.base import data_paths
 from .attribution import (
     ALPHA,
     CANDIDATE_BUDGET,
@@ -472,11 +473,6 @@ def holdout_mask(task: Task | JointTask, reference) -> NDArray:
     )
 
 
-def run_files(data: str | Path | Sequence[str | Path]) -> tuple[str | Path, ...]:
-    """The measured runs named by `data`: one file, or several fitted jointly."""
-    return (data,) if isinstance(data, (str, Path)) else tuple(data)
-
-
 def diagnose(
     config: Config,
     data_file: str | Path | Sequence[str | Path],
@@ -495,7 +491,7 @@ def diagnose(
     t_start = time.perf_counter()
     say = log or (lambda _msg: None)
     config = prepare_config(config)
-    files = run_files(data_file)
+    files = data_paths(data_file)
     task = build_tasks(config, files)
     joint = isinstance(task, JointTask)
     names_of = " + ".join(str(f) for f in files)
