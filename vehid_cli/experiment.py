@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,7 @@ from .config import Config
 from .data import read_measurement, time_grid
 from .errors import InputError
 from .models.effects import check_names
-from .models.fullcar import FullCarMatrices, assemble, parameter_batch
+from .models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
 from .models.sensors import Layout
 from .noise import add_channel_noise, channel_sigma
 from .road import road_function
@@ -63,9 +64,9 @@ class Experiment:
     road: NDArray  # (n, 4) [m]
     road_source: str  # "config" or the measurement file the road came from
 
-    @property
+    @cached_property
     def layout(self) -> Layout:
-        """The sensors (config.layout, or the paper's four corners)."""
+        """The sensors (config.layout, or the paper's four corners), built once: every simulation reads them."""
         return self.config.sensor_layout()
 
     @property
@@ -134,7 +135,7 @@ class Experiment:
         if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
             return self.read(self.simulate(values))
         (P,) = sizes
-        per_car = self.t.size * (3 * 7 + 2 * len(self.layout.sensors) + 8) * 8
+        per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
         chunk = max(1, CHUNK_BYTES // per_car)
         if P <= chunk:
             return self.read(self.simulate(values))

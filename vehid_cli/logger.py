@@ -405,12 +405,18 @@ class NominalRateError(InputError):
     """Time stamps that do not follow the nominal rate given to `read_record` (callers may name their key)."""
 
 
+def _worst_step(steps: NDArray, dt: float) -> int:
+    """The index of the time step furthest from dt [s]: what the nominal-rate check (5 %) and the gap check (50 %)
+    each judge against their own tolerance."""
+    return int(np.argmax(np.abs(steps - dt)))
+
+
 def _on_nominal_rate(name: str, theirs: str, raw: _Raw, rate: float, src: str) -> None:
     """Printed time stamps rounded off a nominal rate: check every step is within 5 % of 1 / rate, then rebuild
     the stamps as t0 + k / rate (the samples are kept as they are, not resampled)."""
     dt = 1.0 / rate
     steps = np.diff(raw.t)
-    bad = int(np.argmax(np.abs(steps - dt)))
+    bad = _worst_step(steps, dt)
     if abs(steps[bad] - dt) > NOMINAL_RATE_MATCH * dt:
         raise NominalRateError(
             f"channel '{name}' ('{theirs}'): time{_named(raw.time)} does not follow the nominal rate {rate:g} Hz "
@@ -444,7 +450,7 @@ def _check_channel(name: str, theirs: str, raw: _Raw, src: str) -> float:
             source=src,
         )
     dt = float(np.median(steps))
-    worst = int(np.argmax(np.abs(steps - dt)))
+    worst = _worst_step(steps, dt)
     if abs(steps[worst] - dt) > JITTER * dt:
         raise InputError(
             f"{label}: a gap in time at sample {worst + 2}: step {steps[worst]:.6g} s against the usual {dt:.6g} s "

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -99,7 +100,7 @@ class Layout:
         """Every channel, grouped by family."""
         return tuple(n for f in self.families for n in self.names(f))
 
-    @property
+    @cached_property
     def _points(self) -> tuple[tuple[str, float, float], ...]:
         """The distinct body points read, in first-use order."""
         seen: dict[tuple[str, float, float], None] = {}
