@@ -218,3 +218,64 @@ def test_road_from_two_measured_tracks_delays_the_rear_by_wheelbase_over_speed(t
     np.testing.assert_allclose(run.road[:, 3], np.interp(later, t, tracks["track1"], left=0.0), atol=1e-12)
     k = int(np.searchsorted(t, 0.5 + delay + 0.01))
     assert run.road[k, 2] == pytest.approx(0.02) and run.road[int(np.searchsorted(t, 0.5 + delay - 0.01)), 2] == 0.0
+
+
+def test_a_logger_run_from_the_independent_simulator_identifies_its_own_car(tmp_path):
+    """Truth from outside: tests/independent_sim.py (Newton per body through scipy's LSODA, no vehid code) drives a
+    car that is not the config's (m, Ix, Iy, a1, b1 off by 4-12 %) over unequal bumps; its channels for a layout of
+    non-corner body accelerometers, wheel accelerometers and 200 Hz deflection potentiometers are computed here
+    from its coordinates, written as MDF4 in g and mm under odd names with offsets, and `vehid identify` must land
+    on the independent car within the bound."""
+    from tests import independent_sim as ind
+    from vehid_cli.logger_write import write_record
+
+    truth = {"m": 1400.0, "Ix": 540.0, "Iy": 2300.0, "a1": 1.35, "b1": 0.72}
+    p = {**ind.PAPER_CAR, **truth, "a2": 2.6 - truth["a1"], "b2": 1.5 - truth["b1"]}
+    heights, speed, start, length = (0.05, 0.03, 0.03, 0.05), 20 / 3.6, 0.1, ind.BUMP_LENGTH
+    car = ind.FullCar(p, None, lambda t: ind.bump_road(t, heights, speed, 2.6, start, length))
+    ramp = length / speed
+    sim = ind.run(car, ind.time_grid(3.0, 1e-3), [start, start + ramp, start + 2.6 / speed, start + 2.6 / speed + ramp])
+    q, qdd = sim["q"], car.evaluate(sim["t"], sim["state"].T)["rate"][7:14].T
+    t = sim["t"]
+    rng = np.random.default_rng(77)
+    G = 9.80665
+
+    def body(qq, x, y):  # vertical motion of the body point (x forward, y toward side 1) from the CG
+        return qq[:, 0] + y * qq[:, 1] - x * qq[:, 2]
+
+    # body accelerometers 15 cm inboard of corners 1 and 3 and 0.3 m behind the front axle centre (from the CG)
+    points = {"ACC_A": (p["a1"] - 0.15, p["b1"] - 0.10), "ACC_B": (-p["a2"] + 0.15, -p["b2"] + 0.10),
+              "ACC_C": (p["a1"] - 0.3, (p["b1"] - p["b2"]) / 2)}  # fmt: skip
+    channels, sigma = {}, {"acc": 0.05, "disp": 1e-4}
+    for name, (x, y) in points.items():
+        channels[name] = (t, (body(qdd, x, y) + sigma["acc"] * rng.standard_normal(t.size)) / G + 1.0)
+    for c in (1, 3):
+        channels[f"HUB{c}"] = (t, (qdd[:, 2 + c] + sigma["acc"] * rng.standard_normal(t.size)) / G + 0.01)
+        cx, cy = {1: (p["a1"], p["b1"]), 3: (-p["a2"], -p["b2"])}[c]
+        defl = body(q, cx, cy) - q[:, 2 + c] + sigma["disp"] * rng.standard_normal(t.size)
+        channels[f"POT{c}"] = (t[::5], 1e3 * defl[::5] + 3.0)  # 200 Hz, mm, a zero offset of 3 mm
+    for i in range(4):
+        channels[f"ACT{i + 1}"] = (t, 1e3 * sim["road"][:, i])
+    write_record(tmp_path / "independent.mf4", channels)
+    layout = (
+        "[{name: a, kind: body_acc, origin: corner1, x: -0.15, y: -0.10},"
+        " {name: b, kind: body_acc, origin: corner3, x: 0.15, y: 0.10},"
+        " {name: c, kind: body_acc, origin: front_axle, x: -0.3, y: 0},"
+        " {name: h1, kind: wheel_acc, corner: 1}, {name: h3, kind: wheel_acc, corner: 3},"
+        " {name: d1, kind: deflection, corner: 1}, {name: d3, kind: deflection, corner: 3}]"
+    )
+    names = {"a": "ACC_A", "b": "ACC_B", "c": "ACC_C", "h1": "HUB1", "h3": "HUB3", "d1": "POT1", "d3": "POT3"}
+    names.update({f"road{i}": f"ACT{i}" for i in range(1, 5)})
+    units = {k: ("g" if k[0] in "abch" else "mm") for k in names}
+    sets = [
+        f"layout={layout}", "data.channels=" + json.dumps(names), "data.units=" + json.dumps(units),
+        "noise.sigma.acc=0.05", "noise.sigma.disp=0.0001", "simulation.duration=3", "identify.unknowns=[m,Ix,Iy,a1,b1]",
+        "identify.start=config",
+    ]  # fmt: skip
+    cfg = load_config(RIG, sets)
+    system = build_system(cfg, tmp_path / "independent.mf4")
+    estimate = system.identify_run(0).estimate
+    bound = system.bound(estimate)
+    z = (estimate - np.array([truth[n] for n in system.names])) / bound.sd
+    assert np.all(np.abs(z) < 4.5), dict(zip(system.names, z.round(2), strict=True))
+    assert system.task.observed is not None and system.task.offsets
