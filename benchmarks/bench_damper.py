@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 
-from vehid_cli.bench import sine
-from vehid_cli.damper_fit import DamperSpec
+from vehid_cli.models.bench import sine
 from vehid_cli.models.damper import default_values
 from vehid_cli.sim.bench import simulate_damper
+from vehid_cli.systems.damper.fit import DamperSpec
 
 CASES = {
     "viscous": ((), dict(c0=1500.0)),

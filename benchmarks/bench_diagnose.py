@@ -53,7 +53,7 @@ def time_unexplained(repeats: int) -> None:
 
     from vehid_cli.config import load_config
     from vehid_cli.diagnose.unexplained import estimate_unexplained
-    from vehid_cli.identification import build_task
+    from vehid_cli.identify.task import build_task
 
     noise = ["identify.objective=wls", "noise.level=0.03", "identify.truth=config"]
     truth = build_task(load_config(BASE, [*noise, "vehicle.cf=3220"]))

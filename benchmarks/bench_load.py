@@ -108,8 +108,8 @@ def run_load(n: int, out_dir: Path, executor: str = "local", workers: int = 2) -
 
 def verify(out_dir: Path, n: int) -> dict:
     """Every planned campaign file present, whole and holding its planned config; the report reads them all."""
-    from vehid_cli.results import read_campaign_h5
-    from vehid_cli.sweep import read_index
+    from vehid_cli.campaign.results import read_campaign_h5
+    from vehid_cli.campaign.sweep import read_index
 
     index = read_index(out_dir / "index.csv")
     assert len(index) == n, f"index lists {len(index)} campaigns, expected {n}"

@@ -30,7 +30,7 @@ import scipy  # noqa: E402
 from scipy import signal  # noqa: E402
 
 from vehid_cli.config import load_config  # noqa: E402
-from vehid_cli.experiment import build_experiment  # noqa: E402
+from vehid_cli.identify.experiment import build_experiment  # noqa: E402
 from vehid_cli.sim.kernel import cubic_spring, set_threads  # noqa: E402
 from vehid_cli.sim.linear import simulate  # noqa: E402
 from vehid_cli.sim.modal import statespace_foh  # noqa: E402

@@ -198,8 +198,8 @@ def sweep_trials(n: int, rng: random.Random, work: Path) -> list[dict]:
 
 def damage_trials(n: int, rng: random.Random, work: Path) -> list[dict]:
     sys.path.insert(0, str(ROOT))
-    from vehid_cli.errors import InputError
-    from vehid_cli.results import read_campaign_h5
+    from vehid_cli.campaign.results import read_campaign_h5
+    from vehid_cli.core.errors import InputError
 
     ref = work / "whole.h5"
     if not ref.exists():

@@ -73,7 +73,7 @@ def invoke(*args) -> tuple[int, str, str]:
     """`vehid ARGS` in this process (typer's CliRunner): exit code, stdout, stderr."""
     from typer.testing import CliRunner
 
-    from vehid_cli.cli import app
+    from vehid_cli.cli.app import app
 
     result = CliRunner().invoke(app, [str(a) for a in args])
     return result.exit_code, result.stdout or "", result.stderr or ""
@@ -141,7 +141,7 @@ def cli(*args, cwd: Path | None = None):
     """Run the command line in this process (typer's CliRunner: stdout and stderr apart, stderr not a terminal)."""
     from typer.testing import CliRunner
 
-    from vehid_cli.cli import app
+    from vehid_cli.cli.app import app
 
     runner = CliRunner()
     if cwd is None:

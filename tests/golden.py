@@ -48,7 +48,7 @@ def campaign_numbers(campaign) -> dict:
 
 def compute() -> dict:
     """Every fingerprint, computed now."""
-    from vehid_cli.campaign import run_campaign
+    from vehid_cli.campaign.runner import run_campaign
     from vehid_cli.config import load_config
     from vehid_cli.diagnose import diagnose
 
@@ -95,7 +95,7 @@ def nonlinear_car(load_config) -> dict:
             cfg = load_config(path)
         finally:
             path.unlink()
-        from vehid_cli.experiment import build_experiment
+        from vehid_cli.identify.experiment import build_experiment
 
         outputs = build_experiment(cfg).outputs()
         out.update({f"{method}:{k}": digest(v) for k, v in outputs.items()})
@@ -104,9 +104,9 @@ def nonlinear_car(load_config) -> dict:
 
 def bench_forces(load_config):
     """A Bouc-Wen damper with every bench effect around it, on a sine: the force."""
-    from vehid_cli.damper_fit import DamperSpec
     from vehid_cli.models.damper import default_values
-    from vehid_cli.systems.damper import bench_history
+    from vehid_cli.systems.damper.fit import DamperSpec
+    from vehid_cli.systems.damper.system import bench_history
 
     cfg = load_config(DAMPER)
     history = bench_history(cfg)

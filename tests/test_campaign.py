@@ -22,9 +22,9 @@ from tests.conftest import (
     small_config,
     vehid,
 )
-from vehid_cli.campaign import run_campaign, run_campaign_to_file
+from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
+from vehid_cli.campaign.runner import run_campaign, run_campaign_to_file
 from vehid_cli.config import load_config
-from vehid_cli.results import read_campaign_h5, write_campaign_h5
 
 
 def test_same_seed_identical_results_for_any_jobs(tmp_path):
@@ -59,7 +59,7 @@ def test_interrupted_campaign_resumes_to_the_same_result(tmp_path, system):
 
 
 def test_checkpoint_of_another_config_is_refused(tmp_path):
-    from vehid_cli.errors import InputError
+    from vehid_cli.core.errors import InputError
 
     partial = tmp_path / "c.partial"
     run_campaign(small_config("identify.runs=1"), jobs=1, checkpoint_dir=partial)
@@ -263,8 +263,8 @@ def test_noise_free_data_has_a_zero_bound_and_no_ratio():
 
 def test_summary_against_hand_computed_numbers():
     """Two runs, truth (10, 4): estimates (11, 4) and (10, 3) -> mean (10.5, 3.5), RE of mean (5, -12.5) %."""
-    from vehid_cli.campaign import RunRecord, summarise
-    from vehid_cli.crlb import CramerRao
+    from vehid_cli.campaign.runner import RunRecord, summarise
+    from vehid_cli.identify.crlb import CramerRao
 
     recs = [
         RunRecord(i, np.array(e), 0.0, 10, 0, 0.0, np.array([10]), np.array([0.0]))
@@ -281,7 +281,7 @@ def test_summary_against_hand_computed_numbers():
 
 
 def test_failed_campaign_leaves_no_checkpoint_to_block_the_corrected_rerun(tmp_path):
-    from vehid_cli.campaign import Checkpoint
+    from vehid_cli.campaign.runner import Checkpoint
 
     partial = tmp_path / "c.h5.partial"
     with pytest.raises(KeyboardInterrupt):
@@ -331,7 +331,7 @@ def test_a_checkpoint_left_beside_its_finished_file_is_removed_not_refused(tmp_p
 
 def test_a_checkpoint_beside_another_configs_file_is_still_refused(tmp_path, written):
     """Only a file of the same campaign settles a checkpoint without campaign.json; else the refusal stands."""
-    from vehid_cli.errors import InputError
+    from vehid_cli.core.errors import InputError
 
     target = tmp_path / "c.h5"
     target.write_bytes(written[1])
@@ -350,7 +350,7 @@ def test_checkpoint_removal_deletes_its_stamp_last(tmp_path, monkeypatch):
     """So a kill midway leaves a stamped checkpoint (fewer runs), never runs without campaign.json."""
     from pathlib import Path
 
-    from vehid_cli.campaign import Checkpoint
+    from vehid_cli.campaign.runner import Checkpoint
 
     partial = tmp_path / "c.h5.partial"
     partial.mkdir()

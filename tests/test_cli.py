@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import BASE_CONFIG, ROOT, VEHICLE_DATA, cli, needs_shared, read_png, vehid
-from vehid_cli.data import read_measurement
+from vehid_cli.io.measurement import read_measurement
 
 
 def test_simulate_csv_and_plot(tmp_path):
@@ -133,9 +133,9 @@ def test_missing_config_file(tmp_path):
 
 def test_importing_the_cli_loads_no_heavy_library():
     """`vehid --help` starts in a fraction of a second: the library (NumPy, pydantic, h5py, SciPy, Numba) is
-    imported inside the commands, not by `import vehid_cli.cli` (which `python -m vehid_cli` does first)."""
+    imported inside the commands, not by `import vehid_cli.cli.app` (which `python -m vehid_cli` does first)."""
     code = (
-        "import vehid_cli.cli, vehid_cli.__main__, sys; "
+        "import vehid_cli.cli.app, vehid_cli.__main__, sys; "
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numpy','pydantic','h5py','scipy','numba')))"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
@@ -226,7 +226,7 @@ def test_without_a_terminal_identify_and_sweep_print_a_line_per_finished_step(tm
 
 
 def test_plain_progress_counts_updates_and_advances():
-    from vehid_cli.progress import PlainProgress
+    from vehid_cli.core.progress import PlainProgress
 
     lines: list[str] = []
     with PlainProgress("identify", "run", lines.append) as progress:

@@ -7,7 +7,7 @@ import yaml
 
 from tests.conftest import BASE_CONFIG, PAPER_CAR
 from vehid_cli.config import apply_overrides, config_from_dict, load_config
-from vehid_cli.errors import InputError
+from vehid_cli.core.errors import InputError
 
 
 def raw_base():

@@ -7,8 +7,8 @@ import pytest
 
 from tests.conftest import BASE_CONFIG
 from vehid_cli.config import load_config
-from vehid_cli.experiment import run_streams
-from vehid_cli.identification import build_task
+from vehid_cli.identify.experiment import run_streams
+from vehid_cli.identify.task import build_task
 from vehid_cli.optimizers import get_optimizer
 
 SMALL = ["simulation.duration=1.5", "simulation.dt=0.002", "sensors=acc", "identify.objective=wls", "noise.level=0.2"]
@@ -54,7 +54,7 @@ def test_unidentifiable_parameter_is_flagged():
 @pytest.mark.parametrize("name", ["m", "Iy"])
 def test_sensitivities_are_converged(name):
     """Halving the finite-difference step leaves the bound unchanged."""
-    from vehid_cli.crlb import cramer_rao
+    from vehid_cli.identify.crlb import cramer_rao
 
     task = build_task(load_config(BASE_CONFIG, SMALL + [f"identify.unknowns=[{name}]"]))
     a = cramer_rao(task.experiment, task.names, task.truth, task.sigma, rel_step=1e-5)

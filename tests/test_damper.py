@@ -8,11 +8,11 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from tests.conftest import ROOT
-from vehid_cli.bench import BenchHistory, constant_velocity, sawtooth, sine, with_force
 from vehid_cli.config import scaled_bounds
-from vehid_cli.damper_fit import PENALTY_FACTOR, DamperSpec, cost_J, fit, realtime_check
-from vehid_cli.experiment import run_streams
+from vehid_cli.identify.experiment import run_streams
+from vehid_cli.models.bench import BenchHistory, constant_velocity, sawtooth, sine, with_force
 from vehid_cli.models.damper import default_values
+from vehid_cli.systems.damper.fit import PENALTY_FACTOR, DamperSpec, cost_J, fit, realtime_check
 
 A, FREQ = 0.025, 0.8
 W = 2 * np.pi * FREQ

@@ -184,7 +184,7 @@ STAGED = ROOT / "configs" / "dampers" / "synthetic_force_map_steps.yaml"
 
 def test_a_stage_may_only_name_unknowns(tmp_path):
     from vehid_cli.config import load_config
-    from vehid_cli.errors import InputError
+    from vehid_cli.core.errors import InputError
 
     raw = yaml.safe_load(STAGED.read_text())
     raw["identify"]["stages"][0]["unknowns"] = ["k1", "x0", "c0"]
@@ -196,7 +196,7 @@ def test_a_stage_may_only_name_unknowns(tmp_path):
 
 def test_every_unknown_needs_a_stage():
     from vehid_cli.config import load_config
-    from vehid_cli.errors import InputError
+    from vehid_cli.core.errors import InputError
 
     with pytest.raises(InputError, match="no stage identifies"):
         load_config(STAGED, ["identify.unknowns=[k1, x0, F_1_1]", "identify.stages=[{name: g, unknowns: [k1, x0]}]"])
@@ -217,9 +217,9 @@ def test_step_by_step_from_the_cli(tmp_path):
 
 def test_bench_csv_holds_the_shortest_exact_repr(tmp_path):
     """Was %.10g: lossy for the force and x, and a grid time like 0.006 only by luck of rounding."""
-    from vehid_cli.bench import BenchHistory
-    from vehid_cli.data import read_table
-    from vehid_cli.systems.damper import write_bench_csv
+    from vehid_cli.io.measurement import read_table
+    from vehid_cli.models.bench import BenchHistory
+    from vehid_cli.systems.damper.system import write_bench_csv
 
     rng = np.random.default_rng(3)
     t = np.arange(50) * 0.002
@@ -274,9 +274,9 @@ BENCH_START = {"k1": 2400.0, "c0": 1200.0, "fc": 250.0}  # the config's values: 
 def _jittered_bench_run():
     """A Bingham damper (TRUTH) on a 25 mm, 1.5 Hz sine, sampled at ISO time stamps with ±10 % jitter around
     1/300 s (whole microseconds, as an ISO stamp prints them): (t [s], x [m], v [m/s], F [N])."""
-    from vehid_cli.bench import BenchHistory
-    from vehid_cli.damper_fit import DamperSpec
+    from vehid_cli.models.bench import BenchHistory
     from vehid_cli.models.damper import default_values
+    from vehid_cli.systems.damper.fit import DamperSpec
 
     rng = np.random.default_rng(13)
     steps = (1 + rng.uniform(-0.1, 0.1, BENCH_N - 1)) / BENCH_RATE
@@ -419,8 +419,8 @@ def test_bench_csv_sample_rate_rebuilds_a_rounded_time_column_and_keeps_the_samp
     """data.sample_rate through the one reader: a time column in ms printed with 5 digits (up to 1 % round-off of
     the step) is rebuilt as k / rate, the samples kept as printed; a rate the column does not follow is an
     error naming data.sample_rate."""
-    from vehid_cli.errors import InputError
-    from vehid_cli.systems.damper import read_bench
+    from vehid_cli.core.errors import InputError
+    from vehid_cli.systems.damper.system import read_bench
 
     k = np.arange(300)
     x, force = np.sin(k / 10), np.cos(k / 7)

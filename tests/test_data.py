@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import vehid_cli.io.measurement as data
 from tests.conftest import VEHICLE_DATA, needs_shared
-from vehid_cli import data
-from vehid_cli.data import (
+from vehid_cli.core.errors import DiskFull, InputError
+from vehid_cli.io.measurement import (
     atomic_path,
     check_writable,
     check_writable_dir,
@@ -23,7 +24,6 @@ from vehid_cli.data import (
     write_bytes,
     write_measurement_csv,
 )
-from vehid_cli.errors import DiskFull, InputError
 
 
 def test_reads_the_shared_bump_run():

@@ -15,7 +15,7 @@ import yaml
 
 from tests.conftest import ROOT, invoke, read_png
 from vehid_cli.config import load_config
-from vehid_cli.design import (
+from vehid_cli.design.search import (
     apply_plan,
     channel_information,
     configured_plan,
@@ -23,7 +23,7 @@ from vehid_cli.design import (
     design_test,
     evaluate,
 )
-from vehid_cli.identification import build_task
+from vehid_cli.identify.task import build_task
 
 DESIGN = ROOT / "configs" / "gokdag2015" / "design.yaml"
 # a small design: 2 ms steps, short records, a few generations (each bound ~3 ms)

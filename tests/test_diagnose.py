@@ -10,11 +10,11 @@ import pytest
 from typer.testing import CliRunner
 
 from tests.conftest import VEHICLE_DATA, needs_shared
-from vehid_cli.cli import app
+from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
 from vehid_cli.diagnose import diagnose
 from vehid_cli.diagnose.residuals import autocorrelation, bin_residual, ljung_box
-from vehid_cli.identification import build_task
+from vehid_cli.identify.task import build_task
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"

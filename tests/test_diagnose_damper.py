@@ -13,12 +13,12 @@ from scipy import signal
 from typer.testing import CliRunner
 
 from tests.conftest import needs_shared_data_of, read_png
-from vehid_cli.bench import sine
-from vehid_cli.cli import app
+from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
-from vehid_cli.damper_fit import DamperSpec
-from vehid_cli.diagnose.damper import diagnose_damper
+from vehid_cli.models.bench import sine
 from vehid_cli.models.damper import default_values
+from vehid_cli.systems.damper.diagnosis import diagnose_damper
+from vehid_cli.systems.damper.fit import DamperSpec
 
 ROOT = Path(__file__).resolve().parents[1]
 BRFD = ROOT / "configs" / "dampers" / "brfd_bingham.yaml"

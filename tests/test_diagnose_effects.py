@@ -15,7 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tests.conftest import BASE_CONFIG, ROOT
-from vehid_cli.cli import app
+from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
 from vehid_cli.diagnose import diagnose
 

@@ -20,16 +20,16 @@ import pytest
 from examples.make_rig_runs import write_rig_run
 from tests.conftest import BASE_CONFIG, ROOT, invoke, sets
 from vehid_cli.config import load_config
+from vehid_cli.core.errors import InputError
 from vehid_cli.diagnose import diagnose_config
 from vehid_cli.diagnose.loop import chi2_limit, holdout_blocks, holdout_mask
 from vehid_cli.diagnose.residuals import analyse, fingerprint_channels
 from vehid_cli.diagnose.unexplained import _linear_car, _responses, estimate_unexplained
-from vehid_cli.errors import InputError
-from vehid_cli.experiment import build_experiment
-from vehid_cli.identification import build_task
+from vehid_cli.identify.experiment import build_experiment
+from vehid_cli.identify.objectives import Objective
+from vehid_cli.identify.task import build_task
 from vehid_cli.models.fullcar import assemble
 from vehid_cli.models.sensors import Layout, Sensor
-from vehid_cli.objectives import Objective
 from vehid_cli.sim.linear import simulate
 
 RIG = ROOT / "configs" / "examples" / "four_post_rig.yaml"

@@ -9,8 +9,8 @@ from tests.conftest import BASE_CONFIG, PAPER_CAR, ROOT, vehid
 from tests.reference import rel_rms
 from tests.test_kernel import knotted_road, orders
 from vehid_cli.config import load_config
-from vehid_cli.data import read_measurement, time_grid
-from vehid_cli.experiment import build_experiment
+from vehid_cli.identify.experiment import build_experiment
+from vehid_cli.io.measurement import read_measurement, time_grid
 from vehid_cli.models.effects import LIBRARY, effect_rows, strut_effects
 from vehid_cli.models.fullcar import assemble
 from vehid_cli.sim.kernel import integrate
@@ -269,7 +269,7 @@ def test_bad_effects_input_exits_2_naming_the_key(overrides, key, words, tmp_pat
 
 def test_effect_parameters_can_be_unknowns():
     """identify.unknowns may name a declared effect's parameters: the task simulates them, the truth is zero-cost."""
-    from vehid_cli.identification import build_task
+    from vehid_cli.identify.task import build_task
 
     hyst = ROOT / "configs" / "effects" / "hysteresis.yaml"
     cfg = load_config(hyst, ["identify.unknowns=[m,hysteresis.alpha_f]", "noise.level=0", "identify.objective=wls"])
@@ -285,7 +285,7 @@ def test_effect_parameters_can_be_unknowns():
     [("[m,hysteresis.alfa_f]", "did you mean 'hysteresis.alpha_f'"), ("[m,hysteresis.alpha_f]", "identify.limits")],
 )
 def test_bad_effect_unknowns_are_named(unknowns, message):
-    from vehid_cli.errors import InputError
+    from vehid_cli.core.errors import InputError
 
     base = ROOT / "configs" / "effects" / "hysteresis.yaml"
     sets = [f"identify.unknowns={unknowns}"]

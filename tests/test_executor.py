@@ -13,11 +13,11 @@ from concurrent.futures import ProcessPoolExecutor
 import pytest
 
 from tests.conftest import BASE_CONFIG, ROOT, SMALL, assert_same_content, invoke, sets, small_config, vehid
-from vehid_cli.campaign import run_campaign
+from vehid_cli.campaign.executor import DaskExecutor, LocalExecutor, identity_mismatch, make_executor
+from vehid_cli.campaign.results import write_campaign_h5
+from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
-from vehid_cli.errors import InputError
-from vehid_cli.executor import DaskExecutor, LocalExecutor, identity_mismatch, make_executor
-from vehid_cli.results import write_campaign_h5
+from vehid_cli.core.errors import InputError
 
 distributed = pytest.importorskip("distributed")
 
@@ -126,7 +126,7 @@ def test_a_pool_worker_whose_parent_is_already_gone_exits():
     """The race of a parent killed between a worker's fork and its setup: the worker is told its parent's pid, so
     it does not take its new parent (init) for it and wait forever."""
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    code = f"from vehid_cli.executor import _exit_with_parent; _exit_with_parent({int(gone.stdout)})"
+    code = f"from vehid_cli.campaign.executor import _exit_with_parent; _exit_with_parent({int(gone.stdout)})"
     res = subprocess.run([sys.executable, "-c", code], timeout=30, cwd=ROOT)
     assert res.returncode == 1
 

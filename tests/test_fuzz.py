@@ -290,8 +290,8 @@ def tiny_sweep_config(d: Path) -> Path:
 def test_sweep_planning_accepts_or_names_the_problem(tmp_path_factory, items, shard):
     """parse_vary, parse_shard and plan_sweep on random --vary/--shard input: an InputError naming the option, or a
     plan of exactly the Cartesian product, one distinct file in the output directory each; nothing is written."""
-    from vehid_cli.errors import InputError
-    from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep
+    from vehid_cli.campaign.sweep import parse_shard, parse_vary, plan_sweep
+    from vehid_cli.core.errors import InputError
 
     d = tmp_path_factory.mktemp("plan")
     config = tiny_sweep_config(d)
@@ -346,7 +346,7 @@ def test_sweep_cli_exits_0_or_2_and_leaves_nothing_on_failure(tmp_path_factory, 
     if code == 2:
         assert not out.exists() or list(out.iterdir()) == [], (text, list(out.iterdir()))
         return
-    from vehid_cli.sweep import parse_shard, parse_vary
+    from vehid_cli.campaign.sweep import parse_shard, parse_vary
 
     total = math.prod(len(v.values) for v in parse_vary(items))
     k, n = parse_shard(shard)

@@ -28,7 +28,7 @@ def linear():
 @pytest.fixture(scope="module")
 def vehid_run():
     from vehid_cli.config import load_config
-    from vehid_cli.experiment import build_experiment
+    from vehid_cli.identify.experiment import build_experiment
 
     ex = build_experiment(load_config(BASE_CONFIG))
     return ex, ex.simulate()
@@ -197,7 +197,7 @@ def test_gas_spring_and_asymmetric_laws():
 
 
 def test_write_run_noise_and_format(tmp_path, linear):
-    from vehid_cli.data import read_measurement
+    from vehid_cli.io.measurement import read_measurement
 
     path = tmp_path / "run.csv"
     S.write_run(path, linear, noise_level=0.05, seed=7, comments=["independent simulator"])

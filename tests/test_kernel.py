@@ -8,7 +8,7 @@ import pytest
 from tests.conftest import PAPER_CAR
 from tests.reference import rel_rms
 from tests.test_linear import smooth_road
-from vehid_cli.data import time_grid
+from vehid_cli.io.measurement import time_grid
 from vehid_cli.models.fullcar import assemble
 from vehid_cli.sim.kernel import cubic_spring, integrate
 from vehid_cli.sim.linear import simulate

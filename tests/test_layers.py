@@ -1,8 +1,9 @@
-"""Imports flow one way: errors/io <- models <- sim <- config <- systems <- campaign <- report <- cli.
+"""Folders are layers, and imports run downward only.
 
-The import graph is read from the source (every import, at module level or inside a function: an import hidden
-in a function to dodge a cycle is still a cycle); it must have no cycle, and no module may import one of a
-higher layer. Each layer is also imported on its own in a fresh interpreter.
+Each folder of the package names the folders it may import (`ALLOWED`, lowest layer first); a module may import
+modules of its own folder and of the folders its folder allows, nothing else. The import graph is read from the
+source (every import, at module level or inside a function: an import hidden in a function to dodge a cycle is
+still a cycle); it must have no cycle. Each layer is also imported on its own in a fresh interpreter.
 """
 
 from __future__ import annotations
@@ -17,31 +18,43 @@ from tests.conftest import ROOT
 
 PACKAGE = ROOT / "vehid_cli"
 
-# Lowest first; a module may import modules of its own layer or of lower ones. Keys are module names relative to
-# the package (a package's __init__ is the package's name); a prefix ending in "." covers a subpackage.
-LAYERS: tuple[tuple[str, ...], ...] = (
-    ("__init__", "errors", "provenance", "locking", "progress", "interrupt"),  # foundations
-    # files (logger files read and written), bench motions, noise, solvers
-    ("data", "h5io", "bench", "logger", "logger_write", "noise", "optimizers", "optimizers."),
-    ("models", "models."),  # force laws and matrices: own their parameter tables and defaults
-    ("sim", "sim."),  # the generic kernel and the car/bench adapters beside it
-    ("config", "config."),  # validated configs: one module per system around a shared identify
-    ("road", "experiment", "measured", "objectives", "crlb", "identification", "damper_fit"),  # a config made concrete
-    ("records",),  # run records, summaries, campaigns: plain data
-    ("systems", "systems."),  # the seam: the car and the damper bench
-    ("results", "executor"),  # campaign files; where runs execute
-    ("campaign", "sweep", "design"),  # the runner; families of campaigns; test design (bounds and campaigns)
-    ("diagnose", "diagnose."),  # the closed loop
-    ("report", "report."),  # tables and figures
-    ("cli", "__main__"),  # the command line
-)
+# What each folder may import, lowest layer first (docs/architecture.md draws the same). A folder's modules may
+# always import each other (without a cycle).
+ALLOWED: dict[str, frozenset[str]] = {}
+for _folder, _below in (
+    ("core", ()),  # errors, atomic files, the HDF5 store, provenance, progress, interrupt, locks, seed streams, units
+    ("io", ("core",)),  # files: the measurement CSV, logger formats (one module each), writers
+    ("optimizers", ("core",)),  # one fixed outer loop, one module per algorithm
+    ("models", ("core",)),  # pure physics: the car, the damper, effects (one module each), sensors, road, noise
+    ("sim", ("core", "models")),  # the compiled kernel (imports no model), solvers, adapters
+    ("config", ("core", "io", "models", "optimizers")),  # validated configs: a section module per system
+    ("identify", ("core", "io", "models", "optimizers", "sim", "config")),  # task, objectives, bound, records
+    ("diagnose", ("core", "io", "models", "optimizers", "sim", "config", "identify")),  # the generic loop
+    ("systems", ("core", "io", "models", "optimizers", "sim", "config", "identify", "diagnose")),  # the seam
+    ("campaign", ("core", "io", "models", "optimizers", "sim", "config", "identify", "systems")),  # runs, files
+    ("design", ("core", "io", "models", "optimizers", "sim", "config", "identify", "systems", "campaign")),
+    ("report", ("core", "io", "config", "identify", "systems", "campaign", "design")),  # tables and figures
+    ("cli", ("core", "io", "config", "identify", "systems", "campaign", "design", "report")),  # the commands
+):
+    ALLOWED[_folder] = frozenset(_below)
+ROOT_MODULES = {"__init__": frozenset(), "__main__": frozenset({"cli"})}  # the package root: at most three
 
 
-def layer_of(module: str) -> int:
-    for rank, members in enumerate(LAYERS):
-        if any(module == m or (m.endswith(".") and module.startswith(m)) for m in members):
-            return rank
+def folder_of(module: str) -> str:
+    """The layer (folder) of a module name relative to the package; the root's own modules are their own."""
+    head = module.split(".")[0]
+    if module in ROOT_MODULES or head in ALLOWED:
+        return module if module in ROOT_MODULES else head
     raise AssertionError(f"vehid_cli.{module} is in no layer of tests/test_layers.py: place it")
+
+
+def allowed(source: str, target: str) -> bool:
+    """May module `source` import module `target`?"""
+    a, b = folder_of(source), folder_of(target)
+    if b == "__init__" or a == b:
+        return True
+    rules = ROOT_MODULES.get(a, ALLOWED.get(a, frozenset()))
+    return b in rules
 
 
 def module_name(path) -> str:
@@ -91,12 +104,27 @@ def graph() -> dict[str, set[str]]:
 
 def test_no_module_imports_a_higher_layer():
     wrong = [
-        f"{m} (layer {layer_of(m)}) imports {t} (layer {layer_of(t)})"
+        f"{m} ({folder_of(m)}/) imports {t} ({folder_of(t)}/), which {folder_of(m)}/ may not import"
         for m, targets in graph().items()
         for t in sorted(targets)
-        if layer_of(t) > layer_of(m)
+        if not allowed(m, t)
     ]
     assert not wrong, "imports against the layers:\n" + "\n".join(wrong)
+
+
+def test_the_package_root_keeps_at_most_three_modules():
+    modules = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem not in ("__init__", "__main__"))
+    assert len(modules) <= 3, modules
+
+
+def test_the_checker_refuses_an_upward_import():
+    """A model importing the config, or the kernel importing a system, breaks the rule (this test could not fail
+    otherwise)."""
+    assert not allowed("models.fullcar", "config.vehicle")
+    assert not allowed("sim.kernel", "systems.base")
+    assert not allowed("core.errors", "io.csv")
+    assert allowed("systems.vehicle.system", "identify.task")
+    assert allowed("cli.app", "campaign.runner")
 
 
 def test_the_import_graph_has_no_cycle():
@@ -138,11 +166,14 @@ def test_the_checker_sees_a_cycle_hidden_in_a_function(tmp_path, monkeypatch):
 @pytest.mark.parametrize(
     "layer, forbidden",
     [
-        ("models", ("config", "sim", "cli", "systems", "campaign", "report", "results")),
-        ("sim", ("config", "cli", "systems", "campaign", "report")),
-        ("config", ("sim", "cli", "systems", "campaign", "report", "results")),
-        ("systems", ("campaign", "report", "cli", "results")),
-        ("campaign", ("report", "cli")),
+        ("core", ("io", "models", "config", "sim", "identify", "systems", "campaign", "report", "cli")),
+        ("io", ("models", "config", "sim", "identify", "systems", "campaign", "report", "cli")),
+        ("models", ("config", "sim", "identify", "cli", "systems", "campaign", "report")),
+        ("sim", ("config", "identify", "cli", "systems", "campaign", "report")),
+        ("config", ("sim", "identify", "cli", "systems", "campaign", "report")),
+        ("identify", ("diagnose", "systems", "campaign", "report", "cli")),
+        ("systems", ("campaign", "design", "report", "cli")),
+        ("campaign", ("design", "report", "cli")),
         ("report", ("cli",)),
         ("cli", ()),
     ],

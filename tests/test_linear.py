@@ -9,9 +9,9 @@ from scipy import signal
 from tests.conftest import PAPER_CAR
 from tests.reference import reference_response, rel_rms
 from vehid_cli.config import Bump
-from vehid_cli.data import time_grid
+from vehid_cli.io.measurement import time_grid
 from vehid_cli.models.fullcar import assemble
-from vehid_cli.road import bump_road
+from vehid_cli.models.road import bump_road
 from vehid_cli.sim.linear import foh_discretisation, simulate
 
 V = 20 / 3.6

@@ -8,9 +8,9 @@ import pytest
 import scipy.io
 
 from tests.logger_files import CHANNELS, HF_AMPLITUDE, G, csv_times, offset_si, truth, write_csv, write_logger_run
-from vehid_cli.data import check_time
-from vehid_cli.errors import InputError
-from vehid_cli.logger import Record, read_record, remove_offset
+from vehid_cli.core.errors import InputError
+from vehid_cli.io.logger import Record, read_record, remove_offset
+from vehid_cli.io.measurement import check_time
 
 SUFFIX = {"mf4": "mf4", "mat": "mat", "mat73": "mat", "h5": "h5", "csv": "csv"}
 SLOW = ("acc_fl", "acc_rr", "disp_fl")  # no content near 150 Hz: comparable on every grid
@@ -263,7 +263,7 @@ def test_without_resampling_a_channel_between_the_grid_points_is_an_error(tmp_pa
 
 
 def test_the_bench_reader_passes_resample_false_on(tmp_path):
-    from vehid_cli.systems.damper import read_bench
+    from vehid_cli.systems.damper.system import read_bench
 
     path = tmp_path / "bench.csv"
     t = csv_times()[:50]  # jittered stamps

@@ -9,7 +9,7 @@ import scipy.linalg
 from tests.conftest import PAPER_CAR
 from tests.reference import rel_rms
 from tests.test_linear import paper_road
-from vehid_cli.data import time_grid
+from vehid_cli.io.measurement import time_grid
 from vehid_cli.models.fullcar import VEHICLE_PARAMETERS, assemble
 from vehid_cli.sim import modal
 from vehid_cli.sim.linear import simulate

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vehid_cli.noise import add_noise, noise_sigma
+from vehid_cli.models.noise import add_noise, noise_sigma
 
 
 def test_noise_size_is_level_times_channel_std():

@@ -7,9 +7,9 @@ import pytest
 
 from tests.conftest import BASE_CONFIG
 from vehid_cli.config import load_config
-from vehid_cli.experiment import build_experiment, run_streams
-from vehid_cli.noise import add_noise, estimate_noise_sigma, noise_sigma, sigma_from_level
-from vehid_cli.objectives import Objective, objective_families
+from vehid_cli.identify.experiment import build_experiment, run_streams
+from vehid_cli.identify.objectives import Objective, objective_families
+from vehid_cli.models.noise import add_noise, estimate_noise_sigma, noise_sigma, sigma_from_level
 
 
 def fake_response(acc, disp):

@@ -24,9 +24,9 @@ import pytest
 import typer.main
 
 from tests.conftest import ROOT, SHARED, needs_shared, read_png
-from vehid_cli.cli import app
+from vehid_cli.campaign.sweep import parse_shard, parse_vary, plan_sweep
+from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
-from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep
 
 README = ROOT / "README.md"
 

@@ -18,13 +18,13 @@ import h5py
 import numpy as np
 import pytest
 
+import vehid_cli.io.measurement as data_module
 from tests.conftest import BASE_CONFIG, ROOT, SMALL, assert_same_content, children, running, sets, small_config, vehid
 from tests.conftest import invoke as invoke_cli
-from vehid_cli import data as data_module
-from vehid_cli.campaign import run_campaign, run_campaign_to_file
-from vehid_cli.errors import InputError
-from vehid_cli.locking import Busy, exclusive, lock_path
-from vehid_cli.results import check_integrity, read_campaign_h5, write_campaign_h5
+from vehid_cli.campaign.results import check_integrity, read_campaign_h5, write_campaign_h5
+from vehid_cli.campaign.runner import run_campaign, run_campaign_to_file
+from vehid_cli.core.errors import InputError
+from vehid_cli.core.locking import Busy, exclusive, lock_path
 
 LONG = SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"]
 
@@ -334,7 +334,7 @@ def test_sweeps_with_different_plans_merge_their_index(tmp_path):
 def test_a_file_rewritten_by_another_sweep_with_another_config_is_not_overwritten(tmp_path):
     """While this sweep runs its first campaign, another process writes the second campaign's file with another
     config: this sweep leaves that file alone and says so (exit 2), rather than lose its results."""
-    from vehid_cli.sweep import parse_vary, plan_sweep, run_sweep
+    from vehid_cli.campaign.sweep import parse_vary, plan_sweep, run_sweep
 
     planned = plan_sweep(BASE_CONFIG, SMALL + ["identify.runs=1"], parse_vary(["noise.level=0.1,0.2"]), tmp_path)
     intruder = run_campaign(small_config("identify.runs=1", "noise.level=0.2", "identify.seed=5"), jobs=1)

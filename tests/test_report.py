@@ -11,11 +11,11 @@ import pytest
 import yaml
 
 from tests.conftest import BASE_CONFIG, ROOT, cli, read_png, vehid
-from vehid_cli.campaign import run_campaign
+from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
+from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.report import load_published, render
 from vehid_cli.report.tables import CSV_COLUMNS
-from vehid_cli.results import read_campaign_h5, write_campaign_h5
 
 SMALL = [
     "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=3",
@@ -122,7 +122,7 @@ def test_table_format_writes_to_a_file_and_directories_skip_other_h5(campaign_di
 
 
 def test_the_cli_knows_the_report_formats():
-    from vehid_cli.cli import REPORT_FORMATS, REPORT_SUFFIXES
+    from vehid_cli.cli.app import REPORT_FORMATS, REPORT_SUFFIXES
     from vehid_cli.report import FORMATS
 
     assert REPORT_FORMATS == FORMATS and set(REPORT_SUFFIXES.values()) == set(FORMATS)

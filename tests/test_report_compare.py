@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import BASE_CONFIG, PAPER_CAR, SMALL, invoke, sets, small_config
-from vehid_cli.campaign import run_campaign
+from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
+from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.report.compare import Provenance, differences
-from vehid_cli.results import read_campaign_h5, write_campaign_h5
 
 
 def test_shards_into_one_directory_make_one_report(tmp_path):
@@ -126,7 +126,7 @@ def test_keys_a_sweep_varied_may_differ(tmp_path):
 
 
 def test_another_numpy_is_refused(files, tmp_path, monkeypatch):
-    import vehid_cli.results as results
+    import vehid_cli.campaign.results as results
 
     real = results.provenance
     monkeypatch.setattr(results, "provenance", lambda: dict(real(), numpy_version="1.0.0"))

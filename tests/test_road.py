@@ -7,7 +7,7 @@ import pytest
 from scipy import signal
 
 from vehid_cli.config import Bump, RandomRoad
-from vehid_cli.road import ISO_8608_GD_N0, ISO_8608_N0, RandomProfile, bump_road, bump_unit
+from vehid_cli.models.road import ISO_8608_GD_N0, ISO_8608_N0, RandomProfile, bump_road, bump_unit
 
 
 def test_cosine_step_values():

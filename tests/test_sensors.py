@@ -7,8 +7,8 @@ import pytest
 
 from tests.conftest import PAPER_CAR, small_config
 from vehid_cli.models.fullcar import assemble, geometry
+from vehid_cli.models.road import road_function
 from vehid_cli.models.sensors import Layout, Sensor, corner_layout
-from vehid_cli.road import road_function
 from vehid_cli.sim.linear import simulate
 
 ROAD = road_function(small_config().road, 2.6, np.random.default_rng(0))

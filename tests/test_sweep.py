@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import BASE_CONFIG, ROOT, vehid
-from vehid_cli.errors import InputError
-from vehid_cli.results import read_campaign_h5
-from vehid_cli.sweep import parse_shard, parse_vary, plan_sweep, split_top_level
+from vehid_cli.campaign.results import read_campaign_h5
+from vehid_cli.campaign.sweep import parse_shard, parse_vary, plan_sweep, split_top_level
+from vehid_cli.core.errors import InputError
 
 SMALL = [
     "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=2",

@@ -22,7 +22,7 @@ from vehid_cli.diagnose.unexplained import (
     estimate_unexplained,
     resemblance,
 )
-from vehid_cli.identification import build_task
+from vehid_cli.identify.task import build_task
 from vehid_cli.report.diagnose_plots import plot_unexplained
 
 NOISE = ["identify.objective=wls", "noise.level=0.03", "identify.truth=config"]

@@ -10,7 +10,7 @@ def main() -> None:
     previous = signal.getsignal(signal.SIGINT)
     if previous is not signal.SIG_IGN:  # started with Ctrl-C ignored (a background job): leave it so
         signal.signal(signal.SIGINT, signal.SIG_DFL)
-    from .cli import run
+    from .cli.app import run
 
     signal.signal(signal.SIGINT, previous)
     run()

@@ -15,10 +15,10 @@ import math
 import platform
 from pathlib import Path
 
+from vehid_cli.campaign.results import write_json
 from vehid_cli.config import load_config
-from vehid_cli.design import design_test
+from vehid_cli.design.search import design_test
 from vehid_cli.report.design import design_json, markdown, write_config, write_plots
-from vehid_cli.results import write_json
 
 ROOT = Path(__file__).resolve().parents[2]
 DESIGN = ROOT / "configs" / "gokdag2015" / "design.yaml"

@@ -17,18 +17,9 @@ from typing import Any, Union
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from ..data import read_text
-from ..errors import InputError
-from .common import (
-    Algorithm,
-    IdentifyCommon,
-    Start,
-    SystemConfig,
-    _did_you_mean,
-    _KeyedError,
-    flatten,
-    scaled_bounds,
-)
+from ..core.errors import InputError
+from ..io.measurement import read_text
+from .common import Algorithm, IdentifyCommon, Start, SystemConfig, _did_you_mean, _KeyedError, flatten, scaled_bounds
 from .damper import (
     DAMPER_STRUCTURAL,
     BenchSection,

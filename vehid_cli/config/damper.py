@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
-from ..bench import BENCH_QUANTITIES, UNITS
+from ..models.bench import BENCH_QUANTITIES, UNITS
 from ..models.damper import MODELS, default_values
 from ..models.effects import BENCH_EFFECTS, LIBRARY, bound_violation
 from .common import (

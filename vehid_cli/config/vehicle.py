@@ -6,9 +6,9 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from ..bench import UNITS
-from ..errors import InputError
-from ..logger import SI_FACTORS
+from ..core.errors import InputError
+from ..io.logger import SI_FACTORS
+from ..models.bench import UNITS
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
 from ..models.sensors import FAMILY, Layout, corner_layout

@@ -8,9 +8,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ..config import DamperConfig, load_config
-from ..errors import InputError
+from ..core.errors import InputError
 from ..systems.base import configured_data_file, data_paths
-from .damper import diagnose_damper
+from ..systems.damper.diagnosis import diagnose_damper
 from .loop import Diagnosis, diagnose
 
 CAR_DEFAULTS = ("identify.objective=wls", "noise.level=0")  # the car's loop: wls, noise estimated from the data

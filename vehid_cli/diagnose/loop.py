@@ -28,8 +28,8 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from ..config import Config, config_from_dict
-from ..experiment import run_streams
-from ..identification import JointTask, Task, build_task, build_tasks
+from ..identify.experiment import run_streams
+from ..identify.task import JointTask, Task, build_task, build_tasks
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
 from ..systems.base import data_paths

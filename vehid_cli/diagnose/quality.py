@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..noise import per_channel
+from ..models.noise import per_channel
 
 MIN_SAMPLES = 500
 MIN_REVERSALS = 4

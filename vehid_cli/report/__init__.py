@@ -11,11 +11,12 @@ import h5py
 import yaml
 from rich.console import Console
 
-from ..errors import InputError
-from ..records import Campaign
-from ..results import CAMPAIGN_KIND, campaign_json, check_integrity, open_results, read_campaign_h5, to_json
-from ..sweep import read_index
-from . import damper, tables
+from ..campaign.results import CAMPAIGN_KIND, campaign_json, check_integrity, open_results, read_campaign_h5, to_json
+from ..campaign.sweep import read_index
+from ..core.errors import InputError
+from ..identify.records import Campaign
+from ..systems.damper import report as damper
+from . import tables
 
 FORMATS = ("table", "md", "csv", "latex", "json")
 

@@ -27,9 +27,9 @@ from pathlib import Path
 
 import yaml
 
+from ..campaign.results import CAMPAIGN_KIND, open_results
 from ..config import flatten
-from ..errors import InputError
-from ..results import CAMPAIGN_KIND, open_results
+from ..core.errors import InputError
 
 METHOD_KEYS = (
     "identify.algorithm", "identify.objective", "identify.runs", "identify.seed", "identify.budget",

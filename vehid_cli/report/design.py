@@ -13,10 +13,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from rich.table import Table  # noqa: E402
 
-from .. import __version__  # noqa: E402
-from ..data import atomic_path  # noqa: E402
-from ..design import LABELS, DesignResult, Evaluation, Plan  # noqa: E402
-from ..results import finite_or_none  # noqa: E402
+from .. import __version__
+from ..campaign.results import finite_or_none
+from ..design.search import LABELS, DesignResult, Evaluation, Plan
+from ..io.measurement import atomic_path
 
 CRITERION_TEXT = {"nre": "NRE bound [%]", "d_optimal": "-log det F", "worst": "largest bound [%]"}
 

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..data import atomic_path  # noqa: E402
+from ..io.measurement import atomic_path
 
 
 def _save(fig, path: Path) -> Path:

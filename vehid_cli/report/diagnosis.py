@@ -9,7 +9,7 @@ from rich import box
 from rich.console import Group
 from rich.table import Table
 
-from ..errors import DiskFull, InputError
+from ..core.errors import DiskFull, InputError
 from .diagnose_plots import plot_diagnosis
 
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..experiment import SimulatedRun
-from ..records import Campaign
+from ..identify.experiment import SimulatedRun
+from ..identify.records import Campaign
 from ..systems import Simulated
+from ..systems.damper.plots import plot_bench, write_damper_plots
 from . import system_of
-from .damper_plots import plot_bench, write_damper_plots
 from .plots import plot_responses, write_campaign_plots
 
 

@@ -10,11 +10,11 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from ..data import atomic_path  # noqa: E402
-from ..experiment import SimulatedRun  # noqa: E402
-from ..identification import JointTask, Task, build_tasks  # noqa: E402
-from . import tables  # noqa: E402
-from .tables import grouped  # noqa: E402
+from ..identify.experiment import SimulatedRun
+from ..identify.task import JointTask, Task, build_tasks
+from ..io.measurement import atomic_path
+from . import tables
+from .tables import grouped
 
 FAMILY_AXES = {"disp": ("mm", 1e3), "acc": ("m/s²", 1.0)}  # the unit each family is drawn in, and its scale from SI
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from rich.table import Table
 
-from ..records import Campaign
+from ..identify.records import Campaign
 
 
 def _f(value, digits: int = 3) -> str:

@@ -9,10 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..config import AnyConfig, DamperConfig
-from ..errors import InputError
+from ..core.errors import InputError
 from .base import Box, Simulated, System
-from .damper import DamperSystem, Findings
-from .vehicle import VehicleSystem
+from .damper.system import DamperSystem, Findings
+from .vehicle.system import VehicleSystem
 
 SYSTEMS: dict[str, type[System]] = {VehicleSystem.name: VehicleSystem, DamperSystem.name: DamperSystem}
 SIMULATION_SUFFIXES = tuple(dict.fromkeys(s for c in SYSTEMS.values() for s in c.simulation_suffixes))

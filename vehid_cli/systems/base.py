@@ -18,11 +18,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import AnyConfig
-from ..crlb import CramerRao
-from ..experiment import run_streams
+from ..identify.crlb import CramerRao
+from ..identify.experiment import run_streams
+from ..identify.records import RunRecord
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
-from ..records import RunRecord
 
 
 @dataclass(frozen=True)

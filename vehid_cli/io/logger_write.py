@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .data import atomic_path
-from .errors import InputError
-from .h5io import h5_file
+from ..core.errors import InputError
+from ..core.h5file import h5_file
 from .logger import SUFFIXES, own_time_name, unit_factor
+from .measurement import atomic_path
 
 MATLAB_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
 MATLAB_NAME_LENGTH = 63  # namelengthmax

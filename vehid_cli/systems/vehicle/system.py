@@ -10,20 +10,20 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import __version__
-from ..config import Config
-from ..crlb import CramerRao
-from ..data import ROAD_COLUMNS as ROAD
-from ..data import write_csv, write_measurement_csv
-from ..experiment import SimulatedRun, build_experiment, run_streams, simulate_measurement
-from ..h5io import h5_file
-from ..identification import JointTask, Task, build_tasks
-from ..logger_write import write_record
-from ..models.fullcar import DOF_NAMES
-from ..models.sensors import UNIT
-from ..optimizers.base import Problem
-from ..provenance import provenance
-from .base import Box, DataFiles, Simulated, System, configured_data_file, data_label, data_paths
+from ... import __version__
+from ...config import Config
+from ...core.h5file import h5_file
+from ...core.provenance import provenance
+from ...identify.crlb import CramerRao
+from ...identify.experiment import SimulatedRun, build_experiment, run_streams, simulate_measurement
+from ...identify.task import JointTask, Task, build_tasks
+from ...io.logger_write import write_record
+from ...io.measurement import ROAD_COLUMNS as ROAD
+from ...io.measurement import write_csv, write_measurement_csv
+from ...models.fullcar import DOF_NAMES
+from ...models.sensors import UNIT
+from ...optimizers.base import Problem
+from ..base import Box, DataFiles, Simulated, System, configured_data_file, data_label, data_paths
 
 
 class VehicleSystem(System):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .plots import _save, plt
+from ...report.plots import _save, plt
 
 
 def _panels(title: str):

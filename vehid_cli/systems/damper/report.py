@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 from rich.table import Table
 
-from ..records import Campaign
-from ..results import campaign_json, to_json
+from ...campaign.results import campaign_json, to_json
+from ...identify.records import Campaign
 
 CSV_COLUMNS = (
     "file", "model", "data_file", "runs", "parameter", "truth", "start", "mean", "re_percent", "sd",

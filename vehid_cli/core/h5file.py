@@ -15,7 +15,7 @@ from pathlib import Path
 
 import h5py
 
-from .data import write_bytes
+from ..io.measurement import write_bytes
 
 _names = itertools.count()
 

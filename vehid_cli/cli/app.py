@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 from rich.console import Console
 
-from . import __version__
-from .errors import DiskFull, InputError
-from .interrupt import interruptible
+from .. import __version__
+from ..core.errors import DiskFull, InputError
+from ..core.interrupt import interruptible
 
 if TYPE_CHECKING:  # the library is imported inside the commands: `vehid --help` starts in a fraction of a second
-    from .config import Config, DamperConfig
+    from ..config import Config, DamperConfig
 
 app = typer.Typer(
     add_completion=False,
@@ -58,14 +58,14 @@ SetOption = Annotated[
 
 def load_config(path: Path, overrides: Sequence[str] = ()) -> Config | DamperConfig:
     """config.load_config, imported when a command runs (not when the CLI starts)."""
-    from .config import load_config as load
+    from ..config import load_config as load
 
     return load(path, overrides)
 
 
 def check_writable(path: Path, suffixes: Sequence[str]) -> Path:
     """data.check_writable, imported when a command runs."""
-    from .data import check_writable as check
+    from ..io.measurement import check_writable as check
 
     return check(path, suffixes)
 
@@ -98,7 +98,7 @@ def _guarded(command):
 
 def _campaign_overrides(set_: list[str] | None, runs: int | None, seed: int | None, jobs: int | None) -> list[str]:
     """--set lines plus the --runs/--seed shortcuts (kept in the resolved config, for provenance)."""
-    from .config import Override
+    from ..config import Override
 
     overrides = list(set_ or ())
     if runs is not None:
@@ -113,7 +113,7 @@ def _campaign_overrides(set_: list[str] | None, runs: int | None, seed: int | No
 def _progress(verb: str):
     """A rich progress bar on stderr on a terminal; elsewhere (logs, CI) one plain stderr line per finished step."""
     if not err.is_terminal:
-        from .progress import PlainProgress
+        from ..core.progress import PlainProgress
 
         return PlainProgress(verb, {"sweep": "campaign", "design": "step"}.get(verb, "run"), _warn)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -216,7 +216,7 @@ def simulate(
     ones); HDF5 holds clean and noisy; MDF4 the noisy channels and the road as a logger records them. The noise
     is the noise stream of run 0 of the campaign with the same seed.
     """
-    from .systems import SIMULATION_SUFFIXES, write_simulation
+    from ..systems import SIMULATION_SUFFIXES, write_simulation
 
     target = check_writable(output, SIMULATION_SUFFIXES)
     if plot is not None:
@@ -227,7 +227,7 @@ def simulate(
     seed = cfg.identify.seed if seed is None else seed
     simulated = write_simulation(cfg, target, seed, road, origin=f"simulate {config}")
     if plot is not None:
-        from .report.figures import plot_simulation
+        from ..report.figures import plot_simulation
 
         plot_simulation(simulated, plot)
     out.print(f"wrote {target}: {simulated.summary}" + (f"; figure {plot}" if plot else ""))
@@ -272,10 +272,10 @@ def identify(
     command to resume an interrupted campaign (Ctrl-C, SIGTERM, a killed job).
     """
 
-    from .campaign import run_campaign_to_file, saved_runs_note
-    from .executor import check_executor_options, make_executor
-    from .report import campaign_notes, rich_tables
-    from .results import campaign_json, write_json
+    from ..campaign.executor import check_executor_options, make_executor
+    from ..campaign.results import campaign_json, write_json
+    from ..campaign.runner import run_campaign_to_file, saved_runs_note
+    from ..report import campaign_notes, rich_tables
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
@@ -339,9 +339,9 @@ def sweep(
     """
     import json
 
-    from .campaign import checkpoint_dir_for, run_campaign_to_file, saved_runs_note
-    from .executor import check_executor_options, make_executor
-    from .sweep import check_no_other_campaigns, parse_shard, parse_vary, plan_sweep, run_sweep, write_index
+    from ..campaign.executor import check_executor_options, make_executor
+    from ..campaign.runner import checkpoint_dir_for, run_campaign_to_file, saved_runs_note
+    from ..campaign.sweep import check_no_other_campaigns, parse_shard, parse_vary, plan_sweep, run_sweep, write_index
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     overrides = _campaign_overrides(set_, runs, seed, jobs)
@@ -437,11 +437,11 @@ def design(
     designed test side by side, names the unknowns the configured test cannot identify with the cheapest change
     that fixes it; --verify N checks the prediction with campaigns of N runs.
     """
-    from .config import Config
-    from .design import design_test
-    from .executor import LocalExecutor
-    from .report.design import design_json, notes, rich_tables, write_config, write_plots
-    from .results import write_json
+    from ..campaign.executor import LocalExecutor
+    from ..campaign.results import write_json
+    from ..config import Config
+    from ..design.search import design_test
+    from ..report.design import design_json, notes, rich_tables, write_config, write_plots
 
     for path, suffixes in ((output, (".yaml", ".yml")), (json_out, (".json",))):
         if path is not None:
@@ -507,7 +507,7 @@ def _report_format(fmt: str | None, output: Path | None) -> str:
 
 def check_output_dir(path: Path, option: str) -> Path:
     """data.check_writable_dir for an option's directory: created if needed and probed, before any work."""
-    from .data import check_writable_dir
+    from ..io.measurement import check_writable_dir
 
     return check_writable_dir(path, option)
 
@@ -553,8 +553,8 @@ def report(
     of different experiments (config keys other than the method keys and a sweep's varied keys), data files
     or code versions are refused unless --allow-mixed is given.
     """
-    from .report import collect, load_published, render, rich_tables, sweep_notes
-    from .report.compare import check_comparable
+    from ..report import collect, load_published, render, rich_tables, sweep_notes
+    from ..report.compare import check_comparable
 
     fmt = _report_format(fmt, output)
     if plots is not None:
@@ -570,7 +570,7 @@ def report(
         text = render(campaigns, files, fmt, load_published(published) if published else None)
     _emit(text, output)
     if plots is not None:
-        from .report.figures import write_plots
+        from ..report.figures import write_plots
 
         written = write_plots(campaigns, files, plots)
         out.print(f"wrote {len(written)} figure(s) to {plots}")
@@ -582,7 +582,7 @@ def _tables(output: Path | None, tables: list) -> str | None:
         for table in tables:
             out.print(table)
         return None
-    from .report import plain_text
+    from ..report import plain_text
 
     return plain_text(tables)
 
@@ -594,7 +594,7 @@ def _emit(text: str | None, output: Path | None) -> None:
     if output is None:
         out.print(text, markup=False, highlight=False)
         return
-    from .data import atomic_path
+    from ..io.measurement import atomic_path
 
     with atomic_path(output) as tmp:
         tmp.write_text(text)
@@ -647,9 +647,9 @@ def diagnose(
     The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
-    from .diagnose import diagnose_config
-    from .report.diagnosis import diagnosis_tables, plot_diagnosis_files
-    from .results import write_json
+    from ..campaign.results import write_json
+    from ..diagnose import diagnose_config
+    from ..report.diagnosis import diagnosis_tables, plot_diagnosis_files
 
     if json_out is not None:
         check_writable(json_out, (".json",))

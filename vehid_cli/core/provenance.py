@@ -9,7 +9,7 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
-from . import __version__
+from .. import __version__
 
 TRACKED_PACKAGES = ("numpy", "scipy", "numba", "h5py", "pydantic")  # numpy, scipy and numba set the numbers
 

@@ -32,10 +32,10 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
 
-from . import __version__
-from .errors import InputError
-from .provenance import git_commit
-from .sim.kernel import set_threads
+from .. import __version__
+from ..core.errors import InputError
+from ..core.provenance import git_commit
+from ..sim.kernel import set_threads
 
 S = TypeVar("S")
 T = TypeVar("T")

@@ -18,14 +18,16 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
-from . import __version__
-from .config import AnyConfig
-from .data import atomic_path, remove_stale_temporaries
-from .errors import InputError
+from .. import __version__
+from ..config import AnyConfig
+from ..core.errors import InputError
+from ..core.locking import exclusive
+from ..core.provenance import git_commit
+from ..identify.records import Campaign, RunRecord, summarise
+from ..io.measurement import atomic_path, remove_stale_temporaries
+from ..systems import System, build_system
+from ..systems.base import DataFiles, configured_data_file, data_paths
 from .executor import Executor, LocalExecutor
-from .locking import exclusive
-from .provenance import git_commit
-from .records import Campaign, RunRecord, summarise
 from .results import (
     CAMPAIGN_KIND,
     campaign_file_digest,
@@ -35,8 +37,6 @@ from .results import (
     read_campaign_h5,
     write_campaign_h5,
 )
-from .systems import System, build_system
-from .systems.base import DataFiles, configured_data_file, data_paths
 
 Log = Callable[[str], None]
 

@@ -18,16 +18,16 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .config import Config
-from .data import read_measurement, time_grid
-from .errors import InputError
-from .models.effects import check_names
-from .models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
-from .models.sensors import Layout
-from .noise import add_channel_noise, channel_sigma
-from .road import road_function
-from .sim.linear import Response, simulate
-from .sim.nonlinear import simulate_effects
+from ..config import Config
+from ..core.errors import InputError
+from ..io.measurement import read_measurement, time_grid
+from ..models.effects import check_names
+from ..models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
+from ..models.noise import add_channel_noise, channel_sigma
+from ..models.road import road_function
+from ..models.sensors import Layout
+from ..sim.linear import Response, simulate
+from ..sim.nonlinear import simulate_effects
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
 CHUNK_BYTES = 64 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs)

@@ -18,14 +18,14 @@ import h5py
 import numpy as np
 import yaml
 
-from .config import config_from_dict, flatten
-from .crlb import CramerRao
-from .data import atomic_path
-from .errors import InputError
-from .h5io import h5_file
-from .provenance import provenance
-from .records import Campaign, RunRecord, summarise
-from .systems import SYSTEMS
+from ..config import config_from_dict, flatten
+from ..core.errors import InputError
+from ..core.h5file import h5_file
+from ..core.provenance import provenance
+from ..identify.crlb import CramerRao
+from ..identify.records import Campaign, RunRecord, summarise
+from ..io.measurement import atomic_path
+from ..systems import SYSTEMS
 
 # ------------------------------------------------------------------------------------------ campaigns
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import DiskFull, InputError
+from ..core.errors import DiskFull, InputError
 
 ROAD_COLUMNS = tuple(f"road{i}" for i in range(1, 5))
 ACC_COLUMNS = tuple(f"acc{i}" for i in range(1, 5))

@@ -29,20 +29,28 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..bench import BenchHistory
-from ..config import DamperConfig
-from ..damper_fit import PENALTY_FACTOR, DamperSpec
-from ..errors import InputError
-from ..experiment import run_streams
-from ..models.effects import LIBRARY
-from ..noise import estimate_noise_sigma
-from ..optimizers import get_optimizer
-from ..optimizers.base import Problem
-from ..systems.damper import configured_spec, load_measured
-from .attribution import ALPHA, Candidate, Fit, candidate_ranges, fit_intervals, lsq_fit, parameter_candidate
-from .loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
-from .quality import assess_bench
-from .residuals import analyse_bench, autocorrelation
+from ...config import DamperConfig
+from ...core.errors import InputError
+from ...diagnose.attribution import (
+    ALPHA,
+    Candidate,
+    Fit,
+    candidate_ranges,
+    fit_intervals,
+    lsq_fit,
+    parameter_candidate,
+)
+from ...diagnose.loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
+from ...diagnose.quality import assess_bench
+from ...diagnose.residuals import analyse_bench, autocorrelation
+from ...identify.experiment import run_streams
+from ...models.bench import BenchHistory
+from ...models.effects import LIBRARY
+from ...models.noise import estimate_noise_sigma
+from ...optimizers import get_optimizer
+from ...optimizers.base import Problem
+from .fit import PENALTY_FACTOR, DamperSpec
+from .system import configured_spec, load_measured
 
 MAX_ROUNDS = 4
 MIN_GAIN = 0.02

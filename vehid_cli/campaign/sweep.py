@@ -23,10 +23,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import AnyConfig, Override, load_config
-from .data import atomic_path
-from .errors import InputError
-from .locking import Busy, exclusive
+from ..config import AnyConfig, Override, load_config
+from ..core.errors import InputError
+from ..core.locking import Busy, exclusive
+from ..io.measurement import atomic_path
 from .results import campaign_file_digest, config_difference
 
 

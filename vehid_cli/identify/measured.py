@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .config import Config
-from .data import read_measurement
-from .errors import InputError
+from ..config import Config
+from ..core.errors import InputError
+from ..io.logger import Record, read_record, remove_offset
+from ..io.measurement import read_measurement
+from ..models.road import road_function
 from .experiment import Experiment, check_time_step, experiment_rng
-from .logger import Record, read_record, remove_offset
-from .road import road_function
 
 ROAD = ("road1", "road2", "road3", "road4")
 TRACKS = ("track1", "track2")

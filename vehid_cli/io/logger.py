@@ -40,9 +40,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .bench import UNITS
-from .data import UNIFORM_TOLERANCE, read_table
-from .errors import InputError
+from ..core.errors import InputError
+from ..models.bench import UNITS
+from .measurement import UNIFORM_TOLERANCE, read_table
 
 SUFFIXES = {
     ".csv": "csv",

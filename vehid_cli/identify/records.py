@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .config import AnyConfig
+from ..config import AnyConfig
+from ..io.measurement import atomic_path
+from ..optimizers.base import Problem
 from .crlb import CramerRao
-from .data import atomic_path
-from .optimizers.base import Problem
 
 PENALTY = Problem.__dataclass_fields__["penalty"].default  # the cost of a NaN/Inf evaluation (optimizers/base.py)
 

@@ -19,21 +19,21 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import __version__
-from ..bench import BenchHistory, sawtooth, sine, triangle, with_force
-from ..config import DamperConfig
-from ..crlb import CramerRao, cramer_rao_outputs
-from ..damper_fit import DamperSpec, RealTime, cost_J, fit, j_problem, realtime_check
-from ..data import atomic_path, format_rows
-from ..errors import InputError
-from ..experiment import run_streams
-from ..h5io import h5_file
-from ..logger import NominalRateError, read_record
-from ..noise import estimate_noise_sigma
-from ..optimizers.base import Problem
-from ..provenance import provenance
-from ..records import RunRecord
-from .base import Box, DataFiles, Simulated, System, configured_data_file, data_paths
+from ... import __version__
+from ...config import DamperConfig
+from ...core.errors import InputError
+from ...core.h5file import h5_file
+from ...core.provenance import provenance
+from ...identify.crlb import CramerRao, cramer_rao_outputs
+from ...identify.experiment import run_streams
+from ...identify.records import RunRecord
+from ...io.logger import NominalRateError, read_record
+from ...io.measurement import atomic_path, format_rows
+from ...models.bench import BenchHistory, sawtooth, sine, triangle, with_force
+from ...models.noise import estimate_noise_sigma
+from ...optimizers.base import Problem
+from ..base import Box, DataFiles, Simulated, System, configured_data_file, data_paths
+from .fit import DamperSpec, RealTime, cost_J, fit, j_problem, realtime_check
 
 BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "u", "force": "force"}
 

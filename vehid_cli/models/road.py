@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .config import Bump, RandomRoad, Road
+from ..config import Bump, RandomRoad, Road
 
 REAR_CORNERS = np.array([False, False, True, True])  # corners 3, 4
 SIDE_OF_CORNER = np.array([0, 1, 1, 0])  # wheel track: 0 = side b1 (corners 1, 4), 1 = side b2 (2, 3)

@@ -16,15 +16,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .config import Config
+from ..config import Config
+from ..core.errors import InputError
+from ..models.effects import LIBRARY
+from ..models.noise import channel_sigma, estimate_noise_sigma, per_channel, sigma_from_level, with_floors
+from ..optimizers.base import Problem
 from .crlb import CramerRao, bound_from_information, cramer_rao, information
-from .errors import InputError
 from .experiment import Experiment, build_experiment, clean_sigma, measurement_noise, run_streams
 from .measured import experiment_of, read_run
-from .models.effects import LIBRARY
-from .noise import channel_sigma, estimate_noise_sigma, per_channel, sigma_from_level, with_floors
 from .objectives import Objective, objective_families
-from .optimizers.base import Problem
 
 MIN_SIGMA_FRACTION = 1e-3  # noise-free data: weight channels as if Np were 0.1 %, to keep wls finite
 

@@ -37,14 +37,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .campaign import run_campaign
-from .config import Config, config_from_dict
-from .config.design import Design
-from .crlb import CramerRao, bound_from_information, weighted_sensitivities
-from .errors import InputError
-from .executor import Executor, LocalExecutor
-from .identification import Task, build_task
-from .models.sensors import FAMILY
+from ..campaign.executor import Executor, LocalExecutor
+from ..campaign.runner import run_campaign
+from ..config import Config, config_from_dict
+from ..config.design import Design
+from ..core.errors import InputError
+from ..identify.crlb import CramerRao, bound_from_information, weighted_sensitivities
+from ..identify.task import Task, build_task
+from ..models.sensors import FAMILY
 
 PENALTY = 1e9  # the optimizer's value of a test that cannot identify every unknown (the criterion is infinite)
 EXHAUSTIVE = 5000  # at most this many sensor subsets are tried one by one
