@@ -50,7 +50,7 @@ def compute() -> dict:
     """Every fingerprint, computed now."""
     from vehid_cli.campaign.runner import run_campaign
     from vehid_cli.config import load_config
-    from vehid_cli.diagnose import diagnose
+    from vehid_cli.systems.vehicle.diagnosis import diagnose
 
     out: dict = {}
     paper = load_config(BASE, ["identify.runs=2", "identify.algorithm.iterations=10"])
@@ -105,8 +105,8 @@ def nonlinear_car(load_config) -> dict:
 def bench_forces(load_config):
     """A Bouc-Wen damper with every bench effect around it, on a sine: the force."""
     from vehid_cli.models.damper import default_values
+    from vehid_cli.systems.damper.bench import bench_history
     from vehid_cli.systems.damper.fit import DamperSpec
-    from vehid_cli.systems.damper.system import bench_history
 
     cfg = load_config(DAMPER)
     history = bench_history(cfg)

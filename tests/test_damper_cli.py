@@ -219,7 +219,7 @@ def test_bench_csv_holds_the_shortest_exact_repr(tmp_path):
     """Was %.10g: lossy for the force and x, and a grid time like 0.006 only by luck of rounding."""
     from vehid_cli.io.measurement import read_table
     from vehid_cli.models.bench import BenchHistory
-    from vehid_cli.systems.damper.system import write_bench_csv
+    from vehid_cli.systems.damper.bench import write_bench_csv
 
     rng = np.random.default_rng(3)
     t = np.arange(50) * 0.002
@@ -420,7 +420,7 @@ def test_bench_csv_sample_rate_rebuilds_a_rounded_time_column_and_keeps_the_samp
     the step) is rebuilt as k / rate, the samples kept as printed; a rate the column does not follow is an
     error naming data.sample_rate."""
     from vehid_cli.core.errors import InputError
-    from vehid_cli.systems.damper.system import read_bench
+    from vehid_cli.systems.damper.bench import read_bench
 
     k = np.arange(300)
     x, force = np.sin(k / 10), np.cos(k / 7)

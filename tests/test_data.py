@@ -10,20 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import vehid_cli.io.measurement as data
+import vehid_cli.core.files as files
 from tests.conftest import VEHICLE_DATA, needs_shared
 from vehid_cli.core.errors import DiskFull, InputError
-from vehid_cli.io.measurement import (
-    atomic_path,
-    check_writable,
-    check_writable_dir,
-    format_rows,
-    read_measurement,
-    read_table,
-    time_grid,
-    write_bytes,
-    write_measurement_csv,
-)
+from vehid_cli.core.files import atomic_path, check_writable, check_writable_dir, write_bytes
+from vehid_cli.io.measurement import format_rows, read_measurement, read_table, time_grid, write_measurement_csv
 
 
 def test_reads_the_shared_bump_run():
@@ -126,7 +117,7 @@ def test_a_full_disk_is_disk_full_naming_the_file_and_leaves_no_temporary(tmp_pa
     assert str(caught.value) == f"no space left on device writing {target}"
     assert caught.value.errno == code and isinstance(caught.value, OSError)
     monkeypatch.undo()
-    monkeypatch.setattr(data, "_write_bytes", lambda fh, b: full(None))
+    monkeypatch.setattr(files, "_write_bytes", lambda fh, b: full(None))
     with pytest.raises(DiskFull, match="m.csv"):
         write_bytes(target, b"new content")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv"] and target.read_text() == "old content"

@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 from tests.conftest import VEHICLE_DATA, needs_shared
 from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
-from vehid_cli.diagnose import diagnose
 from vehid_cli.diagnose.residuals import autocorrelation, bin_residual, ljung_box
 from vehid_cli.identify.task import build_task
+from vehid_cli.systems.vehicle.diagnosis import diagnose
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"
@@ -213,7 +213,7 @@ def test_misset_known_parameters_are_named_not_disguised_as_effects(tmp_path):
 def test_hysteresis_shape_found_from_the_wrong_basin():
     """A Bouc-Wen loop yielding at 13 mm (default 5 mm): the multi-start candidate fit finds its shape."""
     from vehid_cli.diagnose import attribution as A
-    from vehid_cli.diagnose.loop import prepare_config
+    from vehid_cli.systems.vehicle.diagnosis import prepare_config
 
     truth = load_config(ROOT / "configs" / "effects" / "hysteresis.yaml", [
         "vehicle.effects.hysteresis.beta=3e3", "vehicle.effects.hysteresis.gamma=3e3", "noise.level=0.05",

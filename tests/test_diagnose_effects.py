@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from tests.conftest import BASE_CONFIG, ROOT
 from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
-from vehid_cli.diagnose import diagnose
+from vehid_cli.systems.vehicle.diagnosis import diagnose
 
 EFFECTS = sorted(p.stem for p in (ROOT / "configs" / "effects").glob("*.yaml"))
 DIAGNOSE = ["identify.objective=wls", "noise.level=0", "identify.truth=config", "identify.algorithm.name=hybrid"]

@@ -15,7 +15,7 @@ from tests import independent_sim as S
 from tests.conftest import BASE_CONFIG
 from tests.test_diagnose_effects import DIAGNOSE, assert_named
 from vehid_cli.config import load_config
-from vehid_cli.diagnose import diagnose
+from vehid_cli.systems.vehicle.diagnosis import diagnose
 
 
 def run(tmp_path, params=None, effects=None, seed=1):

@@ -21,8 +21,7 @@ from examples.make_rig_runs import write_rig_run
 from tests.conftest import BASE_CONFIG, ROOT, invoke, sets
 from vehid_cli.config import load_config
 from vehid_cli.core.errors import InputError
-from vehid_cli.diagnose import diagnose_config
-from vehid_cli.diagnose.loop import chi2_limit, holdout_blocks, holdout_mask
+from vehid_cli.diagnose.loop import chi2_limit, holdout_blocks
 from vehid_cli.diagnose.residuals import analyse, fingerprint_channels
 from vehid_cli.diagnose.unexplained import _linear_car, _responses, estimate_unexplained
 from vehid_cli.identify.experiment import build_experiment
@@ -31,6 +30,8 @@ from vehid_cli.identify.task import build_task
 from vehid_cli.models.fullcar import assemble
 from vehid_cli.models.sensors import Layout, Sensor
 from vehid_cli.sim.linear import simulate
+from vehid_cli.systems import diagnose_config
+from vehid_cli.systems.vehicle.diagnosis import holdout_mask
 
 RIG = ROOT / "configs" / "examples" / "four_post_rig.yaml"
 SHORT = ["simulation.duration=4", "simulation.integrator=rk4"]  # 4 s of the rig (4000 samples at 1 kHz)

@@ -263,7 +263,7 @@ def test_without_resampling_a_channel_between_the_grid_points_is_an_error(tmp_pa
 
 
 def test_the_bench_reader_passes_resample_false_on(tmp_path):
-    from vehid_cli.systems.damper.system import read_bench
+    from vehid_cli.systems.damper.bench import read_bench
 
     path = tmp_path / "bench.csv"
     t = csv_times()[:50]  # jittered stamps

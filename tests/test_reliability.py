@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 import pytest
 
-import vehid_cli.io.measurement as data_module
+import vehid_cli.core.files as files_module
 from tests.conftest import BASE_CONFIG, ROOT, SMALL, assert_same_content, children, running, sets, small_config, vehid
 from tests.conftest import invoke as invoke_cli
 from vehid_cli.campaign.results import check_integrity, read_campaign_h5, write_campaign_h5
@@ -195,7 +195,7 @@ def fill_the_disk(monkeypatch) -> list[str]:
         refused.append(fh.name)
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(data_module, "_write_bytes", full)
+    monkeypatch.setattr(files_module, "_write_bytes", full)
     return refused
 
 

@@ -15,7 +15,7 @@ from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
 from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.report import load_published, render
-from vehid_cli.report.tables import CSV_COLUMNS
+from vehid_cli.systems.vehicle.report import CSV_COLUMNS
 
 SMALL = [
     "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=3",

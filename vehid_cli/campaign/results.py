@@ -24,7 +24,6 @@ from ..core.h5file import h5_file
 from ..core.provenance import provenance
 from ..identify.crlb import CramerRao
 from ..identify.records import Campaign, RunRecord, summarise
-from ..io.measurement import atomic_path
 from ..systems import SYSTEMS
 
 # ------------------------------------------------------------------------------------------ campaigns
@@ -127,12 +126,10 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
     h5.attrs["seed"] = cfg.identify.seed
     h5.attrs["seed_scheme"] = SEED_SCHEME
     h5.attrs["runs"] = len(campaign.records)
-    h5.attrs["objective"] = objective_of(campaign)
+    h5.attrs["objective"] = campaign.objective
     h5.attrs["algorithm"] = cfg.identify.algorithm.name
-    if campaign.system == "vehicle":
-        h5.attrs["sensors"] = cfg.sensors
-    else:
-        h5.attrs["model"] = cfg.damper.model
+    for key, value in SYSTEMS[campaign.system].results_attributes(cfg).items():  # the car's sensors, a damper's model
+        h5.attrs[key] = value
     h5.attrs["noise_level"] = cfg.noise.level
     h5.attrs["data_file"] = campaign.data_file or ""
     h5.attrs["data_sha256"] = campaign.data_sha256 or ""
@@ -187,77 +184,6 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
         ng.create_dataset(family, data=sigma)
     if campaign.findings is not None:
         campaign.findings.write_h5(h5.create_group(campaign.system))
-
-
-def objective_of(campaign: Campaign) -> str:
-    """What a campaign's cost is: the car's objective (f1, f2, wls) or J (Eq. 7) for a damper."""
-    return SYSTEMS[campaign.system].objective if campaign.system != "vehicle" else campaign.config.identify.objective
-
-
-def finite_or_none(value) -> float | None:
-    """JSON has no Infinity or NaN: a bound that does not exist (unidentifiable) is null."""
-    return None if value is None or not np.isfinite(value) else float(value)
-
-
-def to_json(doc) -> str:
-    """Strict JSON text: every non-finite number anywhere in `doc` becomes null."""
-
-    def clean(x):
-        if isinstance(x, dict):
-            return {k: clean(v) for k, v in x.items()}
-        if isinstance(x, (list, tuple)):
-            return [clean(v) for v in x]
-        if isinstance(x, float):
-            return finite_or_none(x)
-        return x
-
-    return json.dumps(clean(doc), indent=2, allow_nan=False)
-
-
-def write_json(path: str | Path, doc) -> None:
-    """`doc` as strict JSON (to_json), written atomically."""
-    with atomic_path(path) as tmp:
-        tmp.write_text(to_json(doc))
-
-
-def campaign_json(campaign) -> dict:
-    """SPEC section 5 `identify` object (plus a few extra keys); strict JSON (no NaN or Infinity)."""
-    s, b, names = campaign.summary, campaign.bound, list(campaign.names)
-
-    def obj(values):
-        return None if values is None else {n: finite_or_none(v) for n, v in zip(names, values, strict=True)}
-
-    evals = [int(e) for e in s.evaluations]
-    return {
-        "parameters": names,
-        "truth": obj(campaign.truth),
-        "mean": obj(s.mean),
-        "re_percent": obj(s.re_percent),
-        "nre_percent": s.nre_percent,
-        "per_run_nre_percent": None if s.per_run_nre_percent is None else [float(v) for v in s.per_run_nre_percent],
-        "crlb": {
-            "re_sd_percent": obj(b.re_sd_percent),
-            "nre_rms_percent": finite_or_none(b.nre_rms_percent),
-            "unidentifiable": b.unidentifiable(),
-        },
-        "evaluations_per_run": float(np.mean(evals)),
-        "runs": len(campaign.records),
-        "wall_s": s.wall_s,
-        "per_run_nre_median": s.per_run_nre_median,
-        "per_run_nre_rms": s.per_run_nre_rms,
-        "nre_over_crlb": s.nre_over_crlb,
-        "evaluations": evals,
-        "penalised_evaluations": s.penalised,
-        "runs_at_penalty": s.at_penalty,
-        "converged_runs": s.converged,
-        "chi2_per_sample": s.chi2_median,
-        "model_inadequate": s.model_inadequate,
-        "objective": objective_of(campaign),
-        "algorithm": campaign.config.identify.algorithm.name,
-        "noise_level": campaign.config.noise.level,
-        "system": campaign.system,
-        **({} if campaign.findings is None else campaign.findings.to_json(campaign)),
-    }
 
 
 def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
@@ -339,6 +265,7 @@ def read_campaign_h5(path: str | Path):
                 sigma_source=str(h5.attrs["sigma_source"]), records=records, bound=bound, summary=summary,
                 data_sha256=str(h5.attrs.get("data_sha256", "")) or None, system=system, findings=findings,
                 data_files=tuple(json.loads(str(h5.attrs.get("data_files", "[]")))),
+                objective=str(h5.attrs["objective"]),
             )  # fmt: skip
         except (KeyError, ValueError, TypeError, OSError, RuntimeError, yaml.YAMLError) as exc:  # reactions to damage
             raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None

@@ -21,12 +21,12 @@ from pathlib import Path
 from .. import __version__
 from ..config import AnyConfig
 from ..core.errors import InputError
+from ..core.files import atomic_path, remove_stale_temporaries
 from ..core.locking import exclusive
 from ..core.provenance import git_commit
 from ..identify.records import Campaign, RunRecord, summarise
-from ..io.measurement import atomic_path, remove_stale_temporaries
+from ..identify.source import DataFiles, DataSource
 from ..systems import System, build_system
-from ..systems.base import DataFiles, configured_data_file, data_paths
 from .executor import Executor, LocalExecutor
 from .results import (
     CAMPAIGN_KIND,
@@ -47,15 +47,6 @@ Log = Callable[[str], None]
 def identify_run(system: System, index: int) -> RunRecord:
     """Run `index` of a campaign (the unit of work the executors ship)."""
     return system.identify_run(index)
-
-
-def data_digest(data_file: DataFiles) -> str | None:
-    """SHA-256 of a data file's bytes (None without one); of several files, the SHA-256 of their digests in order."""
-    files = data_paths(data_file)
-    digests = [hashlib.sha256(Path(f).read_bytes()).hexdigest() for f in files]
-    if len(digests) <= 1:
-        return digests[0] if digests else None
-    return hashlib.sha256(" ".join(digests).encode()).hexdigest()
 
 
 def campaign_key(config: AnyConfig, data_files: Sequence[str | Path] = ()) -> str:
@@ -193,14 +184,14 @@ def run_campaign(
     return Campaign(
         config=config, data_file=system.data_file, names=box.names, truth=box.truth, nominal=box.nominal,
         lower=box.lower, upper=box.upper, sigma=system.sigma, sigma_source=system.sigma_source, records=records,
-        bound=bound, summary=summary, data_sha256=data_digest(system.data_files()), system=system.name,
-        findings=findings, data_files=system.data_files(),
+        bound=bound, summary=summary, data_sha256=system.source.digest, system=system.name,
+        findings=findings, data_files=system.data_files(), objective=system.objective_label(config),
     )  # fmt: skip
 
 
 def check_same_campaign(output: Path, config: AnyConfig, data_file: DataFiles) -> None:
     """InputError (naming the first differences) if `output` holds a campaign of another config or data file."""
-    diffs = config_difference(output, config, data_digest(configured_data_file(config, data_file)))
+    diffs = config_difference(output, config, DataSource.resolve(config, data_file).digest)
     if diffs:
         shown = "; ".join(diffs[:3]) + (f"; and {len(diffs) - 3} more" if len(diffs) > 3 else "")
         raise InputError(
@@ -226,13 +217,13 @@ def checkpoint_dir_for(output: Path) -> Path:
 def finished_campaign(output: Path, config: AnyConfig, data_file: DataFiles = None) -> Campaign | None:
     """The campaign `output` holds if it is whole (checksum verified) and of this campaign's key: the config (by
     `campaign_file_digest`, the test a sweep skips by), the data file's bytes and the code version; else None."""
-    data_file = configured_data_file(config, data_file)
+    digest = DataSource.resolve(config, data_file).digest
     try:
         if check_integrity(output) is None or campaign_file_digest(output) != config.digest():
             return None
         with open_results(output, CAMPAIGN_KIND, "campaign file") as h5:
             made = tuple(str(h5.attrs.get(k, "")) for k in ("vehid_version", "git_commit", "data_sha256"))
-        if made != (__version__, git_commit(), data_digest(data_file) or ""):
+        if made != (__version__, git_commit(), digest or ""):
             return None
         return read_campaign_h5(output)
     except (InputError, OSError):  # missing, damaged or foreign: not finished
@@ -261,6 +252,7 @@ def run_campaign_to_file(
     file (a sweep records its varied keys). An output file holding another campaign (another config or data) is
     an InputError naming the difference, unless `force`."""
     output = Path(output)
+    data_file = DataSource.resolve(config, data_file)  # resolved once, passed down
     with exclusive(output) if lock else contextlib.nullcontext():
         if output.exists() and not force:
             check_same_campaign(output, config, data_file)

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from ..config import AnyConfig, Override, load_config
 from ..core.errors import InputError
+from ..core.files import atomic_path
 from ..core.locking import Busy, exclusive
-from ..io.measurement import atomic_path
 from .results import campaign_file_digest, config_difference
 
 

@@ -65,7 +65,7 @@ def load_config(path: Path, overrides: Sequence[str] = ()) -> Config | DamperCon
 
 def check_writable(path: Path, suffixes: Sequence[str]) -> Path:
     """data.check_writable, imported when a command runs."""
-    from ..io.measurement import check_writable as check
+    from ..core.files import check_writable as check
 
     return check(path, suffixes)
 
@@ -216,9 +216,9 @@ def simulate(
     ones); HDF5 holds clean and noisy; MDF4 the noisy channels and the road as a logger records them. The noise
     is the noise stream of run 0 of the campaign with the same seed.
     """
-    from ..systems import SIMULATION_SUFFIXES, write_simulation
+    from ..systems import simulation_suffixes, write_simulation
 
-    target = check_writable(output, SIMULATION_SUFFIXES)
+    target = check_writable(output, simulation_suffixes())
     if plot is not None:
         check_writable(plot, (".png",))
     if seed is not None and seed < 0:
@@ -229,7 +229,7 @@ def simulate(
     if plot is not None:
         from ..report.figures import plot_simulation
 
-        plot_simulation(simulated, plot)
+        plot_simulation(cfg, simulated, plot)
     out.print(f"wrote {target}: {simulated.summary}" + (f"; figure {plot}" if plot else ""))
 
 
@@ -273,9 +273,10 @@ def identify(
     """
 
     from ..campaign.executor import check_executor_options, make_executor
-    from ..campaign.results import campaign_json, write_json
     from ..campaign.runner import run_campaign_to_file, saved_runs_note
+    from ..core.jsonio import write_json
     from ..report import campaign_notes, rich_tables
+    from ..systems import system_class
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, _campaign_overrides(set_, runs, seed, jobs))
@@ -285,14 +286,14 @@ def identify(
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
         _progress("identify") as progress,
     ):
-        objective = getattr(cfg.identify, "objective", "J")  # the damper's cost is J (Eq. 7)
+        objective = system_class(cfg).objective_label(cfg)
         bar = progress.add_task(f"{cfg.identify.algorithm.name}/{objective}", total=None)
         campaign = run_campaign_to_file(
             cfg, target, data or None, executor=pool, log=_warn, force=force,
             on_run=lambda d, n: progress.update(bar, completed=d, total=n),
         )  # fmt: skip
     if json_out is not None:
-        write_json(json_out, campaign_json(campaign))
+        write_json(json_out, campaign.to_json())
     for table in rich_tables([campaign], [str(target)]):
         out.print(table)
     for note in campaign_notes(campaign):
@@ -438,10 +439,10 @@ def design(
     that fixes it; --verify N checks the prediction with campaigns of N runs.
     """
     from ..campaign.executor import LocalExecutor
-    from ..campaign.results import write_json
-    from ..config import Config
+    from ..core.jsonio import write_json
     from ..design.search import design_test
     from ..report.design import design_json, notes, rich_tables, write_config, write_plots
+    from ..systems import system_class
 
     for path, suffixes in ((output, (".yaml", ".yml")), (json_out, (".json",))):
         if path is not None:
@@ -453,7 +454,7 @@ def design(
     if jobs is not None and jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {jobs}")
     cfg = load_config(config, set_ or ())
-    if not isinstance(cfg, Config):
+    if not system_class(cfg).designable:
         raise InputError("vehid design plans a car's test (system: vehicle)", source=str(config), key="system")
     with interruptible(lambda: "nothing was written", _warn), LocalExecutor(jobs) as pool, _progress("design") as bar:
         tasks: dict[str, int] = {}
@@ -507,7 +508,7 @@ def _report_format(fmt: str | None, output: Path | None) -> str:
 
 def check_output_dir(path: Path, option: str) -> Path:
     """data.check_writable_dir for an option's directory: created if needed and probed, before any work."""
-    from ..io.measurement import check_writable_dir
+    from ..core.files import check_writable_dir
 
     return check_writable_dir(path, option)
 
@@ -594,7 +595,7 @@ def _emit(text: str | None, output: Path | None) -> None:
     if output is None:
         out.print(text, markup=False, highlight=False)
         return
-    from ..io.measurement import atomic_path
+    from ..core.files import atomic_path
 
     with atomic_path(output) as tmp:
         tmp.write_text(text)
@@ -647,9 +648,9 @@ def diagnose(
     The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
-    from ..campaign.results import write_json
-    from ..diagnose import diagnose_config
+    from ..core.jsonio import write_json
     from ..report.diagnosis import diagnosis_tables, plot_diagnosis_files
+    from ..systems import diagnose_config
 
     if json_out is not None:
         check_writable(json_out, (".json",))

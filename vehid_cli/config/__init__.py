@@ -18,7 +18,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from ..core.errors import InputError
-from ..io.measurement import read_text
+from ..core.files import read_text
 from .common import Algorithm, IdentifyCommon, Start, SystemConfig, _did_you_mean, _KeyedError, flatten, scaled_bounds
 from .damper import (
     DAMPER_STRUCTURAL,
@@ -31,11 +31,19 @@ from .damper import (
     DamperStage,
     DataColumns,
     DataUnits,
-    _resolve_damper_paths,
 )
 from .vehicle import Bump, Config, Identify, Noise, RandomRoad, Road, Simulation, Vehicle
 
 AnyConfig = Union[Config, DamperConfig]  # noqa: UP007
+
+# The config class of each system, by the `system` key of a config (a missing key is the car). A system of its own
+# registers its config here (`register_config`); nothing else in the package asks which system a config is.
+CONFIGS: dict[str, type[SystemConfig]] = {"vehicle": Config, "damper": DamperConfig}
+
+
+def register_config(name: str, cls: type[SystemConfig]) -> None:
+    """Make `system: <name>` configs validate as `cls`."""
+    CONFIGS[name] = cls
 
 
 # ------------------------------------------------------------------------------------------ loading
@@ -62,23 +70,13 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
     except InputError as exc:
         _blame_override(raw, overrides, exc, source)
         raise
-    if isinstance(cfg, DamperConfig):
-        return _resolve_damper_paths(cfg, path)
-    if cfg.road.file is not None and not Path(cfg.road.file).is_absolute():
-        resolved = (path.parent / cfg.road.file).as_posix()
-        cfg = cfg.model_copy(update={"road": cfg.road.model_copy(update={"file": resolved})})
-        cfg._source = source
-    if cfg.data.files:  # runs named relative to the config file
-        files = tuple(f if Path(f).is_absolute() else (path.parent / f).as_posix() for f in cfg.data.files)
-        cfg = cfg.model_copy(update={"data": cfg.data.model_copy(update={"files": files})})
-        cfg._source = source
-    return cfg
+    return cfg.resolved(path)  # files the config names relative to itself
 
 
 def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config | DamperConfig:
     """Validate a plain dict (e.g. parsed YAML) into a Config, or a DamperConfig when `system: damper`.
     Raises InputError naming the key."""
-    root = DamperConfig if isinstance(raw, dict) and raw.get("system") == "damper" else Config
+    root = CONFIGS.get(raw.get("system"), Config) if isinstance(raw, dict) else Config
     try:
         cfg = root.model_validate(raw)
     except ValidationError as exc:
@@ -218,5 +216,5 @@ __all__ = [
     "DAMPER_STRUCTURAL", "Algorithm", "AnyConfig", "BenchSection", "Bump", "Config", "DamperConfig", "DamperData",
     "DamperIdentify", "DamperNoise", "DamperSection", "DamperStage", "DataColumns", "DataUnits", "Identify",
     "IdentifyCommon", "Noise", "Override", "RandomRoad", "Road", "Simulation", "Start", "SystemConfig", "Vehicle",
-    "apply_overrides", "config_from_dict", "flatten", "load_config", "scaled_bounds",
+    "CONFIGS", "apply_overrides", "config_from_dict", "register_config", "flatten", "load_config", "scaled_bounds",
 ]  # fmt: skip

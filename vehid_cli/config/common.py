@@ -9,7 +9,8 @@ import hashlib
 import json
 import typing
 from collections.abc import Mapping
-from typing import Annotated, Literal
+from pathlib import Path
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
@@ -148,6 +149,26 @@ class SystemConfig(_Section):
         """SHA-256 of the resolved config, independent of key order and formatting."""
         canonical = json.dumps(self.model_dump(mode="json", exclude_none=True, by_alias=True), sort_keys=True)
         return hashlib.sha256(canonical.encode()).hexdigest()
+
+    def resolved(self, path: Path) -> SystemConfig:
+        """The config with the files it names relative to its own file (`path`) resolved against that file's
+        directory (a system with such files overrides this)."""
+        return self
+
+    def data_runs(self) -> tuple[str, ...]:
+        """The measured runs the config names to identify from (empty: simulated data)."""
+        return ()
+
+    def related_runs(self, measured: bool) -> tuple[str, ...]:
+        """Other files a campaign's results depend on (held-out runs, a stage's own run); `measured`: the campaign
+        identifies from measured runs."""
+        return ()
+
+    def _relocated(self, update: dict[str, Any]) -> SystemConfig:
+        """A copy with some sections replaced, keeping the source it was read from."""
+        cfg = self.model_copy(update=update)
+        cfg._source = self._source
+        return cfg
 
 
 def scaled_bounds(

@@ -7,7 +7,8 @@ from typing import Annotated, Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
-from ..models.bench import BENCH_QUANTITIES, UNITS
+from ..core.units import UNITS
+from ..models.bench import BENCH_QUANTITIES
 from ..models.damper import MODELS, default_values
 from ..models.effects import BENCH_EFFECTS, LIBRARY, bound_violation
 from .common import (
@@ -84,7 +85,7 @@ class DataColumns(_Section):
 
 
 class DataUnits(_Section):
-    """Units of the columns (see vehid_cli.bench.UNITS); a unit left out is the one the file declares (MDF4
+    """Units of the columns (see vehid_cli.core.units.UNITS); a unit left out is the one the file declares (MDF4
     channel unit, HDF5 `unit` attribute), else the SI default below."""
 
     time: str = "s"
@@ -283,22 +284,30 @@ class DamperConfig(SystemConfig):
         return {n: tuple(ident.limits.get(n, scaled[n])) for n in ident.unknowns}
 
 
-def _resolve_damper_paths(cfg: DamperConfig, path: Path) -> DamperConfig:
-    """Data files named relative to the config file are resolved against its directory."""
+    def resolved(self, path: Path) -> DamperConfig:
+        """Data files (the run, the held-out runs, the stages' runs) named relative to the config file are resolved
+        against its directory."""
 
-    def resolve(name: str) -> str:
-        return name if Path(name).is_absolute() else (path.parent / name).as_posix()
+        def resolve(name: str) -> str:
+            return name if Path(name).is_absolute() else (path.parent / name).as_posix()
 
-    source = cfg.source
-    stages = tuple(
-        s.model_copy(update={"file": resolve(s.file)}) if s.file is not None else s for s in cfg.identify.stages
-    )
-    cfg = cfg.model_copy(update={"identify": cfg.identify.model_copy(update={"stages": stages})})
-    data = cfg.data
-    if data is not None:
-        update = {"validate_files": tuple(resolve(f) for f in data.validate_files)}
-        if data.file is not None:
-            update["file"] = resolve(data.file)
-        cfg = cfg.model_copy(update={"data": data.model_copy(update=update)})
-    cfg._source = source
-    return cfg
+        stages = tuple(
+            s.model_copy(update={"file": resolve(s.file)}) if s.file is not None else s for s in self.identify.stages
+        )
+        cfg = self._relocated({"identify": self.identify.model_copy(update={"stages": stages})})
+        data = cfg.data
+        if data is not None:
+            update = {"validate_files": tuple(resolve(f) for f in data.validate_files)}
+            if data.file is not None:
+                update["file"] = resolve(data.file)
+            cfg = cfg._relocated({"data": data.model_copy(update=update)})
+        return cfg
+
+    def data_runs(self) -> tuple[str, ...]:
+        """The training run of data.file (its held-out runs are data.validate)."""
+        return () if self.data is None or self.data.file is None else (self.data.file,)
+
+    def related_runs(self, measured: bool) -> tuple[str, ...]:
+        """The held-out runs (data.validate, when fitting measured data) and the stages' own runs."""
+        held_out = tuple(str(p) for p in self.data.validate_files) if measured and self.data is not None else ()
+        return held_out + tuple(str(s.file) for s in self.identify.stages if s.file is not None)

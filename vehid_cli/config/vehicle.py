@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
 from ..core.errors import InputError
+from ..core.units import UNITS
 from ..io.logger import SI_FACTORS
-from ..models.bench import UNITS
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
 from ..models.sensors import FAMILY, Layout, corner_layout
@@ -422,3 +423,18 @@ class Config(SystemConfig):
         lo_f, hi_f = ident.bounds
         box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
         return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
+
+    def resolved(self, path: Path) -> Config:
+        """The road file and the data runs named relative to the config file, resolved against its directory."""
+        cfg = self
+        if cfg.road.file is not None and not Path(cfg.road.file).is_absolute():
+            road = cfg.road.model_copy(update={"file": (path.parent / cfg.road.file).as_posix()})
+            cfg = cfg._relocated({"road": road})
+        if cfg.data.files:
+            files = tuple(f if Path(f).is_absolute() else (path.parent / f).as_posix() for f in cfg.data.files)
+            cfg = cfg._relocated({"data": cfg.data.model_copy(update={"files": files})})
+        return cfg
+
+    def data_runs(self) -> tuple[str, ...]:
+        """The runs of data.files (identified jointly when there are several)."""
+        return tuple(self.data.files)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import h5py
 
-from ..io.measurement import write_bytes
+from .files import write_bytes
 
 _names = itertools.count()
 

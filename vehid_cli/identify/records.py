@@ -14,7 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import AnyConfig
-from ..io.measurement import atomic_path
+from ..core.files import atomic_path
+from ..core.jsonio import finite_or_none
 from ..optimizers.base import Problem
 from .crlb import CramerRao
 
@@ -183,3 +184,43 @@ class Campaign:
     system: str = "vehicle"  # which system (systems.SYSTEMS) ran it: vehicle or damper
     findings: Any = None
     data_files: tuple[str, ...] = ()  # every measured run identified from (several: jointly); data_file names them
+    objective: str = ""  # what a run's cost is (f1, f2, wls; J for a damper): System.objective_label
+
+    def to_json(self) -> dict:
+        """SPEC section 5 `identify` object (plus a few extra keys); strict JSON once through `core.jsonio`."""
+        s, b, names = self.summary, self.bound, list(self.names)
+
+        def obj(values):
+            return None if values is None else {n: finite_or_none(v) for n, v in zip(names, values, strict=True)}
+
+        evals = [int(e) for e in s.evaluations]
+        return {
+            "parameters": names,
+            "truth": obj(self.truth),
+            "mean": obj(s.mean),
+            "re_percent": obj(s.re_percent),
+            "nre_percent": s.nre_percent,
+            "per_run_nre_percent": None if s.per_run_nre_percent is None else [float(v) for v in s.per_run_nre_percent],
+            "crlb": {
+                "re_sd_percent": obj(b.re_sd_percent),
+                "nre_rms_percent": finite_or_none(b.nre_rms_percent),
+                "unidentifiable": b.unidentifiable(),
+            },
+            "evaluations_per_run": float(np.mean(evals)),
+            "runs": len(self.records),
+            "wall_s": s.wall_s,
+            "per_run_nre_median": s.per_run_nre_median,
+            "per_run_nre_rms": s.per_run_nre_rms,
+            "nre_over_crlb": s.nre_over_crlb,
+            "evaluations": evals,
+            "penalised_evaluations": s.penalised,
+            "runs_at_penalty": s.at_penalty,
+            "converged_runs": s.converged,
+            "chi2_per_sample": s.chi2_median,
+            "model_inadequate": s.model_inadequate,
+            "objective": self.objective,
+            "algorithm": self.config.identify.algorithm.name,
+            "noise_level": self.config.noise.level,
+            "system": self.system,
+            **({} if self.findings is None else self.findings.to_json(self)),
+        }

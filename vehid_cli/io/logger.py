@@ -3,7 +3,7 @@
 Vehicle data loggers write ASAM MDF4 (`.mf4`/`.mdf`), test engineers pass on MATLAB files (`.mat`, v5 or the
 HDF5-based v7.3), HDF5 (`.h5`/`.hdf5`) and CSV exports (`.csv`/`.txt`, numeric or ISO 8601 time stamps).
 `read_record` reads the channels a caller names (our name -> the name in the file), converts them to SI
-(`bench.UNITS`: one unit table for the whole package) and puts them on one uniform grid:
+(`core.units.UNITS`: one unit table for the whole package) and puts them on one uniform grid:
 
 - the grid rate is `rate` when given, else the highest channel rate; the grid spans the time all channels cover;
 - a channel sampled faster than the grid (down-sampling) is first low-passed on its own grid with a zero-phase
@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.errors import InputError
-from ..models.bench import UNITS
+from ..core.units import UNITS
 from .measurement import UNIFORM_TOLERANCE, read_table
 
 SUFFIXES = {
@@ -59,7 +59,7 @@ DOWNSAMPLE_ORDER = 8  # Butterworth order of the anti-alias filter (applied forw
 DOWNSAMPLE_CUTOFF = 0.4  # its cut-off as a fraction of the new rate (0.8 x the new Nyquist frequency)
 RATE_MATCH = 1e-2  # a channel within 1 % of the grid rate is at the grid rate (no filter)
 NOMINAL_RATE_MATCH = 0.05  # time stamps printed off a nominal rate: each step within 5 % of 1 / rate
-# One unit name -> its factor to SI, over all quantities of bench.UNITS (no unit name means two things there).
+# One unit name -> its factor to SI, over all quantities of core.units.UNITS (no unit name means two things there).
 SI_FACTORS: dict[str, float] = {unit: f for table in UNITS.values() for unit, f in table.items()}
 
 
@@ -559,7 +559,7 @@ def read_record(
     [Hz] gives the sampling rate; with one, `rate` is the rate of the grid (default: the highest channel rate;
     below a channel's rate, the channel is low-passed before it is down-sampled). `window` (start, stop) [s]
     keeps start <= t - t0 < stop, t0 the start of the record; times are kept, t0 is 0. `variable` names the MAT
-    struct (or HDF5 group) that holds the channels when there is more than one. `time_unit` (bench.UNITS['time'])
+    struct (or HDF5 group) that holds the channels when there is more than one. `time_unit` (core.units.UNITS['time'])
     is the unit of a numeric time column/vector (CSV, MAT, HDF5; MDF4 stamps are seconds). `nominal_rate` [Hz]
     declares stamps printed with too few digits to be uniform: each step must be within 5 % of 1 / rate, and the
     stamps are rebuilt as t0 + k / rate with the samples kept as they are (NominalRateError otherwise).

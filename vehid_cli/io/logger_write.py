@@ -34,9 +34,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.errors import InputError
+from ..core.files import atomic_path
 from ..core.h5file import h5_file
 from .logger import SUFFIXES, own_time_name, unit_factor
-from .measurement import atomic_path
 
 MATLAB_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
 MATLAB_NAME_LENGTH = 63  # namelengthmax
@@ -55,7 +55,7 @@ def write_record(
     """Write a run to `path` in the format of its suffix (module docstring); return the path.
 
     `channels`: our name -> (t [s], values in SI units), each channel with its own strictly increasing time stamps
-    (a rate of its own). `units`: our name -> the unit it is written in (`bench.UNITS`, e.g. 'g', 'mm'; default
+    (a rate of its own). `units`: our name -> the unit it is written in (`core.units.UNITS`, e.g. 'g', 'mm'; default
     SI). `names`: our name -> its name in the file (default ours). `start`: the wall-clock time of t = 0 (MDF4
     header, an attribute, a variable or a comment line). Bad input is an InputError naming the file and the
     channel (our name and the file's)."""

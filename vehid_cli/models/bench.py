@@ -5,12 +5,11 @@ control input u(t) [0..1] and, when measured, the force F(t) [N]. Excitations fo
 section 4.2: constant very low velocity in compression and rebound (gas force), a 25 mm sine at 0.8 Hz
 (Bouc-Wen or force-map row at one control input), a 25 mm sawtooth at ±0.15 m/s with control steps
 (time constants and delays). Measured runs are read by `systems.damper.read_bench` through `logger.read_record`
-(every file format; `UNITS` below is the package's one unit table).
+(every file format; units through `core.units`).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -19,17 +18,6 @@ from numpy.typing import NDArray
 
 from ..core.errors import InputError
 
-UNITS: dict[str, dict[str, float]] = {
-    "time": {"s": 1.0, "ms": 1e-3},
-    "displacement": {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "in": 0.0254},
-    "velocity": {"m/s": 1.0, "mm/s": 1e-3, "cm/s": 1e-2, "in/s": 0.0254},
-    "force": {"N": 1.0, "kN": 1e3, "lbf": 4.4482216152605, "lb": 4.4482216152605, "kip": 4448.2216152605},
-    "control": {"1": 1.0, "fraction": 1.0, "%": 0.01, "percent": 0.01, "V": 1.0, "A": 1.0},
-    # quantities of vehicle logger channels (vehid_cli.logger); g is standard gravity (ISO 80000-3)
-    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "mm/s^2": 1e-3, "g": 9.80665},
-    "angle": {"rad": 1.0, "deg": math.pi / 180, "°": math.pi / 180},
-    "angular velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "°/s": math.pi / 180},
-}
 BENCH_QUANTITIES = ("time", "displacement", "velocity", "force", "control")  # the columns of a bench file
 
 

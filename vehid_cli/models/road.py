@@ -7,10 +7,42 @@ their side, (a1 + a2)/V later.
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..config import Bump, RandomRoad, Road
+
+class Bump(Protocol):
+    """A discrete obstacle (the config's `road.bump`): shape, length [m], plateau [m], heights under corners 1..4 [m],
+    the time the front tyres meet it [s]."""
+
+    shape: str
+    length: float
+    plateau: float
+    heights: tuple[float, float, float, float]
+    start_time: float
+
+
+class RandomRoad(Protocol):
+    """An ISO 8608 random road (the config's `road.random`): class, band of spatial frequencies [cycles/m], fade-in
+    distance [m]."""
+
+    iso_class: str
+    n_min: float
+    n_max: float
+    fade_in: float
+
+
+class Road(Protocol):
+    """The configured road (the config's `road`): bumps and/or a random road at the forward speed V [m/s]."""
+
+    file: str | None
+    bump: Bump | None
+    random: RandomRoad | None
+
+    @property
+    def V(self) -> float: ...
 
 REAR_CORNERS = np.array([False, False, True, True])  # corners 3, 4
 SIDE_OF_CORNER = np.array([0, 1, 1, 0])  # wheel track: 0 = side b1 (corners 1, 4), 1 = side b2 (2, 3)

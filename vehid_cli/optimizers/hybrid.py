@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from . import abc, cpso, de, ga, nelder_mead  # noqa: F401  (the global phases it may run register themselves)
 from .base import REGISTRY, BudgetExhausted, Optimizer, Search, register
 from .lsq import polish
 

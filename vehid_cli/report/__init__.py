@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 from pathlib import Path
 
@@ -11,12 +9,12 @@ import h5py
 import yaml
 from rich.console import Console
 
-from ..campaign.results import CAMPAIGN_KIND, campaign_json, check_integrity, open_results, read_campaign_h5, to_json
+from ..campaign.results import CAMPAIGN_KIND, check_integrity, open_results, read_campaign_h5
 from ..campaign.sweep import read_index
 from ..core.errors import InputError
+from ..core.jsonio import to_json
 from ..identify.records import Campaign
-from ..systems.damper import report as damper
-from . import tables
+from ..systems import SYSTEMS, System
 
 FORMATS = ("table", "md", "csv", "latex", "json")
 
@@ -100,7 +98,7 @@ def file_provenance(path: str) -> dict:
         return out
 
 
-def system_of(campaigns: list[Campaign], files: list[str]) -> str:
+def system_of(campaigns: list[Campaign], files: list[str]) -> type[System]:
     """The one system the campaigns share (their tables differ by system); InputError naming a file otherwise."""
     first = campaigns[0].system
     for c, f in zip(campaigns, files, strict=True):
@@ -109,14 +107,14 @@ def system_of(campaigns: list[Campaign], files: list[str]) -> str:
                 f"is a {c.system} campaign but {files[0]} is a {first} campaign; report each system separately",
                 source=f,
             )
-    return first
+    if first not in SYSTEMS:
+        raise InputError(f"a campaign of an unknown system '{first}'", source=files[0])
+    return SYSTEMS[first]
 
 
 def rich_tables(campaigns: list[Campaign], files: list[str]) -> list:
-    """The terminal tables: one per campaign (a damper's parameters and J), or the car's summary tables."""
-    if system_of(campaigns, files) == "damper":
-        return [damper.parameter_table(c, f) for c, f in zip(campaigns, files, strict=True)]
-    return [tables.summary_table(c) for c in campaigns]
+    """The terminal tables of the campaigns' system (the car's summary tables, a damper's parameters and J)."""
+    return system_of(campaigns, files).tables(campaigns, files)
 
 
 def campaign_notes(c: Campaign) -> list[str]:
@@ -161,24 +159,14 @@ def plain_text(tables: list, width: int = 160) -> str:
 
 
 def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dict | None = None) -> str:
-    """The report as text in format `fmt` (all but 'table', which is printed with rich)."""
-    if system_of(campaigns, files) == "damper":
-        if fmt == "latex":
-            raise InputError("--format latex is not available for damper campaigns; use table, md, csv or json")
-        return {"md": damper.markdown, "csv": damper.csv_text, "json": damper.json_text}[fmt](campaigns, files)
-    if fmt == "md":
-        return tables.markdown(campaigns, published)
-    if fmt == "latex":
-        return tables.latex(campaigns, published)
+    """The report as text in format `fmt` (all but 'table', which is printed with rich): JSON is one document per
+    campaign with its file and provenance, for every system; the others are the system's own."""
+    system = system_of(campaigns, files)
     if fmt == "json":
         docs = [
-            dict(campaign_json(c), file=f, provenance=file_provenance(f)) for c, f in zip(campaigns, files, strict=True)
+            dict(c.to_json(), file=f, provenance=file_provenance(f)) for c, f in zip(campaigns, files, strict=True)
         ]
         return to_json(docs)
-    if fmt == "csv":
-        buf = io.StringIO()
-        writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(tables.CSV_COLUMNS)
-        writer.writerows(tables.csv_rows(campaigns, files))
-        return buf.getvalue()
-    raise InputError(f"unknown format '{fmt}'; expected one of {', '.join(FORMATS)}")
+    if fmt not in FORMATS or fmt == "table":
+        raise InputError(f"unknown format '{fmt}'; expected one of {', '.join(FORMATS)}")
+    return system.render(campaigns, files, fmt, published)

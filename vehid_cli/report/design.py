@@ -6,17 +6,14 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import matplotlib
 import numpy as np
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from rich.table import Table  # noqa: E402
+from rich.table import Table
 
 from .. import __version__
-from ..campaign.results import finite_or_none
+from ..core.figures import plt, save
+from ..core.files import atomic_path
+from ..core.jsonio import finite_or_none
 from ..design.search import LABELS, DesignResult, Evaluation, Plan
-from ..io.measurement import atomic_path
 
 CRITERION_TEXT = {"nre": "NRE bound [%]", "d_optimal": "-log det F", "worst": "largest bound [%]"}
 
@@ -297,8 +294,6 @@ def write_plots(r: DesignResult, directory: str | Path) -> list[Path]:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         path = directory / filename
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=110, format="png")
-        plt.close(fig)
+        save(fig, path)
         written.append(path)
     return written

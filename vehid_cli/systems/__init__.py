@@ -1,31 +1,52 @@
 """Systems under test behind one seam (`System`): the full car on a road, a damper on a test bench.
 
-`build_system(config, data_file)` picks the system a config describes; `SYSTEMS` maps the results file's
-`system` attribute back to its class (to read what the system added to a campaign).
+`SYSTEMS` maps a config's (and a results file's) `system` name to its class; `register_system` adds one (a system
+is one sub-package plus its config section, registered with `config.register_config`). `build_system(config,
+data)` builds the system a config describes with its reference data; `write_simulation` and `diagnose_config`
+are the library side of `vehid simulate` and `vehid diagnose`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
-from ..config import AnyConfig, DamperConfig
+from ..config import AnyConfig, load_config
 from ..core.errors import InputError
-from .base import Box, Simulated, System
-from .damper.system import DamperSystem, Findings
+from ..identify.source import DataFiles, DataSource, as_paths
+from .base import Box, Log, Simulated, System
+from .damper.findings import Findings
+from .damper.system import DamperSystem
 from .vehicle.system import VehicleSystem
 
 SYSTEMS: dict[str, type[System]] = {VehicleSystem.name: VehicleSystem, DamperSystem.name: DamperSystem}
-SIMULATION_SUFFIXES = tuple(dict.fromkeys(s for c in SYSTEMS.values() for s in c.simulation_suffixes))
+
+
+def register_system(cls: type[System]) -> type[System]:
+    """Make a system known by its name (usable as a class decorator)."""
+    SYSTEMS[cls.name] = cls
+    return cls
+
+
+def simulation_suffixes() -> tuple[str, ...]:
+    """Every file type some system's `vehid simulate` writes."""
+    return tuple(dict.fromkeys(s for c in SYSTEMS.values() for s in c.simulation_suffixes))
 
 
 def system_class(config: AnyConfig) -> type[System]:
     """The system a config describes (its `system` key)."""
-    return DamperSystem if isinstance(config, DamperConfig) else VehicleSystem
+    try:
+        return SYSTEMS[config.system]
+    except KeyError:
+        raise InputError(
+            f"no system '{config.system}' (known: {', '.join(SYSTEMS)})", source=config.source, key="system"
+        ) from None
 
 
-def build_system(config: AnyConfig, data_file: str | Path | None = None) -> System:
-    """The system a config describes, with its reference data (simulated, or read from `data_file`)."""
-    return system_class(config)(config, data_file)
+def build_system(config: AnyConfig, data: DataFiles | DataSource = None) -> System:
+    """The system a config describes, with its reference data: simulated, or the measured runs of `data` (else the
+    config's own)."""
+    return system_class(config)(config, DataSource.resolve(config, data))
 
 
 def write_simulation(
@@ -42,7 +63,23 @@ def write_simulation(
     return cls.write_simulation(config, target, seed, road, origin)
 
 
+def diagnose_config(
+    config: str | Path,
+    overrides: Sequence[str] = (),
+    data: DataFiles = None,
+    validate: Sequence[str | Path] = (),
+    log: Log | None = None,
+):
+    """`vehid diagnose`: the config's system closes the loop on `data` (else the config's own runs), judged on the
+    `validate` runs; the system's diagnosis defaults come before the user's `overrides`."""
+    cfg = load_config(config, overrides)
+    cls = system_class(cfg)
+    if cls.diagnosis_defaults:
+        cfg = load_config(config, [*cls.diagnosis_defaults, *overrides])
+    return cls.diagnose(cfg, as_paths(data), as_paths(tuple(validate)), log)
+
+
 __all__ = [
-    "SIMULATION_SUFFIXES", "SYSTEMS", "Box", "DamperSystem", "Findings", "Simulated", "System", "VehicleSystem",
-    "build_system", "system_class", "write_simulation",
+    "SYSTEMS", "Box", "DamperSystem", "Findings", "Simulated", "System", "VehicleSystem", "build_system",
+    "diagnose_config", "register_system", "simulation_suffixes", "system_class", "write_simulation",
 ]  # fmt: skip

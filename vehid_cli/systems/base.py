@@ -9,7 +9,7 @@ adds to the campaign (the damper's identified model, held-out J, real-time check
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -18,11 +18,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import AnyConfig
+from ..core.errors import InputError
 from ..identify.crlb import CramerRao
 from ..identify.experiment import run_streams
-from ..identify.records import RunRecord
+from ..identify.records import Campaign, RunRecord
+from ..identify.source import DataSource
 from ..optimizers import get_optimizer
 from ..optimizers.base import Problem
+
+Log = Callable[[str], None]
 
 
 @dataclass(frozen=True)
@@ -45,46 +49,22 @@ class Box:
     truth: NDArray | None  # the true values when known
 
 
-DataFiles = str | Path | Sequence[str | Path] | None  # one measured run, several (identified jointly), or none
-
-
-def data_paths(data: DataFiles) -> tuple[str, ...]:
-    """The data files as a tuple of paths (empty: simulated data)."""
-    if data is None:
-        return ()
-    if isinstance(data, (str, Path)):
-        return (str(data),)
-    return tuple(str(p) for p in data)
-
-
-def configured_data_file(config: AnyConfig, data_file: DataFiles) -> DataFiles:
-    """The data a campaign identifies from: `--data` (one file or several), else the config's data.file (a damper)
-    or data.files (the car) (None: simulated)."""
-    if data_paths(data_file):
-        return data_file
-    data = getattr(config, "data", None)
-    if getattr(data, "file", None) is not None:
-        return data.file
-    files = getattr(data, "files", ())
-    return files or None
-
-
-def data_label(files: Sequence[str]) -> str | None:
-    """How results name the data: the file, or the files joined by ' + ' (None: simulated)."""
-    return " + ".join(files) if files else None
-
-
 class System(ABC):
-    """What a system under test offers a campaign. Subclasses set `name` and implement the hooks."""
+    """What a system under test offers the machine above it: campaigns (the box, the reference data of run r, the
+    problem, the bound, what it concludes), `vehid simulate`, `vehid diagnose`, and the tables and figures of its
+    campaigns. Subclasses set `name` and implement the hooks; `systems.register_system` makes a system known.
+    Nothing outside `systems/` (and the config registry) asks which system it holds: it calls these hooks."""
 
-    name: ClassVar[str]  # "vehicle" or "damper": the results file's `system` attribute
+    name: ClassVar[str]  # the config's `system` key and the results file's `system` attribute
     objective: ClassVar[str]  # what `cost` means in the records (f1, f2, wls; J)
     findings_type: ClassVar[Any] = None  # what `conclude` returns: a class with write_h5(group), read_h5(group)
     simulation_suffixes: ClassVar[tuple[str, ...]] = (".csv", ".h5", ".hdf5")  # what `write_simulation` writes
+    designable: ClassVar[bool] = False  # `vehid design` can plan its test
+    diagnosis_defaults: ClassVar[tuple[str, ...]] = ()  # --set lines a diagnosis starts from (the user's come after)
 
     config: AnyConfig
+    source: DataSource  # the measured runs (and related files), resolved once
     box: Box
-    data_file: str | None  # the measured run(s) identified from, `data_label` (None: simulated data)
     sigma: dict[str, NDArray]  # noise standard deviation per channel, per family
     sigma_source: str  # how sigma was obtained
 
@@ -93,10 +73,15 @@ class System(ABC):
         return self.box.names
 
     @property
+    def data_file(self) -> str | None:
+        """How results name the measured run(s) (None: simulated data)."""
+        return self.source.label
+
+    @property
     def runs(self) -> int:
         """Runs of the campaign: identify.runs on simulated data (each its own noise); one fit on measured data,
         where every run would identify from the same data."""
-        return self.config.identify.runs if self.data_file is None else 1
+        return self.config.identify.runs if self.source.simulated else 1
 
     @property
     def residual_samples(self) -> int:
@@ -105,7 +90,49 @@ class System(ABC):
 
     def data_files(self) -> tuple[str, ...]:
         """Every file the campaign's results depend on (their bytes enter the campaign key)."""
-        return () if self.data_file is None else (self.data_file,)
+        return self.source.files
+
+    # ---------------------------------------------------------------------------- what differs per system, by class
+
+    @classmethod
+    def objective_label(cls, config: AnyConfig) -> str:
+        """What a campaign's cost is for this config (results files, tables, progress)."""
+        return cls.objective
+
+    @classmethod
+    def results_attributes(cls, config: AnyConfig) -> dict[str, str]:
+        """Root attributes of a campaign file that only this system has (the car's sensors, the damper's model)."""
+        return {}
+
+    @classmethod
+    def diagnose(cls, config: AnyConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None) -> Any:
+        """`vehid diagnose`: close the loop on the measured `data` (judged on the `validate` runs) -> a
+        `diagnose.loop.Diagnosis`."""
+        raise InputError(f"vehid diagnose has no loop for a {cls.name} yet", source=config.source, key="system")
+
+    @classmethod
+    def tables(cls, campaigns: Sequence[Campaign], files: Sequence[str]) -> list:
+        """The terminal (rich) tables of campaigns of this system: by default, each campaign's parameters."""
+        from .report import parameter_tables
+
+        return parameter_tables(campaigns, files)
+
+    @classmethod
+    def render(cls, campaigns: Sequence[Campaign], files: Sequence[str], fmt: str, published: dict | None) -> str:
+        """A report in `fmt` (md, csv, latex; JSON is the same for every system) of campaigns of this system."""
+        from .report import render_parameters
+
+        return render_parameters(campaigns, files, fmt)
+
+    @classmethod
+    def figures(cls, campaigns: Sequence[Campaign], files: Sequence[str], out_dir: Path) -> list[Path]:
+        """`vehid report --plots`: the figures of campaigns of this system; the paths written."""
+        return []
+
+    @classmethod
+    def plot_simulation(cls, simulated: Simulated, path: Path) -> None:
+        """`vehid simulate --plot`: the figure of one simulated run."""
+        raise InputError(f"no figure of a simulated {cls.name} run yet", source=str(path))
 
     @classmethod
     @abstractmethod
@@ -138,7 +165,7 @@ class System(ABC):
         """Where a run's optimizer starts: the configured values (`config`, or `auto` on measured data), else None
         (the optimizer's own random start from the run's stream)."""
         mode = self.config.identify.start
-        return self.box.nominal if mode == "config" or (mode == "auto" and self.data_file is not None) else None
+        return self.box.nominal if mode == "config" or (mode == "auto" and not self.source.simulated) else None
 
     def identify_run(self, index: int) -> RunRecord:
         """Run `index`: its own data (noise) and its own optimizer stream, within the evaluation budget."""

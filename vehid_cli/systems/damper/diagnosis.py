@@ -49,8 +49,8 @@ from ...models.effects import LIBRARY
 from ...models.noise import estimate_noise_sigma
 from ...optimizers import get_optimizer
 from ...optimizers.base import Problem
+from .bench import configured_spec, load_measured
 from .fit import PENALTY_FACTOR, DamperSpec
-from .system import configured_spec, load_measured
 
 MAX_ROUNDS = 4
 MIN_GAIN = 0.02

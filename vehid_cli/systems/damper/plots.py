@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...report.plots import _save, plt
+from ...core.figures import plt, save
 
 
 def _panels(title: str):
@@ -35,7 +35,7 @@ def plot_bench(history, clean, path: str | Path, title: str = "simulated bench r
         _draw(axes, history.t, history.x, history.v, history.force, lw=0.5, color="0.6", label="noisy")
     _draw(axes, history.t, history.x, history.v, clean, lw=1.2, color="C0", label="clean")
     axes[0].legend(fontsize=8)
-    _save(fig, Path(path))
+    save(fig, path)
 
 
 def plot_traces(name: str, entries: list[tuple[str, object]], path: str | Path) -> None:
@@ -47,7 +47,7 @@ def plot_traces(name: str, entries: list[tuple[str, object]], path: str | Path) 
     for k, (lab, tr) in enumerate(entries):
         _draw(axes, tr.t, tr.x, tr.v, tr.model, lw=1.0, color=f"C{k}", label=f"{lab} (J = {tr.J:.4f})")
     axes[0].legend(fontsize=8, loc="best")
-    _save(fig, Path(path))
+    save(fig, path)
 
 
 def write_damper_plots(results, labels: list[str], out_dir: str | Path) -> list[Path]:

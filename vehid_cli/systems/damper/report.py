@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from rich.table import Table
 
-from ...campaign.results import campaign_json, to_json
+from ...core.jsonio import to_json
 from ...identify.records import Campaign
 
 CSV_COLUMNS = (
@@ -163,4 +163,4 @@ def csv_text(results: list[Campaign], files: list[str]) -> str:
 
 
 def json_text(results: list[Campaign], files: list[str]) -> str:
-    return to_json([dict(campaign_json(r), file=f) for r, f in zip(results, files, strict=True)])
+    return to_json([dict(r.to_json(), file=f) for r, f in zip(results, files, strict=True)])

@@ -10,202 +10,35 @@ held-out runs, the real-time check and the force traces for the figures.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-import h5py
 import numpy as np
 from numpy.typing import NDArray
 
 from ... import __version__
 from ...config import DamperConfig
 from ...core.errors import InputError
-from ...core.h5file import h5_file
-from ...core.provenance import provenance
+from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao, cramer_rao_outputs
 from ...identify.experiment import run_streams
-from ...identify.records import RunRecord
-from ...io.logger import NominalRateError, read_record
-from ...io.measurement import atomic_path, format_rows
-from ...models.bench import BenchHistory, sawtooth, sine, triangle, with_force
+from ...identify.records import Campaign, RunRecord
+from ...identify.source import DataSource
+from ...models.bench import BenchHistory
 from ...models.noise import estimate_noise_sigma
 from ...optimizers.base import Problem
-from ..base import Box, DataFiles, Simulated, System, configured_data_file, data_paths
-from .fit import DamperSpec, RealTime, cost_J, fit, j_problem, realtime_check
-
-BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "u", "force": "force"}
-
+from ..base import Box, Log, Simulated, System
+from .bench import configured_spec, load_measured, simulate_bench, write_bench_csv, write_bench_h5
+from .diagnosis import diagnose_damper
+from .findings import Findings, Trace
+from .fit import DamperSpec, cost_J, fit, j_problem, realtime_check
 
 # ------------------------------------------------------------------------------------------ bench data
 
 
-def bench_history(cfg: DamperConfig, bench=None) -> BenchHistory:
-    """The configured virtual-bench excitation (motion and control input, no force yet); `bench` replaces
-    the config's bench section (a stage's own excitation)."""
-    b = bench if bench is not None else cfg.bench
-    if b.excitation == "sine":
-        return sine(b.amplitude, b.frequency, b.cycles, b.dt, b.control)
-    if b.excitation == "sawtooth":
-        steps = None if b.steps is None else [tuple(s) for s in b.steps]
-        return sawtooth(b.amplitude, b.velocity, b.cycles, b.dt, b.control, steps)
-    h = triangle(b.amplitude, b.velocity, 1.0, b.dt, b.control)  # constant_velocity: one slow stroke each way
-    return replace(h, source="constant_velocity")
-
-
-def configured_spec(cfg: DamperConfig) -> DamperSpec:
-    """The configured damper: every parameter valued (configured over defaults)."""
-    return DamperSpec(cfg.damper.model, cfg.values(), cfg.table_shape, tuple(cfg.damper.effects))
-
-
-@dataclass(frozen=True)
-class SimulatedBench:
-    """A simulated bench run: the history with the noisy force, and the clean force [N]."""
-
-    history: BenchHistory
-    clean: NDArray
-    sigma: float  # force noise standard deviation [N]
-
-
-def simulate_bench(cfg: DamperConfig, noise_rng: np.random.Generator, bench=None) -> SimulatedBench:
-    """Simulate the configured damper on the configured bench (or a stage's `bench`); noise sigma = level *
-    std(clean force)."""
-    history = bench_history(cfg, bench)
-    clean = configured_spec(cfg).simulate(history, cfg.bench.substeps)
-    if not np.all(np.isfinite(clean)):
-        raise InputError(
-            "the configured damper is unstable on this bench (non-finite force); raise bench.substeps or check "
-            "the parameters",
-            source=cfg.source,
-            key="damper.parameters",
-        )
-    sigma = float(cfg.noise.level * np.std(clean))
-    noisy = clean + sigma * noise_rng.standard_normal(clean.size)
-    return SimulatedBench(with_force(history, noisy, source=f"bench:{history.source}"), clean, sigma)
-
-
-def write_bench_csv(path: str | Path, history: BenchHistory, comments: list[str]) -> None:
-    """A bench file: columns t [s], x [m], v [m/s], u [-], force [N]; `#` comment lines first; atomic."""
-    data = np.column_stack([history.t, history.x, history.v, history.u, history.force])
-    header = "\n".join(f"# {c}" for c in comments)
-    with atomic_path(path) as tmp, open(tmp, "w") as fh:
-        fh.write(header + "\n" if header else "")
-        fh.write("t,x,v,u,force\n")
-        fh.write(format_rows(data))
-
-
-def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, seed: int) -> None:
-    """A bench run in HDF5: /t, /x, /v, /u, /force (noisy), /clean_force, with the resolved config."""
-
-    h = run.history
-    with h5_file(path) as h5:
-        h5.attrs["kind"] = "vehid.bench"
-        h5.attrs["config_yaml"] = cfg.to_yaml()
-        h5.attrs["config_sha256"] = cfg.digest()
-        h5.attrs["noise_level"] = cfg.noise.level
-        h5.attrs["noise_sigma_N"] = run.sigma
-        h5.attrs["seed"] = seed
-        for key, value in provenance().items():
-            h5.attrs[key] = value
-        for name, values, unit in (("t", h.t, "s"), ("x", h.x, "m"), ("v", h.v, "m/s"), ("u", h.u, "1"),
-                                   ("force", h.force, "N"), ("clean_force", run.clean, "N")):  # fmt: skip
-            h5.create_dataset(name, data=values).attrs["unit"] = unit
-
-
-MIN_RUN_S = 0.1  # [s] shortest bench run: damper_fit.realtime_check resamples it at steps up to 50 ms
-
-
-def read_bench(
-    path: str | Path,
-    columns: Mapping[str, str | None],
-    units: Mapping[str, str],
-    source_key: str = "data",
-    sample_rate: float | None = None,
-    variable: str | None = None,
-    resample: bool = True,
-) -> BenchHistory:
-    """A measured bench run, read by `logger.read_record` (one reader for every format: CSV with numeric or ISO
-    8601 time stamps, MDF4, MAT v5/v7.3, HDF5): the columns/channels named by the config (time, displacement,
-    force; velocity and control optional) in SI units on one uniform grid starting at t = 0. The velocity, when
-    not measured, is the central difference of x; the control, when not measured, is 0.
-
-    `units` gives a quantity's unit (time included); a channel without one has the unit its file declares (MDF4,
-    HDF5), else SI. Jittered time stamps are resampled at their median rate (logger.py). `sample_rate` [Hz]
-    declares the rate of a file whose time column was printed with too few digits to be uniform: the column must
-    then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it (the samples kept as they
-    are). `variable` names the MAT struct / HDF5 group holding the channels. `resample=False` refuses channels
-    at different rates, jittered stamps and samples off the grid (`read_record`)."""
-    for role in ("time", "displacement", "force"):
-        if not columns.get(role):
-            raise InputError(f"no column given for the {role}", key=f"{source_key}.columns.{role}")
-    channels = {role: str(name) for role, name in columns.items() if name and role != "time"}
-    given = {role: unit for role, unit in units.items() if role in channels}
-    try:
-        record = read_record(
-            path, channels, given, time=str(columns["time"]), time_unit=units.get("time", "s"),
-            nominal_rate=sample_rate, variable=variable, resample=resample,
-        )  # fmt: skip
-    except NominalRateError as exc:
-        raise InputError(exc.detail, source=exc.source, key=f"{source_key}.sample_rate") from None
-    t = record.t
-    x = record.channels["displacement"]
-    v = record.channels.get("velocity")
-    if v is None:
-        v = np.gradient(x, t)
-    u = record.channels.get("control", np.zeros(t.size))
-    return BenchHistory(t, x, v, u, record.channels["force"], source=record.source)
-
-
-def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
-    """A measured bench run with the config's columns, units, window and decimation (SI units)."""
-    data = cfg.data
-    if data is None:  # no data section: the format `vehid simulate` writes
-        columns, units, window, step = dict(BENCH_COLUMNS), {}, None, 1
-    else:
-        columns = data.columns.model_dump()
-        # only the units the config sets: a channel without one has its file's declared unit (MDF4), else SI
-        units = data.units.model_dump(include=data.units.model_fields_set)
-        window, step = data.window, data.decimate
-    rate = None if data is None else data.sample_rate
-    variable = None if data is None else data.variable
-    resample = True if data is None else data.resample
-    history = read_bench(path, columns, units, sample_rate=rate, variable=variable, resample=resample)
-    if window is not None:
-        history = history.window(history.t[0] + window[0], history.t[0] + window[1])
-    if step > 1:
-        f = history.force
-        history = replace(
-            history, t=history.t[::step], x=history.x[::step], v=history.v[::step], u=history.u[::step],
-            force=None if f is None else f[::step],
-        )  # fmt: skip
-    if history.t.size < 3:
-        raise InputError(f"only {history.t.size} samples left after window and decimation", source=str(path))
-    if history.t[-1] - history.t[0] < MIN_RUN_S:
-        raise InputError(
-            f"the run lasts {history.t[-1] - history.t[0]:.3g} s after window and decimation; a bench run must last at "
-            f"least {MIN_RUN_S:g} s (the real-time check of the fitted model steps it at up to 50 ms)",
-            source=str(path),
-        )
-    if np.var(history.force) == 0:
-        raise InputError(f"column '{columns['force']}' is constant: J is undefined", source=str(path))
-    return history
-
-
 # ------------------------------------------------------------------------------------------ fits
-
-
-@dataclass(frozen=True)
-class Trace:
-    """Measured and model force on one bench run (for the figures), with J on it."""
-
-    name: str
-    t: NDArray
-    x: NDArray
-    v: NDArray
-    measured: NDArray
-    model: NDArray
-    J: float
 
 
 def _fit_once(cfg, spec, history, names, box, start, rng) -> tuple:
@@ -274,87 +107,6 @@ def _trace(name: str, history: BenchHistory, spec: DamperSpec, substeps: int) ->
     return Trace(name, history.t, history.x, history.v, history.force, model, float(cost_J(history.force, model)))
 
 
-@dataclass(frozen=True)
-class Findings:
-    """What a damper campaign adds after its runs: the identified model (run 0's, every parameter), J on the
-    held-out runs, the real-time check, and measured/model force traces (training and held out)."""
-
-    model: str
-    names: tuple[str, ...]  # the whole parameter row of the identified model
-    values: NDArray
-    validation: tuple[tuple[str, float], ...]  # (file, J) on held-out runs
-    realtime: RealTime
-    traces: tuple[Trace, ...]
-
-    def write_h5(self, group) -> None:
-        """Into the results file's /damper group (results.py)."""
-        strings = h5py.string_dtype()
-        group.attrs["model"] = self.model
-        group.create_dataset("model_names", data=np.array(self.names, dtype=strings))
-        group.create_dataset("model_values", data=self.values)
-        v = group.create_group("validation")
-        v.create_dataset("files", data=np.array([f for f, _ in self.validation], dtype=strings))
-        v.create_dataset("J", data=np.array([j for _, j in self.validation], dtype=float))
-        rt = group.create_group("realtime")
-        for name in ("dt", "stable", "realtime_factor", "largest_stable_dt"):
-            rt.attrs[name] = getattr(self.realtime, name)
-        tg = group.create_group("traces")
-        for k, tr in enumerate(self.traces):
-            t = tg.create_group(f"{k:02d}")
-            t.attrs["name"], t.attrs["J"] = tr.name, tr.J
-            for name in ("t", "x", "v", "measured", "model"):
-                t.create_dataset(name, data=getattr(tr, name))
-
-    def to_json(self, campaign) -> dict:
-        """The damper's keys of the JSON summary: J per run and of the truth, held-out J, the model, real time."""
-        rt, recs = self.realtime, campaign.records
-        return {
-            "model": self.model,
-            "J": [float(r.cost) for r in recs],
-            "J_truth": None if campaign.truth is None else [float(r.truth_cost) for r in recs],
-            "J_train": float(np.mean([r.cost for r in recs])),
-            "validation_J": {Path(f).name: j for f, j in self.validation},
-            "model_row": {n: float(v) for n, v in zip(self.names, self.values, strict=True)},
-            "realtime": {
-                "dt": rt.dt,
-                "stable": rt.stable,
-                "realtime_factor": rt.realtime_factor,
-                "largest_stable_dt": rt.largest_stable_dt,
-            },  # fmt: skip
-        }
-
-    @classmethod
-    def read_h5(cls, group) -> Findings:
-        """From a results file's /damper group (KeyError for a damaged one)."""
-        model = str(group.attrs["model"])
-        rt = group["realtime"].attrs
-        realtime = RealTime(
-            model, float(rt["dt"]), bool(rt["stable"]), float(rt["realtime_factor"]), float(rt["largest_stable_dt"])
-        )
-        traces = tuple(
-            Trace(
-                str(t.attrs["name"]),
-                t["t"][()],
-                t["x"][()],
-                t["v"][()],
-                t["measured"][()],
-                t["model"][()],
-                float(t.attrs["J"]),
-            )  # fmt: skip
-            for _, t in sorted(group["traces"].items())
-        )
-        files = _text(group["validation/files"][()])
-        return cls(
-            model=model, names=_text(group["model_names"][()]), values=group["model_values"][()],
-            validation=tuple(zip(files, map(float, group["validation/J"][()]), strict=True)), realtime=realtime,
-            traces=traces,
-        )  # fmt: skip
-
-
-def _text(values) -> tuple[str, ...]:
-    return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
-
-
 class DamperSystem(System):
     """A damper on a test bench: the configured model fitted by J (Eq. 7) to bench runs."""
 
@@ -362,9 +114,9 @@ class DamperSystem(System):
     objective: ClassVar[str] = "J"
     findings_type: ClassVar[type] = Findings
 
-    def __init__(self, config: DamperConfig, data_file: DataFiles = None):
+    def __init__(self, config: DamperConfig, source: DataSource):
         cfg = config
-        files = data_paths(configured_data_file(cfg, data_file))
+        files = source.runs
         if len(files) > 1:
             raise InputError(
                 f"a damper is fitted to one bench run at a time, got {len(files)} files ({', '.join(files)}); "
@@ -372,7 +124,7 @@ class DamperSystem(System):
                 source=cfg.source,
             )
         self.config = cfg
-        self.data_file = files[0] if files else None
+        self.source = source
         self.spec = configured_spec(cfg)
         names = tuple(cfg.identify.unknowns)
         box = cfg.search_box()
@@ -404,9 +156,46 @@ class DamperSystem(System):
         """The search box by name."""
         return {n: (lo, hi) for n, lo, hi in zip(self.names, self.box.lower, self.box.upper, strict=True)}
 
-    def data_files(self) -> tuple[str, ...]:
-        stages = tuple(str(s.file) for s in self.config.identify.stages if s.file is not None)
-        return super().data_files() + self.held_out + stages
+    @classmethod
+    def results_attributes(cls, config: DamperConfig) -> dict[str, str]:
+        return {"model": config.damper.model}
+
+    @classmethod
+    def diagnose(
+        cls, config: DamperConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None
+    ) -> Diagnosis:
+        """The bench's loop (`diagnosis.diagnose_damper`) on one run (else data.file), judged on `validate` (else
+        data.validate)."""
+        if len(data) > 1:
+            raise InputError("a damper is diagnosed on one --data run (its validation runs: --validate)",
+                             source=config.source)  # fmt: skip
+        return diagnose_damper(config, data[0] if data else None, validate or None, log=log)
+
+    @classmethod
+    def tables(cls, campaigns: Sequence[Campaign], files: Sequence[str]) -> list:
+        from .report import parameter_table
+
+        return [parameter_table(c, f) for c, f in zip(campaigns, files, strict=True)]
+
+    @classmethod
+    def render(cls, campaigns: Sequence[Campaign], files: Sequence[str], fmt: str, published: dict | None) -> str:
+        from .report import csv_text, markdown
+
+        if fmt == "latex":
+            raise InputError("--format latex is not available for damper campaigns; use table, md, csv or json")
+        return (markdown if fmt == "md" else csv_text)(list(campaigns), list(files))
+
+    @classmethod
+    def figures(cls, campaigns: Sequence[Campaign], files: Sequence[str], out_dir: Path) -> list[Path]:
+        from .plots import write_damper_plots
+
+        return write_damper_plots([c.findings for c in campaigns], [Path(f).stem for f in files], out_dir)
+
+    @classmethod
+    def plot_simulation(cls, simulated: Simulated, path: Path) -> None:
+        from .plots import plot_bench
+
+        plot_bench(simulated.run.history, simulated.run.clean, path, simulated.title)
 
     @classmethod
     def write_simulation(

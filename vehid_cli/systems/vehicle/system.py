@@ -1,8 +1,9 @@
-"""The full car as a `System`: the identification task of `identification.py` (bump runs, four body sensors,
-f1/f2/wls), with its Cramér–Rao bound."""
+"""The full car as a `System`: the identification task of `identify/task.py` (bump runs, sensors anywhere,
+f1/f2/wls), its Cramér–Rao bound, its simulation files, its diagnosis, tables and figures."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import ClassVar
 
@@ -12,10 +13,14 @@ from numpy.typing import NDArray
 
 from ... import __version__
 from ...config import Config
+from ...core.errors import InputError
 from ...core.h5file import h5_file
 from ...core.provenance import provenance
+from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao
 from ...identify.experiment import SimulatedRun, build_experiment, run_streams, simulate_measurement
+from ...identify.records import Campaign
+from ...identify.source import DataSource
 from ...identify.task import JointTask, Task, build_tasks
 from ...io.logger_write import write_record
 from ...io.measurement import ROAD_COLUMNS as ROAD
@@ -23,7 +28,8 @@ from ...io.measurement import write_csv, write_measurement_csv
 from ...models.fullcar import DOF_NAMES
 from ...models.sensors import UNIT
 from ...optimizers.base import Problem
-from ..base import Box, DataFiles, Simulated, System, configured_data_file, data_label, data_paths
+from ..base import Box, Log, Simulated, System
+from .diagnosis import diagnose
 
 
 class VehicleSystem(System):
@@ -33,19 +39,59 @@ class VehicleSystem(System):
     name: ClassVar[str] = "vehicle"
     objective: ClassVar[str] = "f1, f2 or wls (identify.objective)"
     simulation_suffixes: ClassVar[tuple[str, ...]] = (".csv", ".h5", ".hdf5", ".mf4")
+    designable: ClassVar[bool] = True
+    diagnosis_defaults: ClassVar[tuple[str, ...]] = ("identify.objective=wls", "noise.level=0")  # noise from the data
 
-    def __init__(self, config: Config, data_file: DataFiles = None):
-        self._files = data_paths(configured_data_file(config, data_file))
-        self.task: Task | JointTask = build_tasks(config, self._files)
+    def __init__(self, config: Config, source: DataSource):
+        self.task: Task | JointTask = build_tasks(config, source.runs)
         t = self.task
         self.config = config
+        self.source = source
         self.box = Box(t.names, t.lower, t.upper, t.nominal, t.truth)
-        self.data_file = data_label(self._files)
         self.sigma = run_sigma(t)
         self.sigma_source = t.sigma_source
 
-    def data_files(self) -> tuple[str, ...]:
-        return self._files
+    @classmethod
+    def objective_label(cls, config: Config) -> str:
+        return config.identify.objective
+
+    @classmethod
+    def results_attributes(cls, config: Config) -> dict[str, str]:
+        return {"sensors": config.sensors}
+
+    @classmethod
+    def diagnose(cls, config: Config, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None) -> Diagnosis:
+        """The car's loop (`diagnosis.diagnose`) on one run or several jointly (else the config's data.files)."""
+        files = data or config.data_runs()
+        if not files:
+            raise InputError("diagnose needs --data FILE (the measured run to fit) or data.files", source=config.source)
+        if len(validate) > 1:
+            raise InputError("the full car takes one --validate run", source=config.source)
+        return diagnose(config, files[0] if len(files) == 1 else files, validate[0] if validate else None, log=log)
+
+    @classmethod
+    def tables(cls, campaigns: Sequence[Campaign], files: Sequence[str]) -> list:
+        from .report import summary_table
+
+        return [summary_table(c) for c in campaigns]
+
+    @classmethod
+    def render(cls, campaigns: Sequence[Campaign], files: Sequence[str], fmt: str, published: dict | None) -> str:
+        from .report import render
+
+        return render(list(campaigns), list(files), fmt, published)
+
+    @classmethod
+    def figures(cls, campaigns: Sequence[Campaign], files: Sequence[str], out_dir: Path) -> list[Path]:
+        from .plots import write_campaign_plots
+
+        return write_campaign_plots(campaigns, files, out_dir)
+
+    @classmethod
+    def plot_simulation(cls, simulated: Simulated, path: Path) -> None:
+        from .plots import plot_responses
+
+        plot_responses(simulated.run, path)
 
     @property
     def residual_samples(self) -> int:

@@ -1,11 +1,14 @@
-"""Summary tables of campaigns: rich (terminal), Markdown, CSV, LaTeX (booktabs), JSON."""
+"""Summary tables of the car's campaigns: rich (terminal), Markdown, CSV, LaTeX (booktabs); JSON is report's."""
 
 from __future__ import annotations
+
+import csv
+import io
 
 import numpy as np
 from rich.table import Table
 
-from ..identify.records import Campaign
+from ...identify.records import Campaign
 
 
 def _f(value, digits: int = 3) -> str:
@@ -220,3 +223,21 @@ def csv_rows(campaigns: list[Campaign], files: list[str]) -> list[list]:
                 float(s.evaluations.mean()), s.wall_s,
             ])  # fmt: skip
     return rows
+
+
+def csv_text(campaigns: list[Campaign], files: list[str]) -> str:
+    """The long CSV table (CSV_COLUMNS, csv_rows)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(CSV_COLUMNS)
+    writer.writerows(csv_rows(campaigns, files))
+    return buf.getvalue()
+
+
+def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dict | None = None) -> str:
+    """The car's report as Markdown, LaTeX (booktabs) or CSV."""
+    if fmt == "md":
+        return markdown(campaigns, published)
+    if fmt == "latex":
+        return latex(campaigns, published)
+    return csv_text(campaigns, files)

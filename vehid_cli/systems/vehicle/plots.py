@@ -1,20 +1,16 @@
-"""Figures (matplotlib, off-screen): written atomically as PNG."""
+"""The car's campaign figures: the sensors' responses, convergence, RE boxes, true against estimated values."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
 import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from ..identify.experiment import SimulatedRun
-from ..identify.task import JointTask, Task, build_tasks
-from ..io.measurement import atomic_path
-from . import tables
-from .tables import grouped
+from ...core.figures import plt, save
+from ...identify.experiment import SimulatedRun
+from ...identify.task import JointTask, Task, build_tasks
+from . import report as tables
+from .report import grouped
 
 FAMILY_AXES = {"disp": ("mm", 1e3), "acc": ("m/s²", 1.0)}  # the unit each family is drawn in, and its scale from SI
 
@@ -62,10 +58,7 @@ def plot_responses(run: SimulatedRun, path: str | Path) -> None:
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     fig.suptitle("Responses of the sensors to the road input")
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save(fig, path)
 
 
 def first_task(campaign) -> Task:
@@ -76,12 +69,6 @@ def first_task(campaign) -> Task:
 
 
 # ------------------------------------------------------------------------------------------ campaign figures
-
-
-def _save(fig, path: Path) -> None:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
 
 
 def _best_cost_on_grid(record, grid):
@@ -110,7 +97,7 @@ def plot_convergence(group, path: str | Path) -> None:
     ax.set_ylabel(f"best {group[0].config.identify.objective}")
     ax.set_title("Convergence: median over runs, 10–90 % band")
     ax.legend()
-    _save(fig, Path(path))
+    save(fig, path)
 
 
 def plot_re_boxes(group, path: str | Path) -> None:
@@ -129,7 +116,7 @@ def plot_re_boxes(group, path: str | Path) -> None:
         ax.set_ylabel("RE per run [%]")
         ax.tick_params(axis="x", rotation=45)
     axes[0, 0].legend(fontsize=8)
-    _save(fig, Path(path))
+    save(fig, path)
 
 
 def plot_true_vs_estimated(campaign, path: str | Path) -> None:
@@ -149,7 +136,7 @@ def plot_true_vs_estimated(campaign, path: str | Path) -> None:
     axes[0].legend()
     axes[-1].set_xlabel("t [s]")
     fig.suptitle(f"True and estimated responses ({campaign.config.identify.algorithm.name})")
-    _save(fig, Path(path))
+    save(fig, path)
 
 
 def plot_noisy_vs_clean(campaign, path: str | Path) -> None:

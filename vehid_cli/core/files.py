@@ -1,0 +1,182 @@
+"""Files written so that a failure loses nothing: atomic replacement (temporary, fsync, rename), stale temporaries of
+killed writers removed, a full disk reported as `DiskFull` naming the file; output paths checked before any work."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import os
+import re
+import stat
+import tempfile
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from .errors import DiskFull, InputError
+
+
+def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8") -> str:
+    """A user's text file, or an InputError naming it: `what` it is ("config file") when missing or unreadable,
+    `expected` ("a CSV file") when it is a directory."""
+    source = str(path)
+    try:
+        return Path(path).read_text(encoding=encoding)
+    except FileNotFoundError:
+        raise InputError(f"{what} not found", source=source) from None
+    except IsADirectoryError:
+        raise InputError(f"is a directory, expected {expected}", source=source) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {what} ({exc.__class__.__name__}: {exc})", source=source) from None
+
+
+def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
+    """Check an output path has a known suffix and a writable directory, before any work is done."""
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise InputError(
+            f"unknown output type '{path.suffix}'; expected one of {', '.join(suffixes)}", source=str(path)
+        )
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        state = "is a file, not a directory" if parent.exists() else "does not exist"
+        raise InputError(f"output directory '{parent}' {state}", source=str(path))
+    if path.is_dir():
+        raise InputError("is a directory, expected a file name", source=str(path))
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"output directory '{parent}' is not writable", source=str(path))
+    return path
+
+
+def check_writable_dir(path: str | Path, option: str | None = None) -> Path:
+    """Check an output directory can be made and written (a probe file in it, or in its nearest existing
+    ancestor: nothing is left behind), before any work. InputError names the option and the path."""
+    path = Path(path)
+    source = f"{option} {path}" if option else str(path)
+    if path.exists() and not path.is_dir():
+        raise InputError("is a file, expected a directory", source=source)
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"cannot create the directory: '{existing}' is a file, not a directory", source=source)
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".vehid-probe-", dir=existing)
+    except OSError as exc:
+        where = "the directory" if existing == path else f"'{existing}' (to create the directory in)"
+        raise InputError(f"cannot write in {where}: {exc.strerror}", source=source) from None
+    os.close(fd)
+    os.unlink(probe)
+    return path
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _fsync(path: Path, directory: bool = False) -> None:
+    """Flush a file's (or a directory entry's) data to the disk."""
+    fd = os.open(path, os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0))
+    try:
+        os.fsync(fd)
+    except OSError:  # some file systems cannot fsync a directory: the rename is then as durable as they allow
+        if not directory:
+            raise
+    finally:
+        os.close(fd)
+
+
+FULL_DISK = tuple(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)) if e is not None)
+
+
+def _temporary_name(path: Path) -> re.Pattern:
+    """Our temporaries of `path`: `.NAME.XXXXXXXX.tmp` as `tempfile.mkstemp` names them (no dot inside XXX, so
+    `.NAME.bak.XXXXXXXX.tmp`, a temporary of NAME.bak, is not one of NAME's)."""
+    return re.compile(rf"\.{re.escape(path.name)}\.[A-Za-z0-9_]+\.tmp")
+
+
+def remove_stale_temporaries(path: str | Path) -> list[Path]:
+    """Delete the unfinished atomic writes of `path` a killed process left (`.NAME.*.tmp` beside it); return them.
+
+    A live writer holds an `flock` on its temporary (`atomic_path`), so only abandoned ones are removed, and only
+    files of our own naming."""
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    pattern, removed = _temporary_name(path), []
+    try:
+        candidates = [p for p in parent.iterdir() if pattern.fullmatch(p.name)]
+    except OSError:  # a missing or unreadable directory: nothing of ours to clean (the write reports it)
+        return removed
+    for tmp in candidates:
+        try:
+            fd = os.open(tmp, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW)  # a symlink or a FIFO is not ours
+        except OSError:
+            continue
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                continue
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            os.unlink(tmp)  # while holding its lock: a writer that created it meanwhile sees it gone and retries
+            removed.append(tmp)
+        except OSError:  # BlockingIOError: a live writer's; FileNotFoundError: already gone
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
+def _locked_temporary(path: Path) -> tuple[int, Path]:
+    """A new temporary beside `path`, locked (see `remove_stale_temporaries`): its descriptor and path."""
+    while True:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            if os.stat(tmp).st_ino == os.fstat(fd).st_ino:
+                return fd, Path(tmp)
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # a cleaner took it for a stale one before we locked it: make another
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; on success rename it into place, on failure remove it.
+
+    The temporary file is flushed to the disk before the rename and the directory after it, so after a crash
+    (or a power cut) `path` holds either its old content or the whole new one, never a part of it. Stale
+    temporaries of `path` are removed first; a full disk (or quota) is `DiskFull` naming `path`."""
+    path = Path(path)
+    remove_stale_temporaries(path)
+    fd = -1
+    try:
+        fd, tmp_path = _locked_temporary(path)
+        try:
+            os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private; results get the usual permissions
+            yield tmp_path
+            _fsync(tmp_path)
+            os.replace(tmp_path, path)
+        except BaseException:
+            with contextlib.suppress(FileNotFoundError):
+                tmp_path.unlink()
+            raise
+    except OSError as exc:
+        if exc.errno in FULL_DISK and not isinstance(exc, DiskFull):
+            raise DiskFull(path, exc.errno) from exc
+        raise
+    finally:
+        if fd >= 0:
+            os.close(fd)
+    _fsync(tmp_path.parent, directory=True)
+
+
+def _write_bytes(fh, data: bytes) -> None:
+    """The one write of `write_bytes` (a test replaces it to fill the disk)."""
+    fh.write(data)
+
+
+def write_bytes(path: str | Path, data: bytes) -> None:
+    """Write `data` to `path` atomically (`atomic_path`, fsynced): the old content or the whole new one."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        _write_bytes(fh, data)

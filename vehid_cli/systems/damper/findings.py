@@ -1,0 +1,107 @@
+"""What a damper campaign concludes after its runs (`Findings`): the identified model, J on the held-out runs, the
+real-time check and the measured/model force traces; written into and read from the campaign file's /damper group."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+from .fit import RealTime
+
+
+@dataclass(frozen=True)
+class Trace:
+    """Measured and model force on one bench run (for the figures), with J on it."""
+
+    name: str
+    t: NDArray
+    x: NDArray
+    v: NDArray
+    measured: NDArray
+    model: NDArray
+    J: float
+
+
+@dataclass(frozen=True)
+class Findings:
+    """What a damper campaign adds after its runs: the identified model (run 0's, every parameter), J on the
+    held-out runs, the real-time check, and measured/model force traces (training and held out)."""
+
+    model: str
+    names: tuple[str, ...]  # the whole parameter row of the identified model
+    values: NDArray
+    validation: tuple[tuple[str, float], ...]  # (file, J) on held-out runs
+    realtime: RealTime
+    traces: tuple[Trace, ...]
+
+    def write_h5(self, group) -> None:
+        """Into the results file's /damper group (results.py)."""
+        strings = h5py.string_dtype()
+        group.attrs["model"] = self.model
+        group.create_dataset("model_names", data=np.array(self.names, dtype=strings))
+        group.create_dataset("model_values", data=self.values)
+        v = group.create_group("validation")
+        v.create_dataset("files", data=np.array([f for f, _ in self.validation], dtype=strings))
+        v.create_dataset("J", data=np.array([j for _, j in self.validation], dtype=float))
+        rt = group.create_group("realtime")
+        for name in ("dt", "stable", "realtime_factor", "largest_stable_dt"):
+            rt.attrs[name] = getattr(self.realtime, name)
+        tg = group.create_group("traces")
+        for k, tr in enumerate(self.traces):
+            t = tg.create_group(f"{k:02d}")
+            t.attrs["name"], t.attrs["J"] = tr.name, tr.J
+            for name in ("t", "x", "v", "measured", "model"):
+                t.create_dataset(name, data=getattr(tr, name))
+
+    def to_json(self, campaign) -> dict:
+        """The damper's keys of the JSON summary: J per run and of the truth, held-out J, the model, real time."""
+        rt, recs = self.realtime, campaign.records
+        return {
+            "model": self.model,
+            "J": [float(r.cost) for r in recs],
+            "J_truth": None if campaign.truth is None else [float(r.truth_cost) for r in recs],
+            "J_train": float(np.mean([r.cost for r in recs])),
+            "validation_J": {Path(f).name: j for f, j in self.validation},
+            "model_row": {n: float(v) for n, v in zip(self.names, self.values, strict=True)},
+            "realtime": {
+                "dt": rt.dt,
+                "stable": rt.stable,
+                "realtime_factor": rt.realtime_factor,
+                "largest_stable_dt": rt.largest_stable_dt,
+            },  # fmt: skip
+        }
+
+    @classmethod
+    def read_h5(cls, group) -> Findings:
+        """From a results file's /damper group (KeyError for a damaged one)."""
+        model = str(group.attrs["model"])
+        rt = group["realtime"].attrs
+        realtime = RealTime(
+            model, float(rt["dt"]), bool(rt["stable"]), float(rt["realtime_factor"]), float(rt["largest_stable_dt"])
+        )
+        traces = tuple(
+            Trace(
+                str(t.attrs["name"]),
+                t["t"][()],
+                t["x"][()],
+                t["v"][()],
+                t["measured"][()],
+                t["model"][()],
+                float(t.attrs["J"]),
+            )  # fmt: skip
+            for _, t in sorted(group["traces"].items())
+        )
+        files = _text(group["validation/files"][()])
+        return cls(
+            model=model, names=_text(group["model_names"][()]), values=group["model_values"][()],
+            validation=tuple(zip(files, map(float, group["validation/J"][()]), strict=True)), realtime=realtime,
+            traces=traces,
+        )  # fmt: skip
+
+
+def _text(values) -> tuple[str, ...]:
+    return tuple(v.decode() if isinstance(v, bytes) else str(v) for v in values)
