@@ -25,7 +25,7 @@ from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao, cramer_rao_outputs
 from ...identify.experiment import run_streams
 from ...identify.records import Campaign, RunRecord
-from ...identify.source import DataSource
+from ...identify.source import DataFiles, DataSource
 from ...models.bench import BenchHistory
 from ...models.noise import estimate_noise_sigma
 from ...optimizers.base import Problem
@@ -114,8 +114,9 @@ class DamperSystem(System):
     objective: ClassVar[str] = "J"
     findings_type: ClassVar[type] = Findings
 
-    def __init__(self, config: DamperConfig, source: DataSource):
+    def __init__(self, config: DamperConfig, source: DataSource | DataFiles = None):
         cfg = config
+        source = DataSource.resolve(config, source)
         files = source.runs
         if len(files) > 1:
             raise InputError(

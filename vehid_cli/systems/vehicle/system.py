@@ -20,7 +20,7 @@ from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao
 from ...identify.experiment import SimulatedRun, build_experiment, run_streams, simulate_measurement
 from ...identify.records import Campaign
-from ...identify.source import DataSource
+from ...identify.source import DataFiles, DataSource
 from ...identify.task import JointTask, Task, build_tasks
 from ...io.logger_write import write_record
 from ...io.measurement import ROAD_COLUMNS as ROAD
@@ -42,7 +42,8 @@ class VehicleSystem(System):
     designable: ClassVar[bool] = True
     diagnosis_defaults: ClassVar[tuple[str, ...]] = ("identify.objective=wls", "noise.level=0")  # noise from the data
 
-    def __init__(self, config: Config, source: DataSource):
+    def __init__(self, config: Config, source: DataSource | DataFiles = None):
+        source = DataSource.resolve(config, source)
         self.task: Task | JointTask = build_tasks(config, source.runs)
         t = self.task
         self.config = config
