@@ -10,7 +10,7 @@ from pydantic import ConfigDict, Field, model_validator
 from ..core.units import UNITS
 from ..models.bench import BENCH_QUANTITIES
 from ..models.damper import MODELS, default_values
-from ..models.effects import BENCH_EFFECTS, LIBRARY, bound_violation
+from ..models.effects import LIBRARY, bench_names, bound_violation
 from .common import (
     Algorithm,
     Finite,
@@ -236,12 +236,13 @@ class DamperConfig(SystemConfig):
 
     def _check_effects(self) -> None:
         """Bench effects exist, their parameters exist and lie in their physical bounds."""
+        bench = bench_names()
         for name, params in self.damper.effects.items():
-            if name not in BENCH_EFFECTS:
+            if name not in bench:
                 raise _KeyedError(
                     f"damper.effects.{name}",
-                    f"'{name}' is not an effect on the bench{_did_you_mean(name, BENCH_EFFECTS)} "
-                    f"(known: {', '.join(BENCH_EFFECTS)}; gas force and backlash are the model's k1, x0 and gap)",
+                    f"'{name}' is not an effect on the bench{_did_you_mean(name, bench)} "
+                    f"(known: {', '.join(bench)}; gas force and backlash are the model's k1, x0 and gap)",
                 )
             known = tuple(p.name for p in LIBRARY[name].params)
             for key, value in params.items():

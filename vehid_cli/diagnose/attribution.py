@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from ..models.effects import EFFECT_NAMES
+from ..models.effects import LIBRARY, CandidateForm
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import polish
 from ..sim.kernel import available_cores
@@ -112,63 +112,24 @@ def car_parameter_candidates(config) -> list[Candidate]:
     ]
 
 
-def yield_starts(yields_m: Sequence[float], A: float = 1.0) -> tuple[dict[str, float], ...]:
-    """Bouc-Wen starts (beta = gamma) whose hysteretic state saturates at each yield displacement [m]."""
-    return tuple({"hysteresis.beta": A / (2 * y * y), "hysteresis.gamma": A / (2 * y * y)} for y in yields_m)
+def effect_candidate(name: str, form: CandidateForm) -> Candidate:
+    """An effect's candidate from the form its module declares (`models.effects`: on the car or on a bench)."""
+    return Candidate(
+        name, form.unknowns, dict(form.limits), dict(form.start), form.shape, dict(form.shape_limits),
+        strength=form.strength, null=dict(form.null), starts=form.starts, linear=form.linear,
+        companions=form.companions,
+    )  # fmt: skip
 
 
 def candidate_specs(config) -> dict[str, Candidate]:
-    """Every candidate for the car: the library effects (vehicle values for damping-relative ranges) and the
-    configured known parameters (``parameter:<name>``)."""
+    """Every candidate for the car: each registered effect's car form (its ranges may scale with the configured
+    damping cf, cr), in the library's order, then the configured known parameters (``parameter:<name>``)."""
     v = config.vehicle.values()
-    cf, cr = v["cf"], v["cr"]
-
-    def per_axle(effect, param, lo, hi, start=None, companions=(), shape=(), shape_limits=None, starts=(),
-                 linear=True):  # fmt: skip
-        names = (f"{effect}.{param}_f", f"{effect}.{param}_r")
-        limits = {n: (lo(a), hi(a)) for n, a in zip(names, (cf, cr), strict=True)}
-        st = {n: start for n in names} if start is not None else {}
-        return Candidate(
-            effect, names, limits, st, shape, shape_limits or {}, strength=names, null={n: 0.0 for n in names},
-            starts=tuple(starts), linear=linear, companions=tuple(companions),
-        )  # fmt: skip
-
-    const = lambda x: lambda _c: x  # noqa: E731
-    velocity = lambda name: tuple({name: s} for s in (0.003, 0.015, 0.06))  # noqa: E731
-    specs = [
-        per_axle(
-            "asymmetric_damping", "dc", lambda c: -2 * c, lambda c: 2 * c, companions=("cf", "cr"),
-            shape=("asymmetric_damping.v_eps",), shape_limits={"asymmetric_damping.v_eps": (1e-3, 0.5)},
-            starts=velocity("asymmetric_damping.v_eps"),
-        ),
-        per_axle(
-            "coulomb_friction", "Fc", const(0.0), const(2000.0),
-            shape=("coulomb_friction.v_eps",), shape_limits={"coulomb_friction.v_eps": (1e-3, 0.5)},
-            starts=velocity("coulomb_friction.v_eps"),
-        ),
-        per_axle("progressive_spring", "k3", const(0.0), const(1e9)),
-        per_axle("tyre_damping", "ct", const(0.0), const(5000.0)),
-        per_axle(
-            "hysteresis", "alpha", const(0.0), const(2e6), shape=("hysteresis.beta", "hysteresis.gamma"),
-            shape_limits={"hysteresis.beta": (1e3, 2e6), "hysteresis.gamma": (1e3, 2e6)},
-            starts=yield_starts((0.001, 0.003, 0.008, 0.018)),  # yield 0.5-20 mm
-        ),
-        per_axle(
-            "gas_spring", "F0", const(0.0), const(2e4), shape=("gas_spring.L",),
-            shape_limits={"gas_spring.L": (0.02, 1.0)}, starts=tuple({"gas_spring.L": s} for s in (0.04, 0.1, 0.3)),
-        ),
-        per_axle(
-            "backlash", "gap", const(1e-5), const(0.02), start=1e-4, shape=("backlash.k_contact",),
-            shape_limits={"backlash.k_contact": (1e4, 1e8)}, linear=False,
-            starts=tuple({"backlash.gap_f": g, "backlash.gap_r": g} for g in (1e-4, 1e-3, 5e-3)),
-        ),
-        per_axle(
-            "damper_lag", "T", const(1e-3), const(0.1), start=3e-3, linear=False,
-            starts=tuple({"damper_lag.T_f": t, "damper_lag.T_r": t} for t in (2e-3, 8e-3, 3e-2)),
-        ),
-    ]  # fmt: skip
-    out = {c.effect: c for c in specs}
-    assert set(out) == set(EFFECT_NAMES)
+    out = {
+        name: effect_candidate(name, e.car_candidate(v["cf"], v["cr"]))
+        for name, e in LIBRARY.items()
+        if e.car_candidate is not None
+    }
     out.update({c.effect: c for c in car_parameter_candidates(config)})
     return out
 

@@ -170,8 +170,9 @@ class _KeyedCache(FunctionCache):
 
 def _cache_key(force, error_model: str, *sizes: int) -> str | None:
     """A digest of what the compiled loop for `force` depends on: this file, the source file that defines the
-    law (its helpers too), the error model and the sizes; None when the law's source cannot be read (then the
-    loop is compiled afresh in each process)."""
+    law (its helpers too), what a composed law says it is made of (its `cache_salt`: the sources of the pieces it
+    was composed from), the error model and the sizes; None when the law's source cannot be read (then the loop is
+    compiled afresh in each process)."""
     try:
         law_file = inspect.getsourcefile(force.py_func)
         if not law_file:
@@ -179,6 +180,7 @@ def _cache_key(force, error_model: str, *sizes: int) -> str | None:
         parts = [Path(__file__).read_bytes(), Path(law_file).read_bytes(), force.py_func.__qualname__.encode()]
     except (AttributeError, OSError, TypeError):
         return None
+    parts.append(str(getattr(force, "cache_salt", "")).encode())
     parts.append(repr((error_model, sizes, numba.__version__)).encode())
     return hashlib.sha256(b"\0".join(parts)).hexdigest()
 

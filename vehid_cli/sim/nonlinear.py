@@ -1,7 +1,8 @@
 """The full car with effects (``models.effects``) through the compiled fixed-step kernel, batched.
 
 M qdd + C qd + K q + D' f(d, dd, z) = B y with the linear M, C, K, B of the config and f the composite
-effect law ``strut_effects``. Struts: the four suspensions, d = [G, -I] q (``fullcar_struts``), and, when
+effect law (``models.effects``, composed from the registry). Struts: the four suspensions, d = [G, -I] q
+(``fullcar_struts``), and, when
 ``tyre_damping`` is present, the four tyres, d = x_i - y_i (D rows [0, I], E rows -I).
 
 The integrator is RK4 (order 4) or Newmark (order 2), chosen explicitly by the caller; `substeps`
@@ -19,7 +20,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..models.effects import effect_rows, strut_effects
+from ..models.effects import effect_rows
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
 from .kernel import KernelResult, integrate, no_force
 from .linear import Response
@@ -124,7 +125,7 @@ def simulate_effects(
         D = np.concatenate([D, tyre], axis=1)
         E = np.concatenate([E, -np.eye(N_CORNERS)], axis=0)
     res = integrate(
-        method, M, C, K, B, upsample(road, substeps), dt / substeps, strut_effects, es.rows, es.n_z, D=D, E=E
+        method, M, C, K, B, upsample(road, substeps), dt / substeps, es.law, es.rows, es.n_z, D=D, E=E
     )
     q, qd, qdd = (X[:, ::substeps] for X in (res.q, res.qd, res.qdd))
     Gt = np.swapaxes(G, -1, -2)

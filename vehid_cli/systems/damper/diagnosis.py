@@ -36,6 +36,7 @@ from ...diagnose.attribution import (
     Candidate,
     Fit,
     candidate_ranges,
+    effect_candidate,
     fit_intervals,
     lsq_fit,
     parameter_candidate,
@@ -45,7 +46,7 @@ from ...diagnose.quality import assess_bench
 from ...diagnose.residuals import analyse_bench, autocorrelation
 from ...identify.experiment import run_streams
 from ...models.bench import BenchHistory
-from ...models.effects import LIBRARY
+from ...models.effects import LIBRARY, BenchScale
 from ...models.noise import estimate_noise_sigma
 from ...optimizers import get_optimizer
 from ...optimizers.base import Problem
@@ -61,52 +62,16 @@ BENCH_PARAMETER_RANGE = (0.5, 2.0)  # a fixed damper parameter freed as a candid
 
 
 def bench_candidates(spec: DamperSpec, history: BenchHistory, declared_unknowns) -> dict[str, Candidate]:
-    """The candidate form of each effect the declared damper lacks, its ranges scaled to the data."""
-    F = float(np.std(history.force))
+    """The bench form of each registered effect the declared damper lacks (its ranges scaled to the data), then the
+    damper model's fixed parameters as ``parameter:<name>``."""
     X = max(float(np.std(history.x)), 1e-6)
     V = max(float(np.std(history.v)), 1e-6)
-    zsat = 0.2 * X  # Bouc-Wen z saturates at sqrt(1 / (beta + gamma)): a fifth of the stroke to start
-    bg = 0.5 / zsat**2
-    dt = float(history.dt)
-    yields = (0.03 * X, 0.1 * X, 0.3 * X, 0.8 * X)  # loop widths from 3 % to 80 % of the stroke's spread
-    velocities = (0.02 * V, 0.1 * V, 0.5 * V)
-
-    def effect(name, strength, limits, start, shape=(), shape_limits=None, starts=(), linear=True):
-        return Candidate(
-            name, (strength,), limits, start, shape, shape_limits or {}, strength=(strength,),
-            null={strength: 0.0}, starts=tuple(starts), linear=linear,
-        )  # fmt: skip
-
-    out = [
-        effect(
-            "hysteresis", "hysteresis.alpha", {"hysteresis.alpha": (0.0, 20.0 * F / min(yields))},
-            {"hysteresis.alpha": 0.0, "hysteresis.beta": bg, "hysteresis.gamma": bg},
-            shape=("hysteresis.beta", "hysteresis.gamma"),
-            shape_limits={"hysteresis.beta": (0.5 / max(yields) ** 2 / 4, 0.5 / min(yields) ** 2 * 4),
-                          "hysteresis.gamma": (0.5 / max(yields) ** 2 / 4, 0.5 / min(yields) ** 2 * 4)},
-            starts=tuple({"hysteresis.beta": 0.5 / y**2, "hysteresis.gamma": 0.5 / y**2} for y in yields),
-        ),
-        effect(
-            "asymmetric_damping", "asymmetric_damping.dc", {"asymmetric_damping.dc": (-10 * F / V, 10 * F / V)},
-            {"asymmetric_damping.dc": 0.0, "asymmetric_damping.v_eps": 0.2 * V},
-            shape=("asymmetric_damping.v_eps",), shape_limits={"asymmetric_damping.v_eps": (0.005 * V, 2 * V)},
-            starts=tuple({"asymmetric_damping.v_eps": v} for v in velocities),
-        ),
-        effect("damper_lag", "damper_lag.T", {"damper_lag.T": (1e-4, 0.2)}, {"damper_lag.T": max(dt, 1e-3)},
-               starts=tuple({"damper_lag.T": t} for t in (max(dt, 1e-3), 5 * max(dt, 1e-3), 25 * max(dt, 1e-3))),
-               linear=False),
-        Candidate("gas_spring", ("k1", "x0"), {"k1": (0.0, 20 * F / X), "x0": (-1.0, 1.0)},
-                  {"k1": 0.1 * F / X, "x0": float(np.mean(history.x))}, strength=("k1",), null={"k1": 0.0},
-                  linear=False),
-        Candidate("backlash", ("gap",), {"gap": (0.0, 0.5 * X)}, {"gap": 0.01 * X}, strength=("gap",),
-                  null={"gap": 0.0}, linear=False, starts=tuple({"gap": g * X} for g in (0.003, 0.01, 0.05))),
-        effect(
-            "coulomb_friction", "coulomb_friction.Fc", {"coulomb_friction.Fc": (0.0, 3 * F)},
-            {"coulomb_friction.Fc": 0.0, "coulomb_friction.v_eps": 0.1 * V},
-            shape=("coulomb_friction.v_eps",), shape_limits={"coulomb_friction.v_eps": (0.005 * V, 2 * V)},
-            starts=tuple({"coulomb_friction.v_eps": v} for v in velocities),
-        ),
-    ]  # fmt: skip
+    scale = BenchScale(
+        F=float(np.std(history.force)), X=X, V=V, dt=float(history.dt),
+        yields=(0.03 * X, 0.1 * X, 0.3 * X, 0.8 * X),  # loop widths from 3 % to 80 % of the stroke's spread
+        velocities=(0.02 * V, 0.1 * V, 0.5 * V), x_mean=float(np.mean(history.x)),
+    )  # fmt: skip
+    out = [effect_candidate(name, e.bench_candidate(scale)) for name, e in LIBRARY.items() if e.bench_candidate]
     declared = set(spec.effects)
     if "k1" in declared_unknowns or spec.values.get("k1", 0.0) != 0.0:
         declared.add("gas_spring")

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from ...models.bench import BenchHistory
 from ...models.damper import MODELS, DamperModel, play
-from ...models.effects import bench_effect_rows, bench_effects, bench_lag_state
+from ...models.effects import bench_effect_rows, bench_lag_state
 from ...optimizers import Problem, get_optimizer
 from ...sim.bench import BenchForces, refine, simulate_damper
 from ...sim.kernel import integrate_bench
@@ -125,7 +125,7 @@ def _with_effects(spec: DamperSpec, rows: NDArray, effects: dict, h: BenchHistor
     if lag is not None:
         z0[:, lag] = damper.force[:, 0]  # the lagged force starts settled
     with np.errstate(all="ignore"):
-        force = integrate_bench(bench_effects, eset.rows, road, dt / substeps, z0)
+        force = integrate_bench(eset.law, eset.rows, road, dt / substeps, z0)
     force = force[:, ::substeps, 0]
     stable = damper.stable & np.all(np.isfinite(force), axis=1)
     return BenchForces(t=h.t, force=np.where(stable[:, None], force, np.nan), stable=stable)

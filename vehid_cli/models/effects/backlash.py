@@ -1,0 +1,73 @@
+"""Backlash: play of width gap between strut and damper. The damper piston x_b (one state per strut, centred at rest)
+is driven through contact faces of stiffness k_contact that close after a dead zone of gap/2 either way: the
+transmitted force F = k_contact deadzone(d - x_b) [N], xd_b = F / c. It replaces the configured damper force c v;
+gap = 0 is the rigid mount. On a bench the damper's own play `gap` plays this part."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .base import BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
+
+
+def law(slots):
+    ON, Z, GAP, KC = slots["on"], slots["z"], slots["gap"], slots["k_contact"]
+
+    @numba.njit(inline="always", error_model="numpy")
+    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
+        if p[ON] != 0.0:
+            j = int(p[Z]) + i
+            half = 0.5 * p[GAP + i]
+            if half > 0.0:
+                r = x - z[j]
+                pen = r - half if r > half else (r + half if r < -half else 0.0)
+                damper = p[KC] * pen
+                zd[j] = damper / c
+            else:
+                zd[j] = 0.0
+        return f, damper
+
+    return force
+
+
+def car(cf: float, cr: float) -> CandidateForm:
+    """gap per axle from 10 um to 2 cm; the contact stiffness between 1e4 and 1e8 N/m."""
+    return per_axle_candidate(
+        "backlash", "gap", constant(1e-5), constant(0.02), cf, cr, start=1e-4,
+        shape_limits={"backlash.k_contact": (1e4, 1e8)}, linear=False,
+        starts=tuple({"backlash.gap_f": g, "backlash.gap_r": g} for g in (1e-4, 1e-3, 5e-3)),
+    )  # fmt: skip
+
+
+def bench(s: BenchScale) -> CandidateForm:
+    """The damper's own play `gap`, up to half the stroke's spread."""
+    return CandidateForm(
+        ("gap",), {"gap": (0.0, 0.5 * s.X)}, {"gap": 0.01 * s.X}, strength=("gap",), null={"gap": 0.0}, linear=False,
+        starts=tuple({"gap": g * s.X} for g in (0.003, 0.01, 0.05)),
+    )  # fmt: skip
+
+
+def _dead_bands(x):
+    xm = max(float(np.max(np.abs(x))), 1e-300)
+    return [
+        (np.sign(x) * np.maximum(np.abs(x) - f * xm, 0.0), 1, f"dead band +-{f * xm:.4g} m") for f in (0.2, 0.4, 0.6)
+    ]
+
+
+EFFECT = Effect(
+    "backlash",
+    "play of width gap before the damper engages, contact faces of stiffness k_contact",
+    (
+        Param("gap", 0.0, 0.0, 0.1, "m", "total play (dead zone gap/2 either way)"),
+        Param("k_contact", 2e6, 0.0, 1e10, "N/m", "contact stiffness", per_axle=False, open_lower=True),
+    ),
+    strength="gap",
+    law=law,
+    order=70,
+    states=1,
+    car_candidate=car,
+    bench_candidate=bench,
+    shapes=(Shape("dead_band", "deflection", _dead_bands, rank=3),),
+    resembles={"dead_band": 1.0, "progressive_spring": 0.3},
+)

@@ -1,0 +1,38 @@
+"""Tyre damping: f = ct (xd_i - yd_i) [N], a damper beside each tyre spring on the wheel's velocity over the
+road's."""
+
+from __future__ import annotations
+
+import numba
+
+from .base import CandidateForm, Effect, Param, constant, per_axle_candidate
+
+
+def law(slots):
+    ON, CT = slots["on"], slots["ct"]
+
+    @numba.njit(inline="always", error_model="numpy")
+    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
+        if p[ON] != 0.0:
+            f += p[CT + i] * v
+        return f, damper
+
+    return force
+
+
+def car(cf: float, cr: float) -> CandidateForm:
+    """ct per axle up to 5 kN s/m."""
+    return per_axle_candidate("tyre_damping", "ct", constant(0.0), constant(5000.0), cf, cr)
+
+
+EFFECT = Effect(
+    "tyre_damping",
+    "a damper beside each tyre spring, on wheel minus road velocity",
+    (Param("ct", 0.0, 0.0, 1e5, "N s/m", "tyre damping"),),
+    strength="ct",
+    law=law,
+    order=40,
+    tyre=True,
+    car_candidate=car,
+    resembles={"linear_damping": 0.3},
+)
