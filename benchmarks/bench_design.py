@@ -2,7 +2,7 @@
 
 Target (issue 14): the design of configs/gokdag2015/design.yaml (speed, left/right heights, two shapes, length,
 duration; criterion nre) in <= 30 s on 2 cores, end to end through the CLI (process start, imports, the search,
-the sweeps for the figures, the table; --plots and --json written). Reports the median over --repeats.
+the profiles for the figures, the table; --plots and --json written). Reports the median over --repeats.
 Run: python benchmarks/bench_design.py [--repeats 3] [--jobs N]
 """
 

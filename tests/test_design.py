@@ -15,7 +15,7 @@ import yaml
 
 from tests.conftest import ROOT, invoke, read_png
 from vehid_cli.config import load_config
-from vehid_cli.design.search import (
+from vehid_cli.design import (
     apply_plan,
     channel_information,
     configured_plan,

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from vehid_cli.config import load_config
 from vehid_cli.core.jsonio import write_json
-from vehid_cli.design.search import design_test
+from vehid_cli.design import design_test
 from vehid_cli.report.design import design_json, markdown, write_config, write_plots
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -13,7 +13,7 @@ from .. import __version__
 from ..core.figures import plt, save
 from ..core.files import atomic_path
 from ..core.jsonio import finite_or_none
-from ..design.search import LABELS, DesignResult, Evaluation, Plan
+from ..design import LABELS, DesignResult, Evaluation, Plan
 
 CRITERION_TEXT = {"nre": "NRE bound [%]", "d_optimal": "-log det F", "worst": "largest bound [%]"}
 
@@ -214,13 +214,13 @@ def design_json(r: DesignResult, output: str | None = None) -> dict:
         ],  # fmt: skip
         "sweeps": [
             {
-                "variable": s.variable,
-                "through": s.through,
-                "values": s.values.tolist(),
-                "criterion": s.criterion.tolist(),
-                "nre_rms_percent": s.nre.tolist(),
+                "variable": p.variable,
+                "through": p.through,
+                "values": p.values.tolist(),
+                "criterion": p.criterion.tolist(),
+                "nre_rms_percent": p.nre.tolist(),
             }
-            for s in r.sweeps
+            for p in r.sweeps
         ],  # fmt: skip
         "search": {
             "evaluations": r.evaluations,
@@ -275,13 +275,13 @@ def write_plots(r: DesignResult, directory: str | Path) -> list[Path]:
     directory.mkdir(parents=True, exist_ok=True)
     written = []
     for name, (filename, xlabel) in FIGURES.items():
-        sweeps = [s for s in r.sweeps if s.variable == name]
-        if not sweeps:
+        profiles = [p for p in r.sweeps if p.variable == name]
+        if not profiles:
             continue
         fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
-        for s, style in zip(sweeps, ("-", "--"), strict=False):
-            y = np.where(np.isfinite(s.criterion), s.criterion, np.nan)
-            ax.plot(s.values, y, style, marker=".", label=f"others as {s.through}")
+        for p, style in zip(profiles, ("-", "--"), strict=False):
+            y = np.where(np.isfinite(p.criterion), p.criterion, np.nan)
+            ax.plot(p.values, y, style, marker=".", label=f"others as {p.through}")
         for e, mark, label in ((r.designed, "*", "designed"), (r.configured, "o", "configured")):
             x = e.plan.speed_kmh if name == "speed_kmh" else min(e.plan.side_ratio, 1 / e.plan.side_ratio)
             if math.isfinite(e.criterion):
