@@ -1,4 +1,4 @@
-"""The damper on a virtual test bench: the bench adapter of the compiled kernel (``kernel.integrate_bench``).
+"""The damper on a virtual test bench: the bench adapter of the compiled kernel (``prescribed.integrate_bench``).
 
 The motion x, v is prescribed; models with a control input get the command delayed per candidate
 (``delayed_controls``) and a backlash candidate sees the piston's motion through the play. The kernel
@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..models.damper import N_FRONT, DamperModel, play
-from .kernel import integrate_bench
+from .prescribed import integrate_bench
 
 
 def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray) -> NDArray:

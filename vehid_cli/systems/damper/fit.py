@@ -20,7 +20,7 @@ from ...models.damper import MODELS, DamperModel, play
 from ...models.effects import bench_effect_rows, bench_lag_state
 from ...optimizers import Problem, get_optimizer
 from ...sim.bench import BenchForces, refine, simulate_damper
-from ...sim.kernel import integrate_bench
+from ...sim.prescribed import integrate_bench
 
 PENALTY_FACTOR = 10.0  # an unstable candidate costs this many times the initial J (at least 10)
 
