@@ -76,7 +76,8 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
 def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config | DamperConfig:
     """Validate a plain dict (e.g. parsed YAML) into a Config, or a DamperConfig when `system: damper`.
     Raises InputError naming the key."""
-    root = CONFIGS.get(raw.get("system"), Config) if isinstance(raw, dict) else Config
+    name = raw.get("system") if isinstance(raw, dict) else None
+    root = CONFIGS.get(name, Config) if isinstance(name, str) else Config  # else Config's validation names the key
     try:
         cfg = root.model_validate(raw)
     except ValidationError as exc:
