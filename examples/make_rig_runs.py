@@ -1,7 +1,7 @@
 """Make four-post rig runs as a data logger records them, from vehid's own simulator (README "Your own test data").
 
 Each run is the configured car on its own random road (the config's road with a different seed), every sensor of
-the layout with its noise (noise.sigma), written through `vehid_cli.io.logger_write.write_record` under the logger's
+the layout with its noise (noise.sigma), written through `vehid_cli.io.write.write_record` under the logger's
 channel names and units of the config's `data:` section. What a real logger adds is added too: the deflection
 potentiometers are sampled at 200 Hz (everything else at the simulation's 1 kHz), every accelerometer reads
 gravity (+1 g at rest) and a bias of its own, every potentiometer its own zero. Run 1 is MDF4, run 2 MAT v5,
@@ -20,7 +20,7 @@ import numpy as np
 
 from vehid_cli.config import load_config
 from vehid_cli.identify.experiment import build_experiment, run_streams, simulate_measurement
-from vehid_cli.io.logger_write import write_record
+from vehid_cli.io.write import write_record
 from vehid_cli.models.sensors import FAMILY
 
 G = 9.80665  # m/s² per g: what a DC accelerometer reads at rest

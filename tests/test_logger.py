@@ -9,8 +9,9 @@ import scipy.io
 
 from tests.logger_files import CHANNELS, HF_AMPLITUDE, G, csv_times, offset_si, truth, write_csv, write_logger_run
 from vehid_cli.core.errors import InputError
-from vehid_cli.io.logger import Record, read_record, remove_offset
 from vehid_cli.io.measurement import check_time
+from vehid_cli.io.read import read_record
+from vehid_cli.io.record import Record, remove_offset
 
 SUFFIX = {"mf4": "mf4", "mat": "mat", "mat73": "mat", "h5": "h5", "csv": "csv"}
 SLOW = ("acc_fl", "acc_rr", "disp_fl")  # no content near 150 Hz: comparable on every grid

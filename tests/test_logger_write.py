@@ -11,8 +11,8 @@ import pytest
 import scipy.io
 
 from vehid_cli.core.errors import InputError
-from vehid_cli.io.logger import read_record
-from vehid_cli.io.logger_write import write_record
+from vehid_cli.io.read import read_record
+from vehid_cli.io.write import write_record
 
 G = 9.80665  # m/s² per g, as written here (not taken from the package)
 T1K = np.arange(3000) / 1000  # [s]

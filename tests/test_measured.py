@@ -17,7 +17,7 @@ from examples.make_rig_runs import write_rig_run
 from tests.conftest import ROOT, invoke
 from vehid_cli.config import load_config
 from vehid_cli.identify.task import JointTask, build_task, build_tasks
-from vehid_cli.io.logger import read_record
+from vehid_cli.io.read import read_record
 from vehid_cli.systems import build_system
 
 RIG = ROOT / "configs" / "examples" / "four_post_rig.yaml"
@@ -200,7 +200,7 @@ def test_data_files_in_the_config_are_relative_to_it_and_identified_jointly(runs
 def test_road_from_two_measured_tracks_delays_the_rear_by_wheelbase_over_speed(tmp_path):
     """track1 under corners 1 and 4, track2 under 2 and 3; the rear meets each track L / V later."""
     from vehid_cli.identify.measured import read_run
-    from vehid_cli.io.logger_write import write_record
+    from vehid_cli.io.write import write_record
 
     t = np.arange(4000) * 1e-3
     tracks = {"track1": 0.01 * np.sin(2 * np.pi * 1.5 * t) * (t > 0.1), "track2": 0.02 * (t > 0.5)}
@@ -227,7 +227,7 @@ def test_a_logger_run_from_the_independent_simulator_identifies_its_own_car(tmp_
     from its coordinates, written as MDF4 in g and mm under odd names with offsets, and `vehid identify` must land
     on the independent car within the bound."""
     from tests import independent_sim as ind
-    from vehid_cli.io.logger_write import write_record
+    from vehid_cli.io.write import write_record
 
     truth = {"m": 1400.0, "Ix": 540.0, "Iy": 2300.0, "a1": 1.35, "b1": 0.72}
     p = {**ind.PAPER_CAR, **truth, "a2": 2.6 - truth["a1"], "b2": 1.5 - truth["b1"]}

@@ -101,7 +101,7 @@ class DamperData(_Section):
     file: str | None = Field(
         None,
         description="training run: CSV (numeric or ISO 8601 time stamps, jitter resampled), MDF4 (.mf4), MAT "
-        "(v5/v7.3) or HDF5 (.h5), read by vehid_cli.logger; relative paths are relative to the config",
+        "(v5/v7.3) or HDF5 (.h5), read by vehid_cli.io.read; relative paths are relative to the config",
     )
     columns: DataColumns = DataColumns()
     units: DataUnits = DataUnits()
@@ -117,7 +117,7 @@ class DamperData(_Section):
     )
     resample: bool = Field(
         True,
-        description="put channels at different rates or with jittered time stamps on one grid (logger.read_record); "
+        description="put channels at different rates or with jittered time stamps on one grid (io.read.read_record); "
         "false: read the samples as they are, and such a file is an error",
     )
     validate_files: tuple[str, ...] = Field((), alias="validate", description="held-out runs, same columns")

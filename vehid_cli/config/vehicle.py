@@ -9,7 +9,7 @@ from pydantic import Field, model_validator
 
 from ..core.errors import InputError
 from ..core.units import UNITS
-from ..io.logger import SI_FACTORS
+from ..io.units import SI_FACTORS
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
 from ..models.sensors import FAMILY, Layout, corner_layout

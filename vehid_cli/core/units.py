@@ -11,7 +11,7 @@ UNITS: dict[str, dict[str, float]] = {
     "velocity": {"m/s": 1.0, "mm/s": 1e-3, "cm/s": 1e-2, "in/s": 0.0254},
     "force": {"N": 1.0, "kN": 1e3, "lbf": 4.4482216152605, "lb": 4.4482216152605, "kip": 4448.2216152605},
     "control": {"1": 1.0, "fraction": 1.0, "%": 0.01, "percent": 0.01, "V": 1.0, "A": 1.0},
-    # quantities of vehicle logger channels (vehid_cli.logger); g is standard gravity (ISO 80000-3)
+    # quantities of vehicle logger channels (vehid_cli.io.units); g is standard gravity (ISO 80000-3)
     "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "mm/s^2": 1e-3, "g": 9.80665},
     "angle": {"rad": 1.0, "deg": math.pi / 180, "°": math.pi / 180},
     "angular velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "°/s": math.pi / 180},

@@ -5,7 +5,7 @@ Two kinds of file are read:
 * the SPEC's measurement CSV (t, road1..road4, acc1..acc4, disp1..disp4 in SI units), for the paper's corner
   layout when the config maps no channels: `data.read_measurement`, as `vehid simulate` writes it;
 * anything a data logger or a test engineer writes (MDF4, MAT v5/v7.3, HDF5, CSV with ISO stamps), through
-  `logger.read_record`: the config's `data.channels` say which channel of the file is which sensor (a name left
+  `io.read.read_record`: the config's `data.channels` say which channel of the file is which sensor (a name left
   out is looked up as itself), `data.units` its unit, and channels at different rates meet on one grid.
 
 A channel slower than the grid is compared only at its own samples (`observed`): up-sampled values between them
@@ -25,8 +25,9 @@ from numpy.typing import NDArray
 
 from ..config import Config
 from ..core.errors import InputError
-from ..io.logger import Record, read_record, remove_offset
 from ..io.measurement import read_measurement
+from ..io.read import read_record
+from ..io.record import Record, remove_offset
 from ..models.road import road_function
 from .experiment import Experiment, check_time_step, experiment_rng
 

@@ -4,7 +4,7 @@ A history is the prescribed piston motion x(t) [m] (extension positive), its vel
 control input u(t) [0..1] and, when measured, the force F(t) [N]. Excitations follow Fleps-Dezasse
 section 4.2: constant very low velocity in compression and rebound (gas force), a 25 mm sine at 0.8 Hz
 (Bouc-Wen or force-map row at one control input), a 25 mm sawtooth at ±0.15 m/s with control steps
-(time constants and delays). Measured runs are read by `systems.damper.read_bench` through `logger.read_record`
+(time constants and delays). Measured runs are read by `systems.damper.read_bench` through `io.read.read_record`
 (every file format; units through `core.units`).
 """
 

@@ -1,5 +1,5 @@
 """Bench runs of a damper config: the configured excitation simulated with force noise, written as a bench file
-(CSV or HDF5), and measured runs read through `io.logger.read_record` with the config's columns, units, window and
+(CSV or HDF5), and measured runs read through `io.read.read_record` with the config's columns, units, window and
 decimation."""
 
 from __future__ import annotations
@@ -16,8 +16,9 @@ from ...core.errors import InputError
 from ...core.files import atomic_path
 from ...core.h5file import h5_file
 from ...core.provenance import provenance
-from ...io.logger import NominalRateError, read_record
 from ...io.measurement import format_rows
+from ...io.read import read_record
+from ...io.timegrid import NominalRateError
 from ...models.bench import BenchHistory, sawtooth, sine, triangle, with_force
 from .fit import DamperSpec
 
@@ -108,13 +109,13 @@ def read_bench(
     variable: str | None = None,
     resample: bool = True,
 ) -> BenchHistory:
-    """A measured bench run, read by `logger.read_record` (one reader for every format: CSV with numeric or ISO
+    """A measured bench run, read by `io.read.read_record` (one reader for every format: CSV with numeric or ISO
     8601 time stamps, MDF4, MAT v5/v7.3, HDF5): the columns/channels named by the config (time, displacement,
     force; velocity and control optional) in SI units on one uniform grid starting at t = 0. The velocity, when
     not measured, is the central difference of x; the control, when not measured, is 0.
 
     `units` gives a quantity's unit (time included); a channel without one has the unit its file declares (MDF4,
-    HDF5), else SI. Jittered time stamps are resampled at their median rate (logger.py). `sample_rate` [Hz]
+    HDF5), else SI. Jittered time stamps are resampled at their median rate (io/timegrid.py). `sample_rate` [Hz]
     declares the rate of a file whose time column was printed with too few digits to be uniform: the column must
     then increase with steps within 5 % of 1 / rate, and the grid is rebuilt from it (the samples kept as they
     are). `variable` names the MAT struct / HDF5 group holding the channels. `resample=False` refuses channels

@@ -22,9 +22,9 @@ from ...identify.experiment import SimulatedRun, build_experiment, run_streams, 
 from ...identify.records import Campaign
 from ...identify.source import DataFiles, DataSource
 from ...identify.task import JointTask, Task, build_tasks
-from ...io.logger_write import write_record
 from ...io.measurement import ROAD_COLUMNS as ROAD
 from ...io.measurement import write_csv, write_measurement_csv
+from ...io.write import write_record
 from ...models.fullcar import DOF_NAMES
 from ...models.sensors import UNIT
 from ...optimizers.base import Problem

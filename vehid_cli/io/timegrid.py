@@ -1,0 +1,240 @@
+"""One uniform time grid for the channels of a logger file: their time stamps checked, their rates, the grid, and
+each channel put on it (`io.read.read_record` runs these steps in order; `Record.native_samples` asks
+`native_samples`).
+
+- the grid rate is `rate` when given, else the highest channel rate; the grid spans the time all channels cover;
+- a channel sampled faster than the grid (down-sampling) is first low-passed on its own grid with a zero-phase
+  Butterworth filter (order 8, `scipy.signal.sosfiltfilt`, cut-off at 40 % of the grid rate, i.e. 80 % of the new
+  Nyquist frequency), then interpolated: content above the new Nyquist frequency is removed, not folded back;
+- a channel sampled at the grid rate or slower (up-sampling) is interpolated with a cubic spline (not-a-knot);
+  samples already on the grid are kept as they are;
+- the low-pass starts up over about 2.5 / cut-off seconds at the record's ends (30 ms for a 200 Hz grid): there,
+  content above the new Nyquist frequency is not fully removed; cut it with `window` when it matters;
+- time stamps that jitter (steps within ±50 % of the median step) are resampled the same way at the median rate;
+  a larger step is a gap (a dropped block of samples) and an error, as is a time that goes backwards.
+
+`resample=False` refuses all of this: channels at different rates, jittered stamps or samples off the common grid
+are an error, and every value in the Record is a sample of the file. Either way the Record keeps each channel's
+own rate and sample times (`Record.rates`, `Record.stamps`), and `Record.native_samples` gives the grid points
+that hold a channel's own samples (a 200 Hz channel on a 1 kHz grid: every 5th).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.errors import InputError
+from .formats.base import Raw
+from .measurement import UNIFORM_TOLERANCE
+
+JITTER = 0.5  # a step within ±50 % of the median step is jitter (resampled); a longer one is a gap (an error)
+DOWNSAMPLE_ORDER = 8  # Butterworth order of the anti-alias filter (applied forwards and backwards: zero phase)
+DOWNSAMPLE_CUTOFF = 0.4  # its cut-off as a fraction of the new rate (0.8 x the new Nyquist frequency)
+RATE_MATCH = 1e-2  # a channel within 1 % of the grid rate is at the grid rate (no filter)
+NOMINAL_RATE_MATCH = 0.05  # time stamps printed off a nominal rate: each step within 5 % of 1 / rate
+NATIVE_MATCH = 1e-3  # a channel's sample within 1e-3 of a grid step of a grid point is on that grid point
+RESAMPLE_HINT = "allow resampling to read it (resample=True; config key data.resample)"
+
+
+class NominalRateError(InputError):
+    """Time stamps that do not follow the nominal rate given to `read_record` (callers may name their key)."""
+
+
+def _named(time: str, before: str = "") -> str:
+    """ " '<time column>'" (after `before`) when the stamps come from a named column/vector, else ''."""
+    return f"{before} '{time}'" if time else ""
+
+
+def _worst_step(steps: NDArray, dt: float) -> int:
+    """The index of the time step furthest from dt [s]: what the nominal-rate check (5 %) and the gap check (50 %)
+    each judge against their own tolerance."""
+    return int(np.argmax(np.abs(steps - dt)))
+
+
+# ------------------------------------------------------------------------------------------ time stamps
+
+
+def on_nominal_rate(name: str, theirs: str, raw: Raw, rate: float, src: str) -> None:
+    """Printed time stamps rounded off a nominal rate: check every step is within 5 % of 1 / rate, then rebuild
+    the stamps as t0 + k / rate (the samples are kept as they are, not resampled)."""
+    dt = 1.0 / rate
+    steps = np.diff(raw.t)
+    bad = _worst_step(steps, dt)
+    if abs(steps[bad] - dt) > NOMINAL_RATE_MATCH * dt:
+        raise NominalRateError(
+            f"channel '{name}' ('{theirs}'): time{_named(raw.time)} does not follow the nominal rate {rate:g} Hz "
+            f"(step {dt:g} s) within {NOMINAL_RATE_MATCH:.0%}: step {steps[bad]:g} s at sample {bad + 2}",
+            source=src,
+        )
+    raw.t = raw.t[0] + np.arange(raw.t.size) * dt
+
+
+def check_channel(name: str, theirs: str, raw: Raw, src: str) -> float:
+    """Check a channel's stamps and values; return its (median) sampling step [s]."""
+    label = f"channel '{name}' ('{theirs}')"
+    if raw.t.size != raw.y.size:
+        raise InputError(f"{label} has {raw.y.size} samples but its time vector {raw.t.size}", source=src)
+    if raw.y.size < 3:
+        raise InputError(f"{label} has {raw.y.size} samples; at least 3 are needed", source=src)
+    for what, values in (("time stamp", raw.t), ("sample", raw.y)):
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise InputError(
+                f"{label} has {bad.size} non-finite {what}(s){_named(raw.time, ' in') if what[0] == 't' else ''} "
+                f"(NaN or Inf), first at sample {bad[0] + 1}",
+                source=src,
+            )
+    steps = np.diff(raw.t)
+    if np.any(steps <= 0):
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise InputError(
+            f"{label}: time{_named(raw.time)} goes backwards (or stands still), it must increase strictly: at "
+            f"sample {k + 2}, t = {raw.t[k + 1]:.9g} s after {raw.t[k]:.9g} s",
+            source=src,
+        )
+    dt = float(np.median(steps))
+    worst = _worst_step(steps, dt)
+    if abs(steps[worst] - dt) > JITTER * dt:
+        raise InputError(
+            f"{label}: a gap in time at sample {worst + 2}: step {steps[worst]:.6g} s against the usual {dt:.6g} s "
+            f"(dropped samples?); cut the record with a window",
+            source=src,
+        )
+    return dt
+
+
+def uniform(t: NDArray, dt: float) -> bool:
+    """Are the stamps `t` uniform at step dt [s] (to `measurement.UNIFORM_TOLERANCE`, or round-off of their size)?"""
+    return bool(np.max(np.abs(np.diff(t) - dt)) <= max(UNIFORM_TOLERANCE * dt, 1e-9 * float(np.max(np.abs(t)))))
+
+
+def rate_of(raw: Raw, dt: float) -> float:
+    """A channel's rate [Hz]: from its span when uniform, else its median step; to 9 significant digits (a logger's
+    nominal rate, not the round-off of its time stamps: 1/0.0010000000000000002 s is 1000 Hz)."""
+    rate = (raw.t.size - 1) / float(raw.t[-1] - raw.t[0]) if uniform(raw.t, dt) else 1.0 / dt
+    return float(f"{rate:.9g}")
+
+
+# ------------------------------------------------------------------------------------------ the grid
+
+
+def common_grid(
+    raw: Mapping[str, Raw], channels: Mapping[str, str], rates: Mapping[str, float], rate: float | None, src: str
+) -> tuple[NDArray, float, float]:
+    """The grid [s, on the file's axis], its rate [Hz] (`rate`, else the highest channel rate) and its start (the
+    latest first stamp): over the time all channels cover; InputError when that is less than 3 samples."""
+    grid_rate = rate if rate is not None else max(rates.values())
+    start = max(float(r.t[0]) for r in raw.values())
+    stop = min(float(r.t[-1]) for r in raw.values())
+    n = int(math.floor((stop - start) * grid_rate + 1e-6)) + 1  # 1e-6: a sample at `stop` despite round-off
+    if stop <= start or n < 3:
+        raise InputError(
+            f"the channels ({', '.join(channels)}) share no common time span of 3 samples at {grid_rate:g} Hz",
+            source=src,
+        )
+    return start + np.arange(n) / grid_rate, grid_rate, start
+
+
+def _grid_slice(raw: Raw, dt: float, grid: NDArray) -> slice | None:
+    """The run of the channel's samples that lies on the grid (each stamp within UNIFORM_TOLERANCE of a step of
+    its grid point), None if there is none: the channel is then resampled."""
+    first = int(round((grid[0] - raw.t[0]) / dt))
+    keep = slice(first, first + grid.size)
+    if first < 0 or keep.stop > raw.t.size:
+        return None
+    return keep if np.allclose(raw.t[keep], grid, rtol=0, atol=UNIFORM_TOLERANCE * dt) else None
+
+
+def onto(raw: Raw, dt: float, grid: NDArray, rate: float) -> NDArray:
+    """A channel on the grid: its own samples when they lie on the grid (`_grid_slice`); else an anti-alias
+    low-pass first when its rate is above the grid's, then a cubic spline."""
+    from scipy.interpolate import CubicSpline
+    from scipy.signal import butter, sosfiltfilt
+
+    t, y = raw.t, raw.y
+    own = 1.0 / dt
+    if own <= rate * (1 + RATE_MATCH) and (keep := _grid_slice(raw, dt, grid)) is not None:
+        return y[keep].copy()
+    if own > rate * (1 + RATE_MATCH):
+        if not uniform(t, dt):  # filter on a uniform grid: resample the jittered stamps at their median rate first
+            tu = t[0] + np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1) * dt
+            y, t = CubicSpline(t, y)(tu), tu
+        sos = butter(DOWNSAMPLE_ORDER, DOWNSAMPLE_CUTOFF * rate, fs=own, output="sos")
+        y = sosfiltfilt(sos, y)
+    return CubicSpline(t, y)(grid)
+
+
+# ------------------------------------------------------------------------------------------ resample=False
+
+
+def refuse_resampling(
+    raw: Mapping[str, Raw],
+    channels: Mapping[str, str],
+    steps: Mapping[str, float],
+    rates: Mapping[str, float],
+    rate: float | None,
+    src: str,
+) -> None:
+    """`resample=False`: every channel uniform and at one rate (within RATE_MATCH), that of `rate` if given."""
+    for ours, r in raw.items():
+        if not uniform(r.t, steps[ours]):
+            steps_ = np.diff(r.t)
+            raise InputError(
+                f"channel '{ours}' ('{channels[ours]}'): time stamps{_named(r.time, ' in')} jitter (steps "
+                f"{steps_.min():.6g} to {steps_.max():.6g} s about the median {steps[ours]:.6g} s): reading them "
+                f"means resampling at the median rate; {RESAMPLE_HINT}",
+                source=src,
+            )
+    reference = rate if rate is not None else max(rates.values())
+    if any(abs(f - reference) > RATE_MATCH * reference for f in rates.values()):
+        listed = ", ".join(f"'{ours}' ('{channels[ours]}') {f:g} Hz" for ours, f in rates.items())
+        what = f"differ from the grid rate {rate:g} Hz" if rate is not None else "differ"
+        raise InputError(
+            f"the channels' rates {what}: {listed}; one grid for them means resampling; {RESAMPLE_HINT}",
+            source=src,
+        )
+
+
+def refuse_off_grid(ours: str, theirs: str, raw: Raw, dt: float, grid: NDArray, src: str) -> None:
+    """`resample=False`: a channel at the grid rate whose samples are not on the common grid (a phase between
+    grid points, or a rate within 1 % of the grid's that drifts off it)."""
+    if _grid_slice(raw, dt, grid) is None:
+        k = int(np.argmin(np.abs(raw.t - grid[0])))
+        raise InputError(
+            f"channel '{ours}' ('{theirs}'): its samples are not on the common grid ({grid.size} samples from "
+            f"{grid[0]:.9g} s at {1 / (grid[1] - grid[0]):g} Hz; its nearest sample to the start is at "
+            f"{raw.t[k]:.9g} s, its step {dt:.9g} s): reading it means resampling; {RESAMPLE_HINT}",
+            source=src,
+        )
+
+
+# ------------------------------------------------------------------------------------------ native samples
+
+
+def native_samples(
+    t: NDArray, grid_rate: float, name: str, own_rate: float, stamps: NDArray, source: str, nearest: bool = False
+) -> NDArray[np.intp]:
+    """The grid indices (into `t`, uniform at `grid_rate`) at which channel `name` (its own rate `own_rate`, its
+    sample times `stamps` on the axis of `t`) was sampled in the file: `Record.native_samples` says which."""
+    n = t.size
+    if own_rate >= grid_rate * (1 - RATE_MATCH):
+        return np.arange(n)
+    position = (stamps - t[0]) * grid_rate
+    k = np.rint(position)
+    off = np.abs(position - k)
+    if off.size and float(np.max(off)) > NATIVE_MATCH:
+        if not nearest:
+            worst = int(np.argmax(off))
+            raise InputError(
+                f"channel '{name}' ({own_rate:g} Hz) is not sampled on points of the {grid_rate:g} Hz "
+                f"grid: its sample at t = {stamps[worst]:.9g} s is {off[worst]:.3g} of a step from "
+                f"the nearest; nearest=True gives the nearest grid points (values interpolated there), or read "
+                f"the file at a grid rate its samples fall on",
+                source=source,
+            )
+        return np.unique(np.clip(k, 0, n - 1)).astype(np.intp)
+    return k.astype(np.intp)
