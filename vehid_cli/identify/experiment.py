@@ -23,7 +23,7 @@ from ..core.errors import InputError
 from ..io.measurement import read_measurement, time_grid
 from ..models.effects import check_names
 from ..models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
-from ..models.noise import add_channel_noise, channel_sigma
+from ..models.noise import NoiseModel, add_channel_noise
 from ..models.road import road_function
 from ..models.sensors import Layout
 from ..sim.linear import Response, simulate
@@ -145,14 +145,22 @@ class Experiment:
             parts.append(self.read(self.simulate(part)))
         return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
 
-    def noise_floors(self, family: str) -> NDArray:
-        """Absolute noise standard deviation per channel of a family (k,): the sensor's own sigma, else the
-        family's noise.sigma, else NaN (Eq. 15 with noise.level)."""
+    @cached_property
+    def noise(self) -> NoiseModel:
+        """The config's noise, resolved once: Eq. 15's level and each channel's absolute floor (the sensor's own
+        sigma, else its family's noise.sigma, else NaN: Eq. 15 with noise.level)."""
         cfg = self.config
-        floor = getattr(cfg.noise.sigma, family)
         own = {s.name: s.sigma for s in cfg.layout or ()}
-        values = [own.get(name) or floor for name in self.layout.names(family)]
-        return np.array([np.nan if v is None else v for v in values], dtype=float)
+        floors = {}
+        for family in self.layout.families:
+            floor = getattr(cfg.noise.sigma, family)
+            values = [own.get(name) or floor for name in self.layout.names(family)]
+            floors[family] = np.array([np.nan if v is None else v for v in values], dtype=float)
+        return NoiseModel(cfg.noise.level, floors)
+
+    def noise_floors(self, family: str) -> NDArray:
+        """Absolute noise standard deviation per channel of a family (k,), NaN where Eq. 15 applies."""
+        return self.noise.floors[family]
 
 
 def split_values(values: Mapping[str, ArrayLike] | None) -> tuple[dict[str, ArrayLike], dict[str, ArrayLike]]:
@@ -265,9 +273,8 @@ def simulate_measurement(experiment: Experiment, rng: np.random.Generator) -> Si
 
 
 def clean_sigma(experiment: Experiment, family: str, clean: NDArray) -> NDArray:
-    """The noise standard deviation (k,) of a family's clean channels (n, k): Eq. 15 with noise.level, or the
-    configured absolute floors."""
-    return channel_sigma(clean, experiment.config.noise.level, experiment.noise_floors(family))
+    """The noise standard deviation (k,) drawn for a family's clean channels (n, k) (`NoiseModel.drawn`)."""
+    return experiment.noise.drawn(family, clean)
 
 
 def measurement_noise(

@@ -19,14 +19,11 @@ from numpy.typing import NDArray
 from ..config import Config
 from ..core.errors import InputError
 from ..models.effects import LIBRARY
-from ..models.noise import channel_sigma, estimate_noise_sigma, per_channel, sigma_from_level, with_floors
 from ..optimizers.base import Problem
 from .crlb import CramerRao, bound_from_information, cramer_rao, information
-from .experiment import Experiment, build_experiment, clean_sigma, measurement_noise, run_streams
+from .experiment import Experiment, build_experiment, measurement_noise, run_streams
 from .measured import experiment_of, read_run
 from .objectives import Objective, objective_families
-
-MIN_SIGMA_FRACTION = 1e-3  # noise-free data: weight channels as if Np were 0.1 %, to keep wls finite
 
 
 @dataclass(frozen=True)
@@ -202,38 +199,27 @@ def build_task(config: Config, data_file: str | Path | None = None) -> Task:
     nominal = np.array([values[n] for n in names])
     layout = config.sensor_layout()
     families = objective_families(ident.objective, config.sensors, layout.families)
-    level = config.noise.level
     offsets = config.data.offsets == "identify"
     if data_file is None:
         experiment = build_experiment(config)
         truth = None if ident.truth == "none" else nominal
         clean = experiment.outputs()
-        drawn = {f: clean_sigma(experiment, f, clean[f]) for f in clean}
-        floor = max(level, MIN_SIGMA_FRACTION)
-        floors = {f: experiment.noise_floors(f) for f in families}
-        sigma = {f: channel_sigma(clean[f], floor, floors[f]) for f in families}
-        source = f"Eq. 15 with Np = {level:g}" if level > 0 else f"noise-free data: weights of Np = {floor:g}"
-        if any(np.any(~np.isnan(v)) for v in floors.values()):
-            source = "the configured noise floors" + (f" and Eq. 15 with Np = {level:g}" if level > 0 else "")
+        noise = experiment.noise
+        drawn = {f: noise.drawn(f, clean[f]) for f in clean}
+        sigma = {f: noise.weights(f, clean[f]) for f in families}
+        source = noise.describe_simulated(families)
         return Task(
             config, experiment, names, lower, upper, nominal, truth, families, clean, None, sigma, source, None,
             offsets=offsets, drawn=drawn,
         )  # fmt: skip
     run = read_run(config, data_file, families)
     experiment = experiment_of(config, run)
-    floors = {f: experiment.noise_floors(f) for f in families}
-    if level > 0:
-        statistic = lambda y: sigma_from_level(y, level)  # noqa: E731
-        source = f"Eq. 15 with Np = {level:g} (noise.level)"
-    else:
-        statistic = estimate_noise_sigma
-        source = "estimated from the data (third differences)"
+    noise = experiment.noise
     sigma = {}
     for family in families:
         mask = None if run.observed is None else run.observed[family]
-        sigma[family] = with_floors(per_channel(statistic, run.outputs[family], mask), floors[family])
-    if any(np.any(~np.isnan(v)) for v in floors.values()):
-        source = f"the configured noise floors, elsewhere {source}"
+        sigma[family] = noise.estimated(family, run.outputs[family], mask)
+    source = noise.describe_measured(families)
     for family, s in sigma.items():
         if np.any(~(s > 0)):
             bad = [n for n, v in zip(experiment.layout.names(family), s, strict=True) if not v > 0]

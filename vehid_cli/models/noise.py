@@ -1,6 +1,10 @@
-"""Measurement noise of Gökdağ Eq. 15: z_r = z_c + std(z_c) * Np * randn, independent per channel."""
+"""Measurement noise: Gökdağ Eq. 15 (z_r = z_c + std(z_c) * Np * randn, independent per channel), absolute floors
+per channel, estimates from the data; `NoiseModel` is a config's noise resolved once."""
 
 from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -69,3 +73,57 @@ def add_channel_noise(clean: NDArray, sigma: NDArray, rng: np.random.Generator) 
     if not np.any(sigma > 0):
         return clean.copy()
     return clean + sigma[..., None, :] * rng.standard_normal(clean.shape)
+
+
+MIN_SIGMA_FRACTION = 1e-3  # noise-free data: weight channels as if Np were 0.1 %, to keep wls finite
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """The measurement noise a config declares, resolved once: Eq. 15's level Np and each channel's absolute floor
+    per family (the sensor's own sigma, else its family's noise.sigma; NaN: none, Eq. 15 applies). Every sigma the
+    package uses comes from one of its three methods."""
+
+    level: float
+    floors: Mapping[str, NDArray] = field(default_factory=dict)  # family -> (k,) [SI], NaN where none
+
+    def floor(self, family: str) -> NDArray | None:
+        return self.floors.get(family)
+
+    def has_floors(self, families: tuple[str, ...]) -> bool:
+        """Does any channel of these families have an absolute floor?"""
+        return any(np.any(~np.isnan(self.floors[f])) for f in families if f in self.floors)
+
+    def drawn(self, family: str, clean: NDArray) -> NDArray:
+        """The sigma (k,) simulated noise is drawn with for clean channels (n, k): the floor, else Eq. 15 (level x the
+        clean channel's standard deviation over time)."""
+        return channel_sigma(clean, self.level, self.floor(family))
+
+    def weights(self, family: str, clean: NDArray) -> NDArray:
+        """The sigma (k,) that weights simulated data in wls and the bound: as `drawn`, but never below Eq. 15 at
+        MIN_SIGMA_FRACTION (noise-free data keeps finite weights)."""
+        return channel_sigma(clean, max(self.level, MIN_SIGMA_FRACTION), self.floor(family))
+
+    def estimated(self, family: str, measured: NDArray, observed: NDArray | None = None) -> NDArray:
+        """The sigma (k,) of measured channels (n, k), each over its own samples (`observed`): the floor, else Eq. 15
+        from the noisy data when a level is declared, else estimated from the data (third differences)."""
+        statistic = (lambda y: sigma_from_level(y, self.level)) if self.level > 0 else estimate_noise_sigma
+        return with_floors(per_channel(statistic, measured, observed), self.floor(family))
+
+    def describe_simulated(self, families: tuple[str, ...]) -> str:
+        """Where simulated data's weights come from, in words (results' `sigma_source`)."""
+        level, floor = self.level, max(self.level, MIN_SIGMA_FRACTION)
+        source = f"Eq. 15 with Np = {level:g}" if level > 0 else f"noise-free data: weights of Np = {floor:g}"
+        if self.has_floors(families):
+            source = "the configured noise floors" + (f" and Eq. 15 with Np = {level:g}" if level > 0 else "")
+        return source
+
+    def describe_measured(self, families: tuple[str, ...]) -> str:
+        """Where measured data's sigma comes from, in words (results' `sigma_source`)."""
+        if self.level > 0:
+            source = f"Eq. 15 with Np = {self.level:g} (noise.level)"
+        else:
+            source = "estimated from the data (third differences)"
+        if self.has_floors(families):
+            source = f"the configured noise floors, elsewhere {source}"
+        return source

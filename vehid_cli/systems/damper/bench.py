@@ -20,6 +20,7 @@ from ...io.measurement import format_rows
 from ...io.read import read_record
 from ...io.timegrid import NominalRateError
 from ...models.bench import BenchHistory, sawtooth, sine, triangle, with_force
+from ...models.noise import NoiseModel
 from .fit import DamperSpec
 
 BENCH_COLUMNS = {"time": "t", "displacement": "x", "velocity": "v", "control": "u", "force": "force"}
@@ -64,7 +65,7 @@ def simulate_bench(cfg: DamperConfig, noise_rng: np.random.Generator, bench=None
             source=cfg.source,
             key="damper.parameters",
         )
-    sigma = float(cfg.noise.level * np.std(clean))
+    sigma = float(NoiseModel(cfg.noise.level).drawn("force", clean[:, None])[0])  # Eq. 15 on the force
     noisy = clean + sigma * noise_rng.standard_normal(clean.size)
     return SimulatedBench(with_force(history, noisy, source=f"bench:{history.source}"), clean, sigma)
 
@@ -97,6 +98,7 @@ def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, see
             h5.create_dataset(name, data=values).attrs["unit"] = unit
 
 
+MEASURED = NoiseModel(0.0)  # a measured bench run: the force noise estimated from the data (third differences)
 MIN_RUN_S = 0.1  # [s] shortest bench run: damper_fit.realtime_check resamples it at steps up to 50 ms
 
 

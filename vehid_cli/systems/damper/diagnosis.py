@@ -47,10 +47,9 @@ from ...diagnose.residuals import analyse_bench, autocorrelation
 from ...identify.experiment import run_streams
 from ...models.bench import BenchHistory
 from ...models.effects import LIBRARY, BenchScale
-from ...models.noise import estimate_noise_sigma
 from ...optimizers import get_optimizer
 from ...optimizers.base import Problem
-from .bench import configured_spec, load_measured
+from .bench import MEASURED, configured_spec, load_measured
 from .fit import PENALTY_FACTOR, DamperSpec
 
 MAX_ROUNDS = 4
@@ -194,7 +193,7 @@ def diagnose_damper(
     res = opt.minimize(problem, run_streams(ident.seed, 0).optimizer, budget=budget, x0=x0)
     fit = lsq_fit(problem, res.x, refit_budget)
     say(f"declared {spec.model}: J = {fit.J:.4g} ({res.evaluations + fit.evaluations} evaluations)")
-    sigma = float(estimate_noise_sigma(train.force[:, None])[0])
+    sigma = float(MEASURED.estimated("force", train.force[:, None])[0])
     sigma = max(sigma, 1e-9 * float(np.std(train.force)))
 
     def report(f: Fit, effects) -> ModelReport:

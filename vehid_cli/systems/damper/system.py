@@ -27,10 +27,9 @@ from ...identify.experiment import run_streams
 from ...identify.records import Campaign, RunRecord
 from ...identify.source import DataFiles, DataSource
 from ...models.bench import BenchHistory
-from ...models.noise import estimate_noise_sigma
 from ...optimizers.base import Problem
 from ..base import Box, Log, Simulated, System
-from .bench import configured_spec, load_measured, simulate_bench, write_bench_csv, write_bench_h5
+from .bench import MEASURED, configured_spec, load_measured, simulate_bench, write_bench_csv, write_bench_h5
 from .diagnosis import diagnose_damper
 from .findings import Findings, Trace
 from .fit import DamperSpec, cost_J, fit, j_problem, realtime_check
@@ -144,7 +143,7 @@ class DamperSystem(System):
             self.sigma_source = f"force noise {cfg.noise.level:g} x std of the clean force"
         else:
             self.first = self.measured
-            sigma = float(estimate_noise_sigma(self.measured.force[:, None])[0])
+            sigma = float(MEASURED.estimated("force", self.measured.force[:, None])[0])
             self.sigma_source = "estimated from the data (third differences)"
         self.sigma = {"force": np.array([sigma])}
 
