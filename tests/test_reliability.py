@@ -21,10 +21,11 @@ import pytest
 import vehid_cli.core.files as files_module
 from tests.conftest import BASE_CONFIG, ROOT, SMALL, assert_same_content, children, running, sets, small_config, vehid
 from tests.conftest import invoke as invoke_cli
-from vehid_cli.campaign.results import check_integrity, read_campaign_h5, write_campaign_h5
+from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
 from vehid_cli.campaign.runner import run_campaign, run_campaign_to_file
 from vehid_cli.core.errors import InputError
 from vehid_cli.core.locking import Busy, exclusive, lock_path
+from vehid_cli.core.store import check_integrity
 
 LONG = SMALL + ["identify.runs=12", "identify.algorithm.iterations=30"]
 

@@ -1,15 +1,9 @@
-"""HDF5 result files: layout, atomic writes, provenance, integrity.
-
-A campaign file begins with a 512-byte HDF5 user block (which HDF5 skips) that holds the SHA-256 of every byte
-after it. Every read checks it before HDF5 parses anything, so a file damaged after it was written (truncated,
-partly copied, a disk error, an edit) is reported naming the file, never used, and never handed to the HDF5
-library, whose reactions to damaged metadata range over a dozen exception types. The file stays ordinary HDF5
-for every other tool.
-"""
+"""Campaign files: one layout for every system (a `system` attribute, a group for what the system concluded),
+provenance, reading back, and how a stored campaign differs from a config; written through the checksummed store
+(`core.store`)."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 from collections.abc import Mapping
 from pathlib import Path
@@ -20,8 +14,8 @@ import yaml
 
 from ..config import config_from_dict, flatten
 from ..core.errors import InputError
-from ..core.h5file import h5_file
 from ..core.provenance import provenance
+from ..core.store import USERBLOCK, checksum_block, h5_file, open_results
 from ..identify.crlb import CramerRao
 from ..identify.records import Campaign, RunRecord, summarise
 from ..systems import SYSTEMS
@@ -43,58 +37,6 @@ SEED_SCHEME = (
     "numpy PCG64 streams of run i (0-based): (noise, optimizer) = SeedSequence(seed).spawn(2)[1].spawn(i + 1)[i]"
     ".spawn(2); the experiment's own stream (random road) is SeedSequence(seed).spawn(2)[0]"
 )
-
-
-USERBLOCK = 512  # bytes at the start of a campaign file that HDF5 skips: our checksum lives there
-STAMP = b"vehid sha256 "  # then 64 hex digits of SHA-256(file[USERBLOCK:]) and a newline
-HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-
-
-def checksum_block(body: bytes) -> bytes:
-    """The user block of a campaign file whose bytes after it are `body`: STAMP, SHA-256(body) in hex, newline,
-    zeros up to USERBLOCK bytes."""
-    return (STAMP + hashlib.sha256(body).hexdigest().encode() + b"\n").ljust(USERBLOCK, b"\0")
-
-
-def stamp_checksum(path: str | Path) -> str:
-    """Write the SHA-256 of everything after the user block into the user block of a file on disk; return it."""
-    with open(path, "r+b") as fh:
-        fh.seek(USERBLOCK)
-        block = checksum_block(fh.read())
-        fh.seek(0)
-        fh.write(block)
-    return block[len(STAMP) : len(STAMP) + 64].decode()
-
-
-def check_integrity(path: str | Path) -> str | None:
-    """InputError naming the file if it carries a vehid checksum its bytes no longer match (or a damaged one);
-    the checksum when it matches; None for an HDF5 file without one (written before checksums, or by another
-    tool: HDF5 then reports what it finds)."""
-    source = str(path)
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(USERBLOCK)
-            body = hashlib.sha256(fh.read()).hexdigest()
-    except FileNotFoundError:
-        raise
-    except OSError as exc:
-        raise InputError(f"cannot read the file ({exc.strerror})", source=source) from None
-    if head.startswith(HDF5_SIGNATURE):
-        return None
-    if not head.startswith(STAMP):
-        raise InputError(
-            "not a readable results file: neither a vehid checksum nor an HDF5 signature at its start (damaged, "
-            "truncated to nothing, or another kind of file)",
-            source=source,
-        )
-    stored = head[len(STAMP) : len(STAMP) + 64].decode("ascii", "replace")
-    if len(head) < USERBLOCK or stored != body:
-        raise InputError(
-            "damaged results file: its bytes do not match the SHA-256 checksum it was written with (truncated, "
-            "partly copied, a disk error or an edit); rerun the campaign that wrote it",
-            source=source,
-        )
-    return stored
 
 
 def write_campaign_h5(path: str | Path, campaign, attrs: Mapping[str, str] | None = None) -> None:
@@ -184,27 +126,6 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
         ng.create_dataset(family, data=sigma)
     if campaign.findings is not None:
         campaign.findings.write_h5(h5.create_group(campaign.system))
-
-
-def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
-    """Open a results file for reading, checking its kind; InputError for a missing, unreadable or other file."""
-    source = str(path)
-    try:
-        check_integrity(path)
-        h5 = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise InputError(f"{what} not found", source=source) from None
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file: truncated, damaged or not HDF5 ({exc})", source=source) from None
-    try:
-        found = h5.attrs.get("kind")
-    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # damaged metadata (no checksum)
-        h5.close()
-        raise InputError(f"damaged HDF5 file ({exc})", source=source) from None
-    if found != kind:
-        h5.close()
-        raise InputError(f"not a vehid {what} (kind {found!r})", source=source)
-    return h5
 
 
 def read_campaign_h5(path: str | Path):

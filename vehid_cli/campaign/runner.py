@@ -24,19 +24,12 @@ from ..core.errors import InputError
 from ..core.files import atomic_path, remove_stale_temporaries
 from ..core.locking import exclusive
 from ..core.provenance import git_commit
+from ..core.store import check_integrity, open_results
 from ..identify.records import Campaign, RunRecord, summarise
 from ..identify.source import DataFiles, DataSource
 from ..systems import System, build_system
 from .executor import Executor, LocalExecutor
-from .results import (
-    CAMPAIGN_KIND,
-    campaign_file_digest,
-    check_integrity,
-    config_difference,
-    open_results,
-    read_campaign_h5,
-    write_campaign_h5,
-)
+from .results import CAMPAIGN_KIND, campaign_file_digest, config_difference, read_campaign_h5, write_campaign_h5
 
 Log = Callable[[str], None]
 

@@ -10,10 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config, config_from_dict
+from ..core.result import Result
 
 
 @dataclass(frozen=True)
-class Plan:
+class Plan(Result):
     """One test: speed [km/h], bump heights under corners 1..4 [m], shape, length [m], record duration [s], and
     the mounted sensors (names among design.sensors.candidates; None: the configured layout)."""
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.result import Result
 from ..models.noise import per_channel
 
 MIN_SAMPLES = 500
@@ -35,7 +36,7 @@ MIN_ROLL_RATIO = 0.01
 
 
 @dataclass(frozen=True)
-class Quality:
+class Quality(Result):
     """Why the data cannot support a claim (empty: it can)."""
 
     reasons: tuple[str, ...] = ()

@@ -222,5 +222,5 @@ class Campaign:
             "algorithm": self.config.identify.algorithm.name,
             "noise_level": self.config.noise.level,
             "system": self.system,
-            **({} if self.findings is None else self.findings.to_json(self)),
+            **({} if self.findings is None else self.findings.json_keys(self)),
         }

@@ -5,7 +5,7 @@ The format is the suffix's (`io.formats`, one module each: `.mf4` ASAM MDF 4.10,
 HDF5, `.csv`/`.txt` CSV at one rate). Values are given in SI units and written in the unit named for the channel
 (written = SI / factor, the factor of `io.units.unit_factor`; default SI). Every write is atomic
 (`core.files.atomic_path`): the target holds its old content or the whole new file (HDF5: built in memory,
-`core.h5file.h5_file`).
+`core.store.h5_file`).
 """
 
 from __future__ import annotations

@@ -9,10 +9,11 @@ import h5py
 import yaml
 from rich.console import Console
 
-from ..campaign.results import CAMPAIGN_KIND, check_integrity, open_results, read_campaign_h5
+from ..campaign.results import CAMPAIGN_KIND, read_campaign_h5
 from ..campaign.sweep import read_index
 from ..core.errors import InputError
 from ..core.jsonio import to_json
+from ..core.store import check_integrity, open_results
 from ..identify.records import Campaign
 from ..systems import SYSTEMS, System
 

@@ -27,9 +27,10 @@ from pathlib import Path
 
 import yaml
 
-from ..campaign.results import CAMPAIGN_KIND, open_results
+from ..campaign.results import CAMPAIGN_KIND
 from ..config import flatten
 from ..core.errors import InputError
+from ..core.store import open_results
 
 METHOD_KEYS = (
     "identify.algorithm", "identify.objective", "identify.runs", "identify.seed", "identify.budget",

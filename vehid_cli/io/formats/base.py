@@ -10,7 +10,7 @@ adding a module; nothing else names the formats.
   and putting the channels on one grid is `io.read.read_record`'s, the same for every format;
 - the writer (`LoggerFormat.write`) takes the channels already checked and in the units they are written in, each
   with its own strictly increasing time stamps, and writes the whole file atomically (`core.files.atomic_path`, or
-  `core.h5file.h5_file` for HDF5): the target holds its old content or the whole new file.
+  `core.store.h5_file` for HDF5): the target holds its old content or the whole new file.
 
 A MAT or HDF5 file holds one time vector for all channels (`t`, `time` or the one named by `time=`), and a channel
 `X` sampled otherwise its own beside it: `t_X` (HDF5: in X's group, `acc/t_X` for `acc/X`; see `own_time_name`).

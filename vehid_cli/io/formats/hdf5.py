@@ -5,7 +5,7 @@ the common time vector is `t` or `time` (or the one named by `time=`), a channel
 beside it (`acc/t_X`, `base.own_time_name`). A dataset's `unit` (or `units`) attribute is its unit.
 
 Writing: the same layout, each dataset with a `unit` attribute ('s' for time vectors); `comment` and `start` are
-attributes of the root. The file is built in memory and its bytes written atomically (`core.h5file.h5_file`: HDF5
+attributes of the root. The file is built in memory and its bytes written atomically (`core.store.h5_file`: HDF5
 locks a file it writes).
 """
 
@@ -45,7 +45,7 @@ class Hdf5(LoggerFormat):
         start: dt.datetime | None,
         comment: str,
     ) -> None:
-        from ...core.h5file import h5_file
+        from ...core.store import h5_file
 
         src = str(path)
         for ours, name in names.items():

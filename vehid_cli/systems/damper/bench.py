@@ -14,8 +14,8 @@ from numpy.typing import NDArray
 from ...config import DamperConfig
 from ...core.errors import InputError
 from ...core.files import atomic_path
-from ...core.h5file import h5_file
 from ...core.provenance import provenance
+from ...core.store import h5_file
 from ...io.measurement import format_rows
 from ...io.read import read_record
 from ...io.timegrid import NominalRateError

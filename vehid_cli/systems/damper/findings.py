@@ -10,11 +10,12 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from ...core.result import Result
 from .fit import RealTime
 
 
 @dataclass(frozen=True)
-class Trace:
+class Trace(Result):
     """Measured and model force on one bench run (for the figures), with J on it."""
 
     name: str
@@ -27,7 +28,7 @@ class Trace:
 
 
 @dataclass(frozen=True)
-class Findings:
+class Findings(Result):
     """What a damper campaign adds after its runs: the identified model (run 0's, every parameter), J on the
     held-out runs, the real-time check, and measured/model force traces (training and held out)."""
 
@@ -39,7 +40,9 @@ class Findings:
     traces: tuple[Trace, ...]
 
     def write_h5(self, group) -> None:
-        """Into the results file's /damper group (results.py)."""
+        """Into the results file's /damper group (the layout campaign/results.py documents: the validation pairs
+        as two datasets, the model row under model_names / model_values); the real-time check and the traces as
+        the Result protocol writes them."""
         strings = h5py.string_dtype()
         group.attrs["model"] = self.model
         group.create_dataset("model_names", data=np.array(self.names, dtype=strings))
@@ -47,17 +50,12 @@ class Findings:
         v = group.create_group("validation")
         v.create_dataset("files", data=np.array([f for f, _ in self.validation], dtype=strings))
         v.create_dataset("J", data=np.array([j for _, j in self.validation], dtype=float))
-        rt = group.create_group("realtime")
-        for name in ("dt", "stable", "realtime_factor", "largest_stable_dt"):
-            rt.attrs[name] = getattr(self.realtime, name)
+        self.realtime.write_h5(group.create_group("realtime"))
         tg = group.create_group("traces")
         for k, tr in enumerate(self.traces):
-            t = tg.create_group(f"{k:02d}")
-            t.attrs["name"], t.attrs["J"] = tr.name, tr.J
-            for name in ("t", "x", "v", "measured", "model"):
-                t.create_dataset(name, data=getattr(tr, name))
+            tr.write_h5(tg.create_group(f"{k:02d}"))
 
-    def to_json(self, campaign) -> dict:
+    def json_keys(self, campaign) -> dict:
         """The damper's keys of the JSON summary: J per run and of the truth, held-out J, the model, real time."""
         rt, recs = self.realtime, campaign.records
         return {
@@ -67,34 +65,15 @@ class Findings:
             "J_train": float(np.mean([r.cost for r in recs])),
             "validation_J": {Path(f).name: j for f, j in self.validation},
             "model_row": {n: float(v) for n, v in zip(self.names, self.values, strict=True)},
-            "realtime": {
-                "dt": rt.dt,
-                "stable": rt.stable,
-                "realtime_factor": rt.realtime_factor,
-                "largest_stable_dt": rt.largest_stable_dt,
-            },  # fmt: skip
+            "realtime": rt.to_json(),
         }
 
     @classmethod
     def read_h5(cls, group) -> Findings:
         """From a results file's /damper group (KeyError for a damaged one)."""
         model = str(group.attrs["model"])
-        rt = group["realtime"].attrs
-        realtime = RealTime(
-            model, float(rt["dt"]), bool(rt["stable"]), float(rt["realtime_factor"]), float(rt["largest_stable_dt"])
-        )
-        traces = tuple(
-            Trace(
-                str(t.attrs["name"]),
-                t["t"][()],
-                t["x"][()],
-                t["v"][()],
-                t["measured"][()],
-                t["model"][()],
-                float(t.attrs["J"]),
-            )  # fmt: skip
-            for _, t in sorted(group["traces"].items())
-        )
+        realtime = RealTime.read_h5(group["realtime"], model=model)
+        traces = tuple(Trace.read_h5(t) for _, t in sorted(group["traces"].items()))
         files = _text(group["validation/files"][()])
         return cls(
             model=model, names=_text(group["model_names"][()]), values=group["model_values"][()],

@@ -11,10 +11,12 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ...core.result import Result
 from ...models.bench import BenchHistory
 from ...models.damper import MODELS, DamperModel, play
 from ...models.effects import bench_effect_rows, bench_lag_state
@@ -212,8 +214,11 @@ def fit(
 
 
 @dataclass(frozen=True)
-class RealTime:
+class RealTime(Result):
     """Fixed-step RK4 at the real-time step: stable or not, how fast, and the largest stable step."""
+
+    h5_omit: ClassVar[tuple[str, ...]] = ("model",)  # the group's parent names the model
+    json_omit: ClassVar[tuple[str, ...]] = ("model",)
 
     model: str
     dt: float  # the step checked [s]

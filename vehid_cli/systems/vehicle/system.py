@@ -14,8 +14,8 @@ from numpy.typing import NDArray
 from ... import __version__
 from ...config import Config
 from ...core.errors import InputError
-from ...core.h5file import h5_file
 from ...core.provenance import provenance
+from ...core.store import h5_file
 from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao
 from ...identify.experiment import SimulatedRun, build_experiment, run_streams, simulate_measurement
