@@ -22,6 +22,39 @@ from .common import (
 )
 
 
+def _check_options(output: Path | None, json_out: Path | None, plots: Path | None, verify: int, jobs: int | None):
+    """-o, --json and --plots checked writable, --verify and --jobs checked in range, before any work."""
+    for path, suffixes in ((output, (".yaml", ".yml")), (json_out, (".json",))):
+        if path is not None:
+            check_writable(path, suffixes)
+    if plots is not None:
+        check_output_dir(plots, "--plots")
+    if verify < 0:
+        raise InputError(f"--verify must be a non-negative number of runs, got {verify}")
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be at least 1, got {jobs}")
+
+
+def _print_design(result, output: Path | None, json_out: Path | None, plots: Path | None) -> None:
+    """The comparison tables and notes on the terminal; the designed config, its JSON and figures where asked."""
+    from ..core.jsonio import write_json
+    from ..report.design import design_json, notes, rich_tables, write_config, write_plots
+
+    for table in rich_tables(result):
+        out.print(table)
+    for note in notes(result):
+        out.print(note, markup=False)
+    if output is not None:
+        write_config(result, output)
+        out.print(f"wrote {output}")
+    if json_out is not None:
+        write_json(json_out, design_json(result, None if output is None else str(output)))
+        out.print(f"wrote {json_out}")
+    if plots is not None:
+        for path in write_plots(result, plots):
+            out.print(f"wrote {path}")
+
+
 @guarded
 def design(
     config: Annotated[
@@ -57,20 +90,10 @@ def design(
     that fixes it; --verify N checks the prediction with campaigns of N runs.
     """
     from ..campaign.executor import LocalExecutor
-    from ..core.jsonio import write_json
     from ..design.search import design_test
-    from ..report.design import design_json, notes, rich_tables, write_config, write_plots
     from ..systems import system_class
 
-    for path, suffixes in ((output, (".yaml", ".yml")), (json_out, (".json",))):
-        if path is not None:
-            check_writable(path, suffixes)
-    if plots is not None:
-        check_output_dir(plots, "--plots")
-    if verify < 0:
-        raise InputError(f"--verify must be a non-negative number of runs, got {verify}")
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    _check_options(output, json_out, plots, verify, jobs)
     cfg = load_config(config, set_ or ())
     if not system_class(cfg).designable:
         raise InputError("vehid design plans a car's test (system: vehicle)", source=str(config), key="system")
@@ -83,16 +106,4 @@ def design(
             bar.update(tasks[stage], completed=done, total=total)
 
         result = design_test(cfg, executor=pool, verify=verify, progress=progress)
-    for table in rich_tables(result):
-        out.print(table)
-    for note in notes(result):
-        out.print(note, markup=False)
-    if output is not None:
-        write_config(result, output)
-        out.print(f"wrote {output}")
-    if json_out is not None:
-        write_json(json_out, design_json(result, None if output is None else str(output)))
-        out.print(f"wrote {json_out}")
-    if plots is not None:
-        for path in write_plots(result, plots):
-            out.print(f"wrote {path}")
+    _print_design(result, output, json_out, plots)

@@ -7,7 +7,23 @@ from typing import Annotated, Optional
 
 import typer
 
-from .common import SetOption, check_output_dir, check_writable, err, guarded, out
+from .common import SetOption, check_output_dir, check_writable, guarded, out, warn
+
+
+def _print_diagnosis(result) -> None:
+    """The diagnosis on the terminal: its tables, each effect added (J and validation J before -> after), the
+    notes and the verdict."""
+    from ..report.diagnosis import diagnosis_tables
+
+    out.print(diagnosis_tables(result))
+    for step in result.steps:
+        out.print(
+            f"added {step.effect}: J {step.J_before:.4g} -> {step.J_after:.4g}, "
+            f"validation J {step.validation_J_before:.4g} -> {step.validation_J_after:.4g}"
+        )
+    for note in result.notes:
+        out.print(f"note: {note}", markup=False)
+    out.print(f"verdict: {result.verdict} ({result.wall_s:.1f} s)")
 
 
 @guarded
@@ -56,25 +72,16 @@ def diagnose(
     """
 
     from ..core.jsonio import write_json
-    from ..report.diagnosis import diagnosis_tables, plot_diagnosis_files
+    from ..report.diagnosis import plot_diagnosis_files
     from ..systems import diagnose_config
 
     if json_out is not None:
         check_writable(json_out, (".json",))
     if plots is not None:
         check_output_dir(plots, "--plots")
-    say = lambda msg: err.print(msg, markup=False)  # noqa: E731
-    result = diagnose_config(config, set_ or (), data or None, validate or (), log=say)
+    result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn)
     doc = result.to_json()
-    out.print(diagnosis_tables(result))
-    for step in result.steps:
-        out.print(
-            f"added {step.effect}: J {step.J_before:.4g} -> {step.J_after:.4g}, "
-            f"validation J {step.validation_J_before:.4g} -> {step.validation_J_after:.4g}"
-        )
-    for note in result.notes:
-        out.print(f"note: {note}", markup=False)
-    out.print(f"verdict: {result.verdict} ({result.wall_s:.1f} s)")
+    _print_diagnosis(result)
     if plots is not None:
         for path in plot_diagnosis_files(result, plots, (data[0] if data else config).stem):
             out.print(f"wrote {path}")
