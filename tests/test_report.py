@@ -122,7 +122,7 @@ def test_table_format_writes_to_a_file_and_directories_skip_other_h5(campaign_di
 
 
 def test_the_cli_knows_the_report_formats():
-    from vehid_cli.cli.app import REPORT_FORMATS, REPORT_SUFFIXES
+    from vehid_cli.cli.report import REPORT_FORMATS, REPORT_SUFFIXES
     from vehid_cli.report import FORMATS
 
     assert REPORT_FORMATS == FORMATS and set(REPORT_SUFFIXES.values()) == set(FORMATS)

@@ -18,6 +18,7 @@ import contextlib
 import csv
 import io
 import itertools
+import json
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -111,6 +112,17 @@ def plan_sweep(config_path: str | Path, base_overrides: Sequence[str], variation
     return planned
 
 
+def shard_of(planned: Sequence[PlannedCampaign], shard: tuple[int, int]) -> list[PlannedCampaign]:
+    """The campaigns of shard K/N of a plan: K-1, K-1+N, ..."""
+    k, n = shard
+    return [p for p in planned if p.index % n == k - 1]
+
+
+def campaign_attrs(variations: Sequence[Variation], planned: PlannedCampaign) -> dict[str, str]:
+    """What a sweep's campaign file records of the sweep: the varied keys (JSON) and its own --vary values."""
+    return {"sweep_vary": json.dumps([v.key for v in variations]), "sweep_overrides": " ".join(planned.overrides)}
+
+
 def stored_digest(path: Path) -> str | None:
     """The config digest a finished campaign file records, or None if there is no readable one."""
     try:
@@ -194,6 +206,18 @@ def check_no_other_campaigns(planned: Sequence[PlannedCampaign]) -> None:
         )
 
 
+def check_no_conflicts(outcome: SweepOutcome, out_dir: Path) -> None:
+    """InputError, after the sweep, if another sweep rewrote some of its files with a different config meanwhile
+    (they were not overwritten)."""
+    if outcome.conflicts:
+        raise InputError(
+            f"{len(outcome.conflicts)} campaign file(s) were written meanwhile by another sweep with a different "
+            f"config and were not overwritten ({', '.join(p.path.name for p in outcome.conflicts)}); give different "
+            "sweeps different output directories",
+            source=str(out_dir),
+        )
+
+
 def run_sweep(
     planned: Sequence[PlannedCampaign],
     shard: tuple[int, int],
@@ -203,8 +227,7 @@ def run_sweep(
 ) -> SweepOutcome:
     """Run this shard's campaigns that have no up-to-date file, each under its file's lock (`run_one` must
     not take the lock again). Campaigns another process holds are done last, after waiting for it."""
-    k, n = shard
-    mine = [p for p in planned if p.index % n == k - 1]
+    mine = shard_of(planned, shard)
     at_start = {p.path: file_state(p.path)[0] for p in mine}
     ran, skipped, conflicts, busy = [], [], [], []
 

@@ -1,0 +1,140 @@
+"""What the `vehid` commands share: the consoles, the shared options, the error guard, progress, output checks and
+config loading. Imports only typer, rich and `vehid_cli.core` at module level: the library is imported when a
+command runs, so `vehid --help` starts in a fraction of a second.
+
+Exit status (SPEC section 3): 0 success; 2 bad input, with one message naming the file, key or
+column; 1 anything else. Set VEHID_DEBUG=1 to see the traceback of an unexpected error.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Optional
+
+import typer
+from rich.console import Console
+
+from ..core.errors import DiskFull, InputError
+
+if TYPE_CHECKING:  # the library is imported inside the commands: `vehid --help` starts in a fraction of a second
+    from ..config import Config, DamperConfig
+
+out = Console(soft_wrap=True)
+err = Console(stderr=True, highlight=False, soft_wrap=True)
+
+
+SetOption = Annotated[
+    Optional[list[str]],  # noqa: UP045 - typer needs Optional here
+    typer.Option(
+        "--set", metavar="KEY=VALUE", help="Override a config value: dotted.key=value (repeatable).", show_default=False
+    ),
+]
+RunsOption = Annotated[
+    Optional[int],  # noqa: UP045 - typer needs Optional here
+    typer.Option("--runs", metavar="N", help="Runs per campaign (identify.runs)."),
+]
+SeedOption = Annotated[
+    Optional[int],  # noqa: UP045
+    typer.Option("--seed", metavar="N", help="Campaign seed (identify.seed)."),
+]
+JobsOption = Annotated[
+    Optional[int],  # noqa: UP045
+    typer.Option("--jobs", metavar="N", help="Worker processes (default: all cores)."),
+]
+ExecutorOption = Annotated[
+    str,
+    typer.Option(
+        "--executor",
+        metavar="local|dask",
+        help="Where the runs execute: local (this machine; --jobs processes) or dask (a cluster).",
+    ),
+]
+SchedulerOption = Annotated[
+    Optional[str],  # noqa: UP045 - typer needs Optional here
+    typer.Option(
+        "--scheduler", metavar="ADDRESS", help="Dask scheduler address, tcp://HOST:PORT (with --executor dask)."
+    ),
+]
+
+
+def warn(message: str) -> None:
+    """A message on stderr, as given (no rich markup)."""
+    err.print(message, markup=False)
+
+
+def load_config(path: Path, overrides: Sequence[str] = ()) -> Config | DamperConfig:
+    """config.load_config, imported when a command runs (not when the CLI starts)."""
+    from ..config import load_config as load
+
+    return load(path, overrides)
+
+
+def check_writable(path: Path, suffixes: Sequence[str]) -> Path:
+    """data.check_writable, imported when a command runs."""
+    from ..core.files import check_writable as check
+
+    return check(path, suffixes)
+
+
+def check_output_dir(path: Path, option: str) -> Path:
+    """data.check_writable_dir for an option's directory: created if needed and probed, before any work."""
+    from ..core.files import check_writable_dir
+
+    return check_writable_dir(path, option)
+
+
+def guarded(command):
+    """Turn InputError into exit 2 with its message, anything unexpected into exit 1, never a traceback."""
+
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except InputError as exc:
+            err.print(f"error: {exc}", markup=False)
+            raise typer.Exit(2) from None
+        except DiskFull as exc:  # a full disk or quota: the write was undone (nothing partial left), exit 1
+            err.print(f"error: {exc}", markup=False)
+            raise typer.Exit(1) from None
+        except (typer.Exit, typer.Abort, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # noqa: BLE001 - the last line of defence of the CLI
+            if os.environ.get("VEHID_DEBUG"):
+                raise
+            err.print(
+                f"internal error: {exc.__class__.__name__}: {exc} (set VEHID_DEBUG=1 for the traceback)", markup=False
+            )
+            raise typer.Exit(1) from None
+
+    return wrapper
+
+
+def campaign_overrides(set_: list[str] | None, runs: int | None, seed: int | None, jobs: int | None) -> list[str]:
+    """--set lines plus the --runs/--seed shortcuts (kept in the resolved config, for provenance)."""
+    from ..config import Override
+
+    overrides = list(set_ or ())
+    if runs is not None:
+        overrides.append(Override(f"identify.runs={runs}", "--runs"))
+    if seed is not None:
+        overrides.append(Override(f"identify.seed={seed}", "--seed"))
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    return overrides
+
+
+def progress_bar(verb: str):
+    """A rich progress bar on stderr on a terminal; elsewhere (logs, CI) one plain stderr line per finished step."""
+    if not err.is_terminal:
+        from ..core.progress import PlainProgress
+
+        return PlainProgress(verb, {"sweep": "campaign", "design": "step"}.get(verb, "run"), warn)
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        TextColumn(f"[bold]{verb}[/] {{task.description}}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+        console=err, transient=True,
+    )  # fmt: skip

@@ -1,0 +1,104 @@
+"""`vehid identify`: one statistical identification campaign (a car or a damper) into one HDF5 file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from ..core.interrupt import interruptible
+from .common import (
+    ExecutorOption,
+    JobsOption,
+    RunsOption,
+    SchedulerOption,
+    SeedOption,
+    SetOption,
+    campaign_overrides,
+    check_output_dir,
+    check_writable,
+    guarded,
+    load_config,
+    out,
+    progress_bar,
+    warn,
+)
+
+
+def _results_target(config: Path, cfg, output: Path | None, json_out: Path | None) -> Path:
+    """The results file (default runs/<config>-<hash>.h5), checked writable with the --json file before any work."""
+    if output is None:
+        check_output_dir(Path("runs"), "the default output directory").mkdir(exist_ok=True)
+        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+    target = check_writable(output, (".h5", ".hdf5"))
+    if json_out is not None:
+        check_writable(json_out, (".json",))
+    return target
+
+
+@guarded
+def identify(
+    config: Annotated[Path, typer.Argument(metavar="CONFIG", help="Experiment config (YAML).", show_default=False)],
+    data: Annotated[
+        Optional[list[Path]],  # noqa: UP045
+        typer.Option(
+            "--data",
+            metavar="FILE",
+            help="Identify from this measured run instead of simulated data; repeat it to identify several runs "
+            "jointly (one parameter set).",
+        ),
+    ] = None,
+    runs: RunsOption = None,
+    seed: SeedOption = None,
+    jobs: JobsOption = None,
+    output: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("-o", "--output", metavar="FILE", help="Campaign file (.h5); default runs/<config>-<hash>.h5."),
+    ] = None,
+    json_out: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option("--json", metavar="FILE", help="Also write the SPEC JSON summary here."),
+    ] = None,
+    set_: SetOption = None,
+    executor: ExecutorOption = "local",
+    scheduler: SchedulerOption = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite an output file that holds a campaign of another config.")
+    ] = False,
+) -> None:
+    """Run a statistical identification campaign (a car or a damper): one HDF5 file, and the summary table.
+
+    Each run identifies from its own noise realisation with its own optimizer stream, so results are
+    identical for any --jobs and executor (--executor dask --scheduler tcp://HOST:PORT runs them on a Dask
+    cluster). Finished runs are kept in <output>.partial/ until the campaign completes: rerun the same
+    command to resume an interrupted campaign (Ctrl-C, SIGTERM, a killed job).
+    """
+
+    from ..campaign.executor import check_executor_options, make_executor
+    from ..campaign.runner import run_campaign_to_file, saved_runs_note
+    from ..core.jsonio import write_json
+    from ..report import campaign_notes, rich_tables
+    from ..systems import system_class
+
+    check_executor_options(executor, jobs=jobs, scheduler=scheduler)
+    cfg = load_config(config, campaign_overrides(set_, runs, seed, jobs))
+    target = _results_target(config, cfg, output, json_out)
+    with (
+        interruptible(lambda: saved_runs_note(target), warn),
+        make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
+        progress_bar("identify") as progress,
+    ):
+        objective = system_class(cfg).objective_label(cfg)
+        bar = progress.add_task(f"{cfg.identify.algorithm.name}/{objective}", total=None)
+        campaign = run_campaign_to_file(
+            cfg, target, data or None, executor=pool, log=warn, force=force,
+            on_run=lambda d, n: progress.update(bar, completed=d, total=n),
+        )  # fmt: skip
+    if json_out is not None:
+        write_json(json_out, campaign.to_json())
+    for table in rich_tables([campaign], [str(target)]):
+        out.print(table)
+    for note in campaign_notes(campaign):
+        out.print(note)
+    out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
