@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from vehid_cli.config import load_config
-from vehid_cli.identify.experiment import build_experiment, run_streams, simulate_measurement
+from vehid_cli.core.streams import run_streams
+from vehid_cli.identify.experiment import build_experiment, simulate_measurement
 from vehid_cli.io.write import write_record
 from vehid_cli.models.sensors import FAMILY
 

@@ -7,7 +7,7 @@ import pytest
 
 from tests.conftest import BASE_CONFIG
 from vehid_cli.config import load_config
-from vehid_cli.identify.experiment import run_streams
+from vehid_cli.core.streams import run_streams
 from vehid_cli.identify.task import build_task
 from vehid_cli.optimizers import get_optimizer
 

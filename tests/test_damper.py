@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from tests.conftest import ROOT
 from vehid_cli.config import scaled_bounds
-from vehid_cli.identify.experiment import run_streams
+from vehid_cli.core.streams import run_streams
 from vehid_cli.models.bench import BenchHistory, constant_velocity, sawtooth, sine, with_force
 from vehid_cli.models.damper import default_values
 from vehid_cli.systems.damper.fit import PENALTY_FACTOR, DamperSpec, cost_J, fit, realtime_check

@@ -9,6 +9,7 @@ still a cycle); it must have no cycle. Each layer is also imported on its own in
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 
@@ -186,3 +187,81 @@ def test_each_layer_imports_alone_and_pulls_in_nothing_above_it(layer, forbidden
     assert res.returncode == 0, res.stderr
     loaded = {m.removeprefix("vehid_cli.").split(".")[0] for m in res.stdout.split()}
     assert not loaded & set(forbidden), f"import vehid_cli.{layer} loads {sorted(loaded & set(forbidden))}"
+
+
+# ------------------------------------------------------------------------------------------ one home per concept
+
+MAX_FILE_LINES = 600
+MAX_FUNCTION_LINES = 80
+
+
+def _compiled(node) -> bool:
+    """A function numba compiles (decorated with njit or jit): a hot loop, which may stay whole."""
+    for d in getattr(node, "decorator_list", ()):
+        text = ast.unparse(d)
+        if "njit" in text or "numba.jit" in text:
+            return True
+    return False
+
+
+def long_functions(tree: ast.AST) -> list[tuple[str, int]]:
+    """(name, lines) of every function over MAX_FUNCTION_LINES, not counting the compiled functions it holds."""
+    out = []
+    for node in ast.walk(tree):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) or _compiled(node):
+            continue
+        inner = sum(
+            n.end_lineno - n.lineno + 1
+            for n in ast.walk(node)
+            if n is not node and isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and _compiled(n)
+        )
+        size = node.end_lineno - node.lineno + 1 - inner
+        if size > MAX_FUNCTION_LINES:
+            out.append((node.name, size))
+    return out
+
+
+def test_no_file_over_600_lines_and_no_function_over_80():
+    big = [f"{p.relative_to(ROOT)}: {n} lines" for p in PACKAGE.rglob("*.py") if (n := len(p.read_text().splitlines()))
+           > MAX_FILE_LINES]  # fmt: skip
+    long = [f"{p.relative_to(ROOT)}: {name} {n} lines" for p in PACKAGE.rglob("*.py")
+            for name, n in long_functions(ast.parse(p.read_text()))]  # fmt: skip
+    assert not big and not long, "\n".join(big + long)
+
+
+def test_the_size_check_sees_a_long_function_but_not_a_compiled_loop():
+    body = "\n".join(f"    x{i} = {i}" for i in range(90))
+    assert long_functions(ast.parse(f"def f():\n{body}\n")) == [("f", 91)]
+    assert long_functions(ast.parse(f"@numba.njit\ndef f():\n{body}\n")) == []
+    nested = "\n".join(f"        x{i} = {i}" for i in range(90))
+    factory = f"def make():\n    @numba.njit(cache=True)\n    def f():\n{nested}\n    return f\n"
+    assert long_functions(ast.parse(factory)) == []
+
+
+# A check that asks which system a config or a result is: only systems/ (and the config registry) may hold one.
+SYSTEM_CHECK = re.compile(
+    r"isinstance\([^)]*\b(Config|DamperConfig|VehicleSystem|DamperSystem)\b"
+    r"|\bsystem\s*[!=]=\s*[\"']|[\"'](vehicle|damper)[\"']\s*[!=]="
+    r"|[!=]=\s*[\"'](vehicle|damper)[\"']"
+)
+
+
+def system_checks(text: str) -> list[str]:
+    return [line.strip() for line in text.splitlines() if SYSTEM_CHECK.search(line)]
+
+
+def test_nothing_outside_systems_asks_which_system_it_holds():
+    found = [
+        f"{p.relative_to(ROOT)}: {line}"
+        for p in PACKAGE.rglob("*.py")
+        if p.relative_to(PACKAGE).parts[0] not in ("systems", "config")
+        for line in system_checks(p.read_text())
+    ]
+    assert not found, "\n".join(found)
+
+
+def test_the_system_check_finder_sees_each_kind():
+    for line in ('if campaign.system == "vehicle":', "if isinstance(cfg, DamperConfig):", 'x = c.system != "damper"',
+                 'if "damper" == kind:'):  # fmt: skip
+        assert system_checks(line), line
+    assert not system_checks("system = system_class(cfg)")

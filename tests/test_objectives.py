@@ -7,7 +7,8 @@ import pytest
 
 from tests.conftest import BASE_CONFIG
 from vehid_cli.config import load_config
-from vehid_cli.identify.experiment import build_experiment, run_streams
+from vehid_cli.core.streams import run_streams
+from vehid_cli.identify.experiment import build_experiment
 from vehid_cli.identify.objectives import Objective, objective_families
 from vehid_cli.models.noise import add_noise, estimate_noise_sigma, noise_sigma, sigma_from_level
 

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..config import Config
 from ..core.errors import InputError
+from ..core.streams import experiment_rng
 from ..io.measurement import read_measurement, time_grid
 from ..models.effects import check_names
 from ..models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
@@ -31,28 +32,6 @@ from ..sim.nonlinear import simulate_effects
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
 CHUNK_BYTES = 64 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs)
-
-
-@dataclass(frozen=True)
-class RunStreams:
-    """The random generators of one run of a campaign."""
-
-    noise: np.random.Generator
-    optimizer: np.random.Generator
-
-
-def experiment_rng(seed: int) -> np.random.Generator:
-    """The experiment's own stream (e.g. a random road): the same for every run of the campaign."""
-    experiment_seq, _ = np.random.SeedSequence(seed).spawn(2)
-    return np.random.default_rng(experiment_seq)
-
-
-def run_streams(seed: int, run: int) -> RunStreams:
-    """Streams of run `run` (0-based): child `run` of the runs' SeedSequence, split in noise and optimizer."""
-    _, runs_seq = np.random.SeedSequence(seed).spawn(2)
-    run_seq = runs_seq.spawn(run + 1)[run]
-    noise_seq, opt_seq = run_seq.spawn(2)
-    return RunStreams(noise=np.random.default_rng(noise_seq), optimizer=np.random.default_rng(opt_seq))
 
 
 @dataclass(frozen=True)

@@ -25,11 +25,12 @@ from numpy.typing import NDArray
 
 from ..config import Config
 from ..core.errors import InputError
+from ..core.streams import experiment_rng
 from ..io.measurement import read_measurement
 from ..io.read import read_record
 from ..io.record import Record, remove_offset
 from ..models.road import road_function
-from .experiment import Experiment, check_time_step, experiment_rng
+from .experiment import Experiment, check_time_step
 
 ROAD = ("road1", "road2", "road3", "road4")
 TRACKS = ("track1", "track2")

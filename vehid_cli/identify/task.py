@@ -18,10 +18,11 @@ from numpy.typing import NDArray
 
 from ..config import Config
 from ..core.errors import InputError
+from ..core.streams import run_streams
 from ..models.effects import LIBRARY
 from ..optimizers.base import Problem
 from .crlb import CramerRao, bound_from_information, cramer_rao, information
-from .experiment import Experiment, build_experiment, measurement_noise, run_streams
+from .experiment import Experiment, build_experiment, measurement_noise
 from .measured import experiment_of, read_run
 from .objectives import Objective, objective_families
 

@@ -31,14 +31,9 @@ from ..campaign.results import CAMPAIGN_KIND
 from ..config import flatten
 from ..core.errors import InputError
 from ..core.store import open_results
+from ..systems import SYSTEMS, System
 
-METHOD_KEYS = (
-    "identify.algorithm", "identify.objective", "identify.runs", "identify.seed", "identify.budget",
-    "identify.start", "sensors", "noise.level",
-)  # fmt: skip
-# A damper bench test is the same experiment for every model fitted to it: the model, its configured values and
-# what is identified are the method (`damper.*`, `identify.*`); the bench, the data and the noise are not.
-DAMPER_METHOD_KEYS = ("damper", "identify")
+METHOD_KEYS = System.method_keys  # a system's own: System.method_keys
 CODE_KEYS = ("vehid_version", "git_commit", "numpy_version", "scipy_version", "numba_version")
 _MISSING = object()
 
@@ -77,6 +72,12 @@ def read_provenance(path: str | Path) -> Provenance:
     )
 
 
+def method_keys(p: Provenance) -> tuple[str, ...]:
+    """The method keys of a stored campaign's system (another system's campaign: the common ones)."""
+    cls = SYSTEMS.get(str(p.config.get("system", "vehicle")))
+    return METHOD_KEYS if cls is None else cls.method_keys
+
+
 def _covered(key: str, allowed) -> bool:
     return any(key == a or key.startswith(a + ".") for a in allowed)
 
@@ -89,9 +90,7 @@ def differences(a: Provenance, b: Provenance) -> list[str]:
     """What makes two campaigns incomparable (empty if they are comparable), each as 'what (a vs b)'."""
     out = []
     fa, fb = flatten(a.config), flatten(b.config)
-    allowed = set(METHOD_KEYS) | a.varied | b.varied
-    if a.config.get("system") == "damper" and b.config.get("system") == "damper":
-        allowed |= set(DAMPER_METHOD_KEYS)
+    allowed = set(method_keys(a)) & set(method_keys(b)) | a.varied | b.varied
     for key in sorted(set(fa) | set(fb)):
         va, vb = fa.get(key, _MISSING), fb.get(key, _MISSING)
         if va != vb and not _covered(key, allowed):

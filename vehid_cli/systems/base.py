@@ -19,8 +19,8 @@ from numpy.typing import NDArray
 
 from ..config import AnyConfig
 from ..core.errors import InputError
+from ..core.streams import run_streams
 from ..identify.crlb import CramerRao
-from ..identify.experiment import run_streams
 from ..identify.records import Campaign, RunRecord
 from ..identify.source import DataSource
 from ..optimizers import get_optimizer
@@ -60,6 +60,11 @@ class System(ABC):
     findings_type: ClassVar[Any] = None  # what `conclude` returns: a class with write_h5(group), read_h5(group)
     simulation_suffixes: ClassVar[tuple[str, ...]] = (".csv", ".h5", ".hdf5")  # what `write_simulation` writes
     designable: ClassVar[bool] = False  # `vehid design` can plan its test
+    # config keys that are the method, not the experiment: campaigns differing only there share a report
+    method_keys: ClassVar[tuple[str, ...]] = (
+        "identify.algorithm", "identify.objective", "identify.runs", "identify.seed", "identify.budget",
+        "identify.start", "sensors", "noise.level",
+    )  # fmt: skip
     diagnosis_defaults: ClassVar[tuple[str, ...]] = ()  # --set lines a diagnosis starts from (the user's come after)
 
     config: AnyConfig

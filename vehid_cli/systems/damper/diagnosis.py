@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from ...config import DamperConfig
 from ...core.errors import InputError
+from ...core.streams import run_streams
 from ...diagnose.attribution import (
     ALPHA,
     Candidate,
@@ -44,7 +45,6 @@ from ...diagnose.attribution import (
 from ...diagnose.loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
 from ...diagnose.quality import assess_bench
 from ...diagnose.residuals import analyse_bench, autocorrelation
-from ...identify.experiment import run_streams
 from ...models.bench import BenchHistory
 from ...models.effects import LIBRARY, BenchScale
 from ...optimizers import get_optimizer

@@ -21,9 +21,9 @@ from numpy.typing import NDArray
 from ... import __version__
 from ...config import DamperConfig
 from ...core.errors import InputError
+from ...core.streams import run_streams
 from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao, cramer_rao_outputs
-from ...identify.experiment import run_streams
 from ...identify.records import Campaign, RunRecord
 from ...identify.source import DataFiles, DataSource
 from ...models.bench import BenchHistory
@@ -112,6 +112,9 @@ class DamperSystem(System):
     name: ClassVar[str] = "damper"
     objective: ClassVar[str] = "J"
     findings_type: ClassVar[type] = Findings
+    # a bench test is the same experiment for every model fitted to it: the model, its configured values and what is
+    # identified are the method (`damper.*`, `identify.*`); the bench, the data and the noise are not
+    method_keys: ClassVar[tuple[str, ...]] = (*System.method_keys, "damper", "identify")
 
     def __init__(self, config: DamperConfig, source: DataSource | DataFiles = None):
         cfg = config

@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...config import Config, config_from_dict
+from ...core.streams import run_streams
 from ...diagnose.attribution import (
     ALPHA,
     CANDIDATE_BUDGET,
@@ -40,7 +41,6 @@ from ...diagnose.loop import (
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
 from ...diagnose.residuals import ResidualAnalysis, analyse
 from ...diagnose.unexplained import candidate_order, estimate_unexplained
-from ...identify.experiment import run_streams
 from ...identify.source import as_paths
 from ...identify.task import JointTask, Task, build_task, build_tasks
 from ...optimizers import get_optimizer

@@ -16,9 +16,10 @@ from ...config import Config
 from ...core.errors import InputError
 from ...core.provenance import provenance
 from ...core.store import h5_file
+from ...core.streams import run_streams
 from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao
-from ...identify.experiment import SimulatedRun, build_experiment, run_streams, simulate_measurement
+from ...identify.experiment import SimulatedRun, build_experiment, simulate_measurement
 from ...identify.records import Campaign
 from ...identify.source import DataFiles, DataSource
 from ...identify.task import JointTask, Task, build_tasks
