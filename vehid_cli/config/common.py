@@ -4,7 +4,6 @@ that mean the same for the car and the damper."""
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import json
 import typing
@@ -15,6 +14,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
+from ..core.hints import closest
 from ..optimizers import ALGORITHMS, algorithm_class
 
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -38,12 +38,9 @@ class _KeyedError(ValueError):
 
 
 def _did_you_mean(word: str, choices: typing.Iterable[str]) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.5)
-    if not close:
-        lowered = {c.lower(): c for c in choices}
-        if word.lower() in lowered:
-            close = [lowered[word.lower()]]
-    return f"; did you mean '{close[0]}'?" if close else ""
+    """A config message's hint "; did you mean 'X'?" (core.hints.closest, a looser cutoff), else ''."""
+    match = closest(word, choices, cutoff=0.5)
+    return f"; did you mean '{match}'?" if match else ""
 
 
 class Algorithm(_Section):

@@ -8,8 +8,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from ..core.errors import InputError
-from ..core.units import UNITS
-from ..io.units import SI_FACTORS
+from ..core.units import SI_FACTORS, UNITS
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
 from ..models.sensors import FAMILY, Layout, corner_layout

@@ -5,14 +5,34 @@ from __future__ import annotations
 
 import math
 
+from .errors import InputError
+from .hints import did_you_mean
+
 UNITS: dict[str, dict[str, float]] = {
     "time": {"s": 1.0, "ms": 1e-3},
     "displacement": {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "in": 0.0254},
     "velocity": {"m/s": 1.0, "mm/s": 1e-3, "cm/s": 1e-2, "in/s": 0.0254},
     "force": {"N": 1.0, "kN": 1e3, "lbf": 4.4482216152605, "lb": 4.4482216152605, "kip": 4448.2216152605},
     "control": {"1": 1.0, "fraction": 1.0, "%": 0.01, "percent": 0.01, "V": 1.0, "A": 1.0},
-    # quantities of vehicle logger channels (vehid_cli.io.units); g is standard gravity (ISO 80000-3)
+    # quantities of vehicle logger channels (io.read); g is standard gravity (ISO 80000-3)
     "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "mm/s^2": 1e-3, "g": 9.80665},
     "angle": {"rad": 1.0, "deg": math.pi / 180, "°": math.pi / 180},
     "angular velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "°/s": math.pi / 180},
 }
+
+
+# One unit name -> its factor to SI, over all quantities of core.units.UNITS (no unit name means two things there).
+SI_FACTORS: dict[str, float] = {unit: f for table in UNITS.values() for unit, f in table.items()}
+
+
+def unit_factor(unit: str, source: str, channel: str) -> float:
+    """The factor that turns `unit` into SI ('' is SI); InputError naming the file, the channel and the known units."""
+    unit = unit.strip()
+    if not unit:
+        return 1.0
+    if unit in SI_FACTORS:
+        return SI_FACTORS[unit]
+    raise InputError(
+        f"{channel}: unknown unit '{unit}'{did_you_mean(unit, SI_FACTORS)}; known units: {', '.join(SI_FACTORS)}",
+        source=source,
+    )

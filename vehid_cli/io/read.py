@@ -4,7 +4,7 @@ Vehicle data loggers write ASAM MDF4 (`.mf4`/`.mdf`), test engineers pass on MAT
 HDF5-based v7.3), HDF5 (`.h5`/`.hdf5`) and CSV exports (`.csv`/`.txt`, numeric or ISO 8601 time stamps): one
 module each in `io.formats`, found by the file's suffix. `read_record` reads the channels a caller names (our
 name -> the name in the file), converts them to SI (`core.units.UNITS`: one unit table for the whole package,
-`io.units`) and puts them on one uniform grid (`io.timegrid`: anti-alias low-pass before down-sampling, cubic
+`core.units`) and puts them on one uniform grid (`io.timegrid`: anti-alias low-pass before down-sampling, cubic
 spline otherwise, jitter resampled, gaps refused; `resample=False` refuses any resampling). The Record
 (`io.record`) keeps each channel's own rate and sample times.
 
@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.errors import InputError
-from ..core.units import UNITS
+from ..core.hints import did_you_mean
+from ..core.units import UNITS, unit_factor
 from .formats import FORMATS, SUFFIXES, LoggerFormat, Raw
-from .hints import did_you_mean
 from .record import Record
 from .timegrid import (
     NATIVE_MATCH,
@@ -35,7 +35,6 @@ from .timegrid import (
     refuse_off_grid,
     refuse_resampling,
 )
-from .units import unit_factor
 
 
 def read_record(

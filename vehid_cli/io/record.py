@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.errors import InputError
-from .hints import did_you_mean
+from ..core.hints import did_you_mean
 from .timegrid import native_samples
 
 

@@ -3,7 +3,7 @@
 
 The format is the suffix's (`io.formats`, one module each: `.mf4` ASAM MDF 4.10, `.mat` MATLAB v5, `.h5`/`.hdf5`
 HDF5, `.csv`/`.txt` CSV at one rate). Values are given in SI units and written in the unit named for the channel
-(written = SI / factor, the factor of `io.units.unit_factor`; default SI). Every write is atomic
+(written = SI / factor, the factor of `core.units.unit_factor`; default SI). Every write is atomic
 (`core.files.atomic_path`): the target holds its old content or the whole new file (HDF5: built in memory,
 `core.store.h5_file`).
 """
@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.errors import InputError
+from ..core.units import unit_factor
 from .formats import FORMATS, LoggerFormat, writable
-from .units import unit_factor
 
 
 def write_record(

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import InputError
-from ..hints import did_you_mean
+from ...core.hints import did_you_mean
 
 TIME_NAMES = ("t", "time", "Time", "TIME", "timestamp", "Timestamp")  # a time column/vector found without `time=`
 
