@@ -39,7 +39,8 @@ from ...diagnose.loop import (
 )
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
 from ...diagnose.residuals import ResidualAnalysis, analyse
-from ...diagnose.unexplained import candidate_order, estimate_unexplained
+from ...diagnose.shapes import candidate_order
+from ...diagnose.unexplained import estimate_unexplained
 from ...identify.experiment import run_streams
 from ...identify.source import as_paths
 from ...identify.task import JointTask, Task, build_task, build_tasks
