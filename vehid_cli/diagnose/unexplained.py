@@ -55,9 +55,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from ..identify.objectives import Objective
+from ..identify.task import Task
 from ..models.fullcar import N_CORNERS, N_DOF
-from .linear_response import car_at, channel_columns, responses
-from .psplines import basis, penalised_fit
+from .linear_response import LinearCar, car_at, channel_columns, responses
+from .psplines import Basis, PenalisedFit, basis, penalised_fit
 from .shapes import Resemblance, resemblance
 
 Z95 = 1.959963984540054
@@ -240,7 +242,7 @@ class Unexplained:
 # ------------------------------------------------------------------------------------------ the estimate
 
 
-def _trajectories(task, names: tuple[str, ...], X: NDArray):
+def _trajectories(task: Task, names: tuple[str, ...], X: NDArray):
     """Simulate the batch X (P, D): responses and each corner's deflection and velocity (P, n, 4)."""
     exp = task.experiment
     values = {n: X[:, j] for j, n in enumerate(names)}
@@ -253,8 +255,260 @@ def _trajectories(task, names: tuple[str, ...], X: NDArray):
     return resp, d, v
 
 
+@dataclass(frozen=True)
+class _Linearisation:
+    """The fitted car at some values of its unknowns: the weighted residual (R_all,), the model's sensitivities to
+    the unknowns over sigma (R_all, p), each corner's strut deflection and velocity (n, 4) and their sensitivities
+    (p, n, 4), and its linear part."""
+
+    r: NDArray
+    Jm: NDArray
+    d: NDArray
+    v: NDArray
+    dd: NDArray
+    dv: NDArray
+    car: LinearCar
+
+
+@dataclass(frozen=True)
+class _FittedCar:
+    """What the estimate holds fixed: the task (one run) with its objective on the reference, the fitted unknowns'
+    names and the task's box for them, and whether they are re-fitted with the force (nuisance columns)."""
+
+    task: Task
+    names: tuple[str, ...]
+    objective: Objective
+    sigma: dict[str, NDArray]  # family -> (k,) the task's noise sigma of the family's channels
+    lo: NDArray
+    hi: NDArray
+    nuisance: bool
+
+    @classmethod
+    def of(cls, task: Task, reference: dict[str, NDArray], names: tuple[str, ...], nuisance: bool) -> _FittedCar:
+        """The fitted car `names` of `task` against `reference` (family -> (n, k)); `nuisance`: re-fit the unknowns."""
+        objective = task.objective(reference)
+        sigma = {f: np.asarray(task.sigma[f], dtype=float) for f in reference}
+        lo = np.array([task.lower[task.names.index(m)] if m in task.names else -np.inf for m in names])
+        hi = np.array([task.upper[task.names.index(m)] if m in task.names else np.inf for m in names])
+        return cls(task, names, objective, sigma, lo, hi, bool(nuisance and names))
+
+    def linearise(self, at: NDArray) -> _Linearisation:
+        """Residual, trajectories and the unknowns' sensitivities at `at` (one batched simulation)."""
+        exp, lo, hi = self.task.experiment, self.lo, self.hi
+        n = exp.t.size
+        steps = np.zeros(0)
+        if self.nuisance:
+            width = np.where(np.isfinite(hi - lo), hi - lo, np.abs(at))
+            h = 1e-6 * np.maximum(np.abs(at), np.maximum(1e-3 * width, 1e-9))
+            steps = np.where(at + h <= hi, h, -h)
+        X = np.vstack([at[None, :], at[None, :] + np.diag(steps)]) if steps.size else at[None, :]
+        resp, d_all, v_all = _trajectories(self.task, self.names, X)
+        res = np.asarray(self.objective.residuals(exp.read(resp)), dtype=float)  # (P, R_all)
+        if not np.all(np.isfinite(res[0])):
+            raise ValueError("the fitted model's residual is not finite")
+        if steps.size:
+            Jm = (-(res[1:] - res[0]) / steps[:, None]).T  # d model / dx / sigma
+            dd = (d_all[1:] - d_all[0]) / steps[:, None, None]
+            dv = (v_all[1:] - v_all[0]) / steps[:, None, None]
+        else:
+            Jm, dd, dv = np.zeros((res.shape[1], 0)), np.zeros((0, n, 4)), np.zeros((0, n, 4))
+        car = car_at(exp, {m: at[j] for j, m in enumerate(self.names)}, exp.dt)
+        return _Linearisation(res[0], Jm, d_all[0], v_all[0], dd, dv, car)
+
+    def force_columns(self, car: LinearCar, d: NDArray, v: NDArray, n_knots: int):
+        """The basis of each function (front g, front h, rear g, rear h) on the trajectory d, v (n, 4), its columns
+        applied as input forces at the corners of its axle: the bases, the car's states driven by them (n, 14, K)
+        and their weighted responses laid out like the residual (R_all, K)."""
+        n = self.task.experiment.t.size
+        bases, cols = [], []
+        for _axle, corners in AXLES:
+            for traj in (d, v):
+                b = basis(traj[:, corners], n_knots)
+                bases.append(b)
+                U = np.zeros((n, N_CORNERS, b.size))
+                for c in corners:
+                    U[:, c, :] = b(traj[:, c])
+                cols.append(U)
+        U = np.concatenate(cols, axis=2)  # (n, 4, K)
+        s = responses(car, U)
+        S = np.concatenate([channel_columns(self.objective, f, car, s, U, sg) for f, sg in self.sigma.items()], axis=0)
+        return tuple(bases), s, S
+
+
+def _fit_without_force(Jk: NDArray, rk0: NDArray) -> tuple[float, float]:
+    """RSS and degrees of freedom of the fit without the force on the kept residual rk0: the unknowns' linearised
+    re-fit (columns Jk) at x (x itself when it is the fit's optimum)."""
+    p = Jk.shape[1]
+    if p:
+        JtJ = Jk.T @ Jk + 1e-12 * np.trace(Jk.T @ Jk) * np.eye(p)
+        c0 = np.linalg.solve(JtJ, Jk.T @ rk0)
+        rss0 = min(float(np.sum((rk0 - Jk @ c0) ** 2)), float(rk0 @ rk0))
+        edf0 = float(np.trace(np.linalg.solve(JtJ, Jk.T @ Jk)))
+    else:
+        rss0, edf0 = float(rk0 @ rk0), 0.0
+    return rss0, edf0
+
+
+@dataclass(frozen=True)
+class _ForceFit:
+    """The force and the unknowns' re-fit on one trajectory d, v (n, 4): the bases, the states their forces drive,
+    the kept columns A = [J | S] (the p nuisance columns first), the kept residual and the penalised solution."""
+
+    d: NDArray
+    v: NDArray
+    bases: tuple[Basis, ...]
+    s: NDArray
+    A: NDArray
+    rk: NDArray
+    sol: PenalisedFit
+    p: int
+
+    @property
+    def theta(self) -> NDArray:
+        """The basis coefficients of the force."""
+        return self.sol.coef[self.p :]
+
+    @property
+    def dx(self) -> NDArray:
+        """The unknowns' re-fit."""
+        return self.sol.coef[: self.p]
+
+
+def _fit_force(
+    fitted: _FittedCar, lin: _Linearisation, d: NDArray, v: NDArray, keep: NDArray, n_knots: int, criterion: str
+) -> _ForceFit:
+    """The force on the trajectory d, v jointly with the unknowns' linear re-fit, over the kept residual entries,
+    one smoothing parameter per function (REML or GCV)."""
+    rk, Jk = lin.r[keep], lin.Jm[keep]
+    p = Jk.shape[1]
+    bases, s, S = fitted.force_columns(lin.car, d, v, n_knots)
+    A = np.hstack([Jk, S[keep]])
+    blocks, k0 = [], p
+    for b in bases:
+        blocks.append((slice(k0, k0 + b.size), b.P))
+        k0 += b.size
+    sol = penalised_fit(A.T @ A, A.T @ rk, float(rk @ rk), int(keep.sum()), blocks, criterion)
+    return _ForceFit(d, v, bases, s, A, rk, sol, p)
+
+
+@dataclass(frozen=True)
+class _Converged:
+    """The fixed-point iteration's end: the last fit, the unknowns' total re-fit from x, the corrections made."""
+
+    fit: _ForceFit
+    dx: NDArray
+    corrections: int
+
+
+def _iterate(
+    fitted: _FittedCar, lin: _Linearisation, x: NDArray, keep: NDArray, n_knots: int, iterations: int, criterion: str
+) -> _Converged:
+    """Fit the force on the fitted trajectory corrected by the estimate's own response and the unknowns' shift
+    (superposition), re-estimate on the corrected trajectory until it stops moving (at most `iterations` times);
+    when the unknowns' step moves the trajectory, a Gauss-Newton step: re-simulate there."""
+    x_cur = x.copy()
+    corr_d = np.zeros_like(lin.d)
+    corr_v = np.zeros_like(lin.v)
+    done = 0
+    for it in range(max(0, iterations) + 1):
+        d, v = lin.d + corr_d, lin.v + corr_v
+        fit = _fit_force(fitted, lin, d, v, keep, n_knots, criterion)
+        theta, dx, s = fit.theta, fit.dx, fit.s
+        # the trajectory of the corrected model: fitted + the unknowns' shift + the estimate's own response
+        new_d = (s[:, :N_DOF, :] @ theta) @ lin.car.D.T
+        new_v = (s[:, N_DOF:, :] @ theta) @ lin.car.D.T
+        shift_d, shift_v = np.tensordot(dx, lin.dd, axes=1), np.tensordot(dx, lin.dv, axes=1)
+        change = max(float(np.max(np.abs(new_d + shift_d - corr_d)) / np.ptp(d)),
+                     float(np.max(np.abs(new_v + shift_v - corr_v)) / np.ptp(v)))  # fmt: skip
+        if it == iterations or change < 1e-3:
+            break
+        done += 1
+        corr_d, corr_v = new_d, new_v
+        moved = float(np.max(np.abs(shift_d)) / np.ptp(d)) > 1e-4 or float(np.max(np.abs(shift_v)) / np.ptp(v)) > 1e-4
+        if fit.p and moved:  # a Gauss-Newton step of the unknowns: re-simulate there
+            x_cur = np.clip(x_cur + dx, fitted.lo, fitted.hi)
+            lin = fitted.linearise(x_cur)
+    return _Converged(fit, np.clip(x_cur + fit.dx, fitted.lo, fitted.hi) - x, done)
+
+
+@dataclass(frozen=True)
+class _FTest:
+    """Does the residual hold a strut force: the fit with the force against the fit without it."""
+
+    rss1: float  # kept residual power with the force
+    edf_force: float
+    df_test: float
+    sigma2: float
+    F: float
+    p_value: float
+
+
+def _f_test(fit: _ForceFit, rss0: float, edf0: float, R: int) -> _FTest:
+    """The F test of the force against the fit without it (RSS rss0 over edf0 degrees of freedom), on R entries."""
+    sol = fit.sol
+    rss1 = float(np.sum((fit.rk - fit.A @ sol.coef) ** 2))
+    edf_force = max(sol.edf - edf0, 1e-9)
+    df_test = max(sol.edf2 - edf0, edf_force)
+    dof = max(R - sol.edf, 1.0)
+    sigma2 = max(1.0, rss1 / dof)
+    F = max(rss0 - rss1, 0.0) / df_test / sigma2
+    p_value = float(stats.f.sf(F, df_test, dof))
+    return _FTest(rss1, edf_force, df_test, sigma2, F, p_value)
+
+
+def _curve(
+    variable: str, grid: NDArray, Bg: NDArray, sl: slice, line: int | None, fit: _ForceFit, V: NDArray, lam: float
+) -> Curve:
+    """One function's curve over `grid` (Bg its basis there, sl its columns) with its 95 % band (covariance V) and
+    resemblance; `line`: the column of the unknown whose re-fit is the curve's line through 0 (the curve is then
+    reported modulo lines), None when that unknown is not fitted."""
+    A, coef = fit.A, fit.sol.coef
+    if line is not None:  # its line and the unknown's re-fit are one: the curve modulo lines
+        rows = np.zeros((grid.size, coef.size))
+        rows[:, sl], rows[:, line] = Bg, grid
+        rows -= np.outer(grid, grid @ rows) / float(grid @ grid)
+        f = rows @ coef
+        se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, V, rows), 0.0))
+        own = A[:, line]  # its response, and the part of the curve's the unknown absorbs
+        contrib = A[:, sl] @ coef[sl]
+        contrib = contrib - own * float(own @ contrib) / max(float(own @ own), 1e-300)
+    else:
+        f = Bg @ coef[sl]
+        se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bg, V[sl, sl], Bg), 0.0))
+        contrib = A[:, sl] @ coef[sl]
+    i_peak = int(np.argmax(np.abs(f)))
+    z = np.abs(f) / np.maximum(se, 1e-300)
+    return Curve(
+        variable=variable, grid=grid, force=f, band=np.vstack([f - Z95 * se, f + Z95 * se]),
+        peak_force=float(abs(f[i_peak])), peak_at=float(grid[i_peak]),
+        z_max=float(np.max(np.where(se > 0, z, 0.0))), chi2_explained=float(np.mean(contrib**2)),
+        lam=float(lam), resembles=resemblance(variable, grid, f, se, free_line=line is not None),
+    )  # fmt: skip
+
+
+def _axle_estimates(fit: _ForceFit, names: tuple[str, ...], sigma2: float, grid_points: int) -> list[AxleEstimate]:
+    """Each axle's curves over the observed range of its trajectory, bands from the posterior covariance."""
+    V = sigma2 * fit.sol.cov
+    axles = []
+    j, k0 = 0, fit.p
+    for axle, corners in AXLES:
+        curves = []
+        for var, traj in (("deflection", fit.d), ("velocity", fit.v)):
+            b = fit.bases[j]
+            sl = slice(k0, k0 + b.size)
+            grid = np.linspace(float(np.min(traj[:, corners])), float(np.max(traj[:, corners])), grid_points)
+            Bg = b(grid)
+            own = LINE_UNKNOWN[(axle, var)]
+            line = names.index(own) if own in names[: fit.p] else None
+            curves.append(_curve(var, grid, Bg, sl, line, fit, V, fit.sol.lam[j]))
+            j += 1
+            k0 += b.size
+        axles.append(AxleEstimate(axle, curves[0], curves[1]))
+    return axles
+
+
 def estimate_unexplained(
-    task,
+    task: Task,
     reference: dict[str, NDArray],
     names: Sequence[str],
     x: NDArray,
@@ -276,146 +530,20 @@ def estimate_unexplained(
     x = np.asarray(x, dtype=float).ravel()
     if x.size != len(names):
         raise ValueError(f"{len(names)} names but {x.size} values")
-    exp = task.experiment
-    n, dt = exp.t.size, exp.dt
-    families = tuple(reference)
-    objective = task.objective(reference)
-    sigma = {f: np.asarray(task.sigma[f], dtype=float) for f in families}
-    use_nuisance = bool(nuisance and names)
-    lo = np.array([task.lower[task.names.index(m)] if m in task.names else -np.inf for m in names])
-    hi = np.array([task.upper[task.names.index(m)] if m in task.names else np.inf for m in names])
-
-    def linearise(at: NDArray):
-        """Residual, trajectories and the unknowns' sensitivities at `at` (one batched simulation)."""
-        steps = np.zeros(0)
-        if use_nuisance:
-            width = np.where(np.isfinite(hi - lo), hi - lo, np.abs(at))
-            h = 1e-6 * np.maximum(np.abs(at), np.maximum(1e-3 * width, 1e-9))
-            steps = np.where(at + h <= hi, h, -h)
-        X = np.vstack([at[None, :], at[None, :] + np.diag(steps)]) if steps.size else at[None, :]
-        resp, d_all, v_all = _trajectories(task, names, X)
-        res = np.asarray(objective.residuals(exp.read(resp)), dtype=float)  # (P, R_all)
-        if not np.all(np.isfinite(res[0])):
-            raise ValueError("the fitted model's residual is not finite")
-        if steps.size:
-            Jm = (-(res[1:] - res[0]) / steps[:, None]).T  # d model / dx / sigma
-            dd = (d_all[1:] - d_all[0]) / steps[:, None, None]
-            dv = (v_all[1:] - v_all[0]) / steps[:, None, None]
-        else:
-            Jm, dd, dv = np.zeros((res.shape[1], 0)), np.zeros((0, n, 4)), np.zeros((0, n, 4))
-        car = car_at(exp, {m: at[j] for j, m in enumerate(names)}, dt)
-        return res[0], Jm, d_all[0], v_all[0], dd, dv, car
-
-    r, Jm, d0, v0, dd, dv, car = linearise(x)
-    R_all = r.size
+    fitted = _FittedCar.of(task, reference, names, nuisance)
+    lin = fitted.linearise(x)
+    R_all = lin.r.size
     keep = np.ones(R_all, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
     if keep.shape != (R_all,):
         raise ValueError(f"keep must have {R_all} entries (family, time, channel), got {keep.shape}")
     R = int(keep.sum())
-    p = Jm.shape[1]
-    rk0 = r[keep]
-    # the fit without the force: the unknowns' linearised re-fit at x (x itself when it is the fit's optimum)
-    if p:
-        Jk = Jm[keep]
-        JtJ = Jk.T @ Jk + 1e-12 * np.trace(Jk.T @ Jk) * np.eye(p)
-        c0 = np.linalg.solve(JtJ, Jk.T @ rk0)
-        rss0 = min(float(np.sum((rk0 - Jk @ c0) ** 2)), float(rk0 @ rk0))
-        edf0 = float(np.trace(np.linalg.solve(JtJ, Jk.T @ Jk)))
-    else:
-        rss0, edf0 = float(rk0 @ rk0), 0.0
-
-    x_cur = x.copy()
-    corr_d = np.zeros_like(d0)
-    corr_v = np.zeros_like(v0)
-    done = 0
-    for it in range(max(0, iterations) + 1):
-        d, v = d0 + corr_d, v0 + corr_v
-        rk, Jk = r[keep], Jm[keep]
-        # basis of each function on the current trajectory, inputs at the corners of its axle
-        bases, cols = [], []
-        for _axle, corners in AXLES:
-            for traj in (d, v):
-                b = basis(traj[:, corners], n_knots)
-                bases.append(b)
-                U = np.zeros((n, N_CORNERS, b.size))
-                for c in corners:
-                    U[:, c, :] = b(traj[:, c])
-                cols.append(U)
-        U = np.concatenate(cols, axis=2)  # (n, 4, K)
-        s = responses(car, U)
-        S = np.concatenate([channel_columns(objective, f, car, s, U, sigma[f]) for f in families], axis=0)
-        A = np.hstack([Jk, S[keep]])
-        blocks, k0 = [], p
-        for b in bases:
-            blocks.append((slice(k0, k0 + b.size), b.P))
-            k0 += b.size
-        sol = penalised_fit(A.T @ A, A.T @ rk, float(rk @ rk), R, blocks, criterion)
-        theta, dx = sol.coef[p:], sol.coef[:p]
-        # the trajectory of the corrected model: fitted + the unknowns' shift + the estimate's own response
-        new_d = (s[:, :N_DOF, :] @ theta) @ car.D.T
-        new_v = (s[:, N_DOF:, :] @ theta) @ car.D.T
-        shift_d, shift_v = np.tensordot(dx, dd, axes=1), np.tensordot(dx, dv, axes=1)
-        change = max(float(np.max(np.abs(new_d + shift_d - corr_d)) / np.ptp(d)),
-                     float(np.max(np.abs(new_v + shift_v - corr_v)) / np.ptp(v)))  # fmt: skip
-        if it == iterations or change < 1e-3:
-            break
-        done += 1
-        corr_d, corr_v = new_d, new_v
-        moved = float(np.max(np.abs(shift_d)) / np.ptp(d)) > 1e-4 or float(np.max(np.abs(shift_v)) / np.ptp(v)) > 1e-4
-        if p and moved:  # a Gauss-Newton step of the unknowns: re-simulate there
-            x_cur = np.clip(x_cur + dx, lo, hi)
-            r, Jm, d0, v0, dd, dv, car = linearise(x_cur)
-    dx_total = np.clip(x_cur + dx, lo, hi) - x
-
-    # significance against the fit without the force
-    rss1 = float(np.sum((rk - A @ sol.coef) ** 2))
-    edf_force = max(sol.edf - edf0, 1e-9)
-    df_test = max(sol.edf2 - edf0, edf_force)
-    dof = max(R - sol.edf, 1.0)
-    sigma2 = max(1.0, rss1 / dof)
-    F = max(rss0 - rss1, 0.0) / df_test / sigma2
-    p_value = float(stats.f.sf(F, df_test, dof))
-
-    # curves, bands, resemblance
-    V = sigma2 * sol.cov
-    axles = []
-    j, k0 = 0, p
-    for axle, corners in AXLES:
-        curves = []
-        for var, traj in (("deflection", d), ("velocity", v)):
-            b = bases[j]
-            sl = slice(k0, k0 + b.size)
-            grid = np.linspace(float(np.min(traj[:, corners])), float(np.max(traj[:, corners])), grid_points)
-            Bg = b(grid)
-            own = LINE_UNKNOWN[(axle, var)]
-            if own in names[:p]:  # its line and the unknown's re-fit are one: the curve modulo lines
-                rows = np.zeros((grid.size, sol.coef.size))
-                rows[:, sl], rows[:, names.index(own)] = Bg, grid
-                rows -= np.outer(grid, grid @ rows) / float(grid @ grid)
-                f = rows @ sol.coef
-                se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, V, rows), 0.0))
-                line = A[:, names.index(own)]  # its response, and the part of the curve's the unknown absorbs
-                contrib = A[:, sl] @ sol.coef[sl]
-                contrib = contrib - line * float(line @ contrib) / max(float(line @ line), 1e-300)
-            else:
-                f = Bg @ sol.coef[sl]
-                se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bg, V[sl, sl], Bg), 0.0))
-                contrib = A[:, sl] @ sol.coef[sl]
-            i_peak = int(np.argmax(np.abs(f)))
-            z = np.abs(f) / np.maximum(se, 1e-300)
-            curves.append(
-                Curve(
-                    variable=var, grid=grid, force=f, band=np.vstack([f - Z95 * se, f + Z95 * se]),
-                    peak_force=float(abs(f[i_peak])), peak_at=float(grid[i_peak]),
-                    z_max=float(np.max(np.where(se > 0, z, 0.0))), chi2_explained=float(np.mean(contrib**2)),
-                    lam=float(sol.lam[j]), resembles=resemblance(var, grid, f, se, free_line=own in names[:p]),
-                )
-            )  # fmt: skip
-            j += 1
-            k0 += b.size
-        axles.append(AxleEstimate(axle, curves[0], curves[1]))
+    rk0 = lin.r[keep]
+    rss0, edf0 = _fit_without_force(lin.Jm[keep], rk0)
+    end = _iterate(fitted, lin, x, keep, n_knots, iterations, criterion)
+    test = _f_test(end.fit, rss0, edf0, R)
+    axles = _axle_estimates(end.fit, names, test.sigma2, grid_points)
     return Unexplained(
-        front=axles[0], rear=axles[1], chi2_before=float(np.mean(rk0**2)), chi2_after=rss1 / R,
-        edf=float(edf_force), edf_total=float(sol.edf), df_test=float(df_test), F=float(F), p_value=p_value,
-        sigma2=float(sigma2), samples=R, iterations=done, dx=dx_total, names=names,
+        front=axles[0], rear=axles[1], chi2_before=float(np.mean(rk0**2)), chi2_after=test.rss1 / R,
+        edf=float(test.edf_force), edf_total=float(end.fit.sol.edf), df_test=float(test.df_test), F=float(test.F),
+        p_value=test.p_value, sigma2=float(test.sigma2), samples=R, iterations=end.corrections, dx=end.dx, names=names,
     )  # fmt: skip
