@@ -12,7 +12,7 @@ import pytest
 from tests.conftest import BASE_CONFIG, ROOT, read_png
 from vehid_cli.config import load_config
 from vehid_cli.diagnose.attribution import lsq_fit
-from vehid_cli.diagnose.loop import holdout_blocks
+from vehid_cli.diagnose.holdout import holdout_blocks
 from vehid_cli.diagnose.psplines import basis as _basis
 from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, candidate_order, resemblance
 from vehid_cli.diagnose.unexplained import Unexplained, estimate_unexplained

@@ -5,7 +5,7 @@ then say honestly whether the residual is now at the noise.
 J of the car is the wls objective, the noise-weighted residual power per sample (chi² per sample), on the
 training data; the validation J is the same on the --validate run (its own noise sigma, the parameters
 carried over unchanged: same car, another road), else on held-out blocks of the data (every HOLDOUT_EVERY-th
-block of BLOCK samples is kept out of every fit). Confidence intervals: 95 %, from the Fisher information
+block of BLOCK samples is kept out of every fit, holdout.py). Confidence intervals: 95 %, from the Fisher information
 J'J of the weighted residuals at the fit, scaled by the chi² per sample (the residual's own variance).
 
 What is claimed: a candidate the likelihood-ratio test accepts (attribution.py), preferred over an effect
@@ -47,8 +47,6 @@ from .unexplained import Unexplained
 
 MAX_ROUNDS = 4
 REFIT_BUDGET = 600
-BLOCK = 100  # samples per hold-out block
-HOLDOUT_EVERY = 4  # without --validate, every 4th block is held out
 
 
 def chi2_limit(residual_count: int) -> float:
@@ -491,29 +489,6 @@ def augment(
         run.recheck_claims()
     run.settle_companions(len(fit.names))
     return Loop(run.current, tuple(run.claimed), tuple(run.rounds), tuple(run.steps), tuple(run.notes))
-
-
-def block_size(n: int) -> int:
-    """Samples per hold-out block: BLOCK, smaller on short data so that every run has held-out blocks."""
-    return max(1, min(BLOCK, n // (2 * HOLDOUT_EVERY)))
-
-
-def holdout_blocks(n: int) -> NDArray:
-    """(n,) True on the held-out samples: every HOLDOUT_EVERY-th block of block_size(n)."""
-    return (np.arange(n) // block_size(n)) % HOLDOUT_EVERY == HOLDOUT_EVERY - 1
-
-
-def masked(problem: Problem, keep: NDArray | None) -> Problem:
-    """The problem on the kept residuals only (cost: their chi² per sample); diverging candidates (NaN, inf)
-    are the optimizer's to penalise, without floating-point warnings."""
-
-    def cr(X):
-        with np.errstate(all="ignore"):
-            _, r = problem.residuals(X)
-            r = r if keep is None else r[:, keep]
-            return np.mean(r**2, axis=1), r
-
-    return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names)
 
 
 def close(

@@ -42,7 +42,8 @@ from ...diagnose.attribution import (
     lsq_fit,
     parameter_candidate,
 )
-from ...diagnose.loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
+from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks
+from ...diagnose.loop import Diagnosis, ModelReport, Subject, close
 from ...diagnose.quality import assess_bench
 from ...diagnose.residuals import analyse_bench, autocorrelation
 from ...identify.experiment import run_streams

@@ -26,19 +26,8 @@ from ...diagnose.attribution import (
     fit_intervals,
     lsq_fit,
 )
-from ...diagnose.loop import (
-    HOLDOUT_EVERY,
-    MAX_ROUNDS,
-    REFIT_BUDGET,
-    Diagnosis,
-    ModelReport,
-    Subject,
-    block_size,
-    chi2_limit,
-    close,
-    holdout_blocks,
-    masked,
-)
+from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks, masked
+from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Diagnosis, ModelReport, Subject, chi2_limit, close
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
 from ...diagnose.residuals import ResidualAnalysis, analyse
 from ...diagnose.shapes import candidate_order
