@@ -163,6 +163,7 @@ class BenchRuns:
 
     @property
     def validation_source(self) -> str:
+        """Where the validation J comes from, for the report."""
         if self.held_out:
             return "held-out runs: " + ", ".join(os.path.normpath(str(p)) for p in self.validate_files)
         n = self.train.t.size

@@ -102,6 +102,7 @@ class CarLoop:
 
     @property
     def joint(self) -> bool:
+        """Several runs fitted jointly (a JointTask)?"""
         return isinstance(self.task, JointTask)
 
     @staticmethod
