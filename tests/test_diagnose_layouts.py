@@ -21,9 +21,12 @@ from examples.make_rig_runs import write_rig_run
 from tests.conftest import BASE_CONFIG, ROOT, invoke, sets
 from vehid_cli.config import load_config
 from vehid_cli.core.errors import InputError
-from vehid_cli.diagnose.loop import chi2_limit, holdout_blocks
+from vehid_cli.diagnose.holdout import holdout_blocks
+from vehid_cli.diagnose.linear_response import linear_car as _linear_car
+from vehid_cli.diagnose.linear_response import responses as _responses
+from vehid_cli.diagnose.loop import chi2_limit
 from vehid_cli.diagnose.residuals import analyse, fingerprint_channels
-from vehid_cli.diagnose.unexplained import _linear_car, _responses, estimate_unexplained
+from vehid_cli.diagnose.unexplained import estimate_unexplained
 from vehid_cli.identify.experiment import build_experiment
 from vehid_cli.identify.objectives import Objective
 from vehid_cli.identify.task import build_task

@@ -12,16 +12,10 @@ import pytest
 from tests.conftest import BASE_CONFIG, ROOT, read_png
 from vehid_cli.config import load_config
 from vehid_cli.diagnose.attribution import lsq_fit
-from vehid_cli.diagnose.loop import holdout_blocks
-from vehid_cli.diagnose.unexplained import (
-    SHAPES,
-    Unexplained,
-    _basis,
-    _shape_columns,
-    candidate_order,
-    estimate_unexplained,
-    resemblance,
-)
+from vehid_cli.diagnose.holdout import holdout_blocks
+from vehid_cli.diagnose.psplines import basis as _basis
+from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, candidate_order, resemblance
+from vehid_cli.diagnose.unexplained import Unexplained, estimate_unexplained
 from vehid_cli.identify.task import build_task
 from vehid_cli.report.diagnose_plots import plot_unexplained
 

@@ -5,7 +5,7 @@ then say honestly whether the residual is now at the noise.
 J of the car is the wls objective, the noise-weighted residual power per sample (chi² per sample), on the
 training data; the validation J is the same on the --validate run (its own noise sigma, the parameters
 carried over unchanged: same car, another road), else on held-out blocks of the data (every HOLDOUT_EVERY-th
-block of BLOCK samples is kept out of every fit). Confidence intervals: 95 %, from the Fisher information
+block of BLOCK samples is kept out of every fit, holdout.py). Confidence intervals: 95 %, from the Fisher information
 J'J of the weighted residuals at the fit, scaled by the chi² per sample (the residual's own variance).
 
 What is claimed: a candidate the likelihood-ratio test accepts (attribution.py), preferred over an effect
@@ -47,8 +47,6 @@ from .unexplained import Unexplained
 
 MAX_ROUNDS = 4
 REFIT_BUDGET = 600
-BLOCK = 100  # samples per hold-out block
-HOLDOUT_EVERY = 4  # without --validate, every 4th block is held out
 
 
 def chi2_limit(residual_count: int) -> float:
@@ -254,6 +252,213 @@ def strength_excludes_null(cand: Candidate, fit: Fit, ci: NDArray) -> list[str]:
     return out
 
 
+@dataclass
+class _Augmentation:
+    """The loop's running state: the current fit and its validation J, what is claimed, dropped and noted so far,
+    every round's ranking and the steps taken; its methods are the loop's steps."""
+
+    subject: Subject
+    alpha: float
+    candidate_budget: int
+    refit_budget: int
+    claim: bool
+    say: Callable[[str], None]
+    ordered: list[str]  # every candidate, those to fit first first
+    current: Fit
+    current_v: tuple[float, dict[str, float] | None]
+    claimed: list[str] = field(default_factory=list)
+    rounds: list[tuple[Ranked, ...]] = field(default_factory=list)
+    steps: list[Step] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    dropped: set[str] = field(default_factory=set)
+
+    def note(self, text: str) -> None:
+        """Record a note and say it."""
+        self.notes.append(text)
+        self.say(text)
+
+    def level(self, n: int) -> float:
+        """The test level for one of n candidates (Bonferroni)."""
+        return self.alpha / max(n, 1)
+
+    def move_to(self, fit: Fit) -> None:
+        """Make `fit` the current fit (its validation J computed)."""
+        self.current = fit
+        self.current_v = self.subject.validation_J(fit.names, fit.x)
+
+    def make_problem(self, names: tuple[str, ...], cand: Candidate):
+        """The problem over `names` plus the candidate's new unknowns, and the new unknowns' start values."""
+        new = tuple(n for n in cand.unknowns + cand.shape if n not in names)
+        problem, start = self.subject.problem_for(names + new)
+        return problem, start[len(names) :]
+
+    def removal_p(self, f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
+        """p-value of keeping `cand` in the fit f: a short fit without its own unknowns, the LR test."""
+        own = own_unknowns(cand, f.names)
+        reduced = tuple(n for n in f.names if n not in own)
+        problem_r, _ = self.subject.problem_for(reduced)
+        idx = [f.names.index(n) for n in reduced]
+        free = np.array([n not in f.fixed for n in reduced])
+        without = fit_free(problem_r, f.x[idx], free, budget)
+        k = len([n for n in own if n not in f.fixed])
+        return float(stats.chi2.sf(self.subject.statistic(f)(without.J, f.J), max(k, 1))), without
+
+    def round(self) -> bool:
+        """One round: rank the candidates against the current fit and try to add the best accepted one. False when
+        the loop stops: the residual is at the noise, no candidate is left or accepted, or the data cannot tell the
+        best from another."""
+        subject, current = self.subject, self.current
+        if self.claimed and subject.noise_limit is not None and current.J <= subject.noise_limit:
+            self.note(f"stopped: the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g})")
+            return False
+        specs = subject.specs
+        todo = [
+            specs[e] for e in self.ordered
+            if e not in subject.declared and e not in self.claimed and e not in self.dropped
+            and not (specs[e].kind == "parameter" and specs[e].unknowns[0] in current.names)
+        ]  # fmt: skip
+        if not todo:
+            return False
+        best = self.choose(self.rank(todo))
+        if best is None:
+            return False
+        self.try_claim(best, len(todo))
+        return True
+
+    def rank(self, todo: list[Candidate]) -> list[Ranked]:
+        """The candidates `todo` ranked against the current fit (the round recorded and said)."""
+        subject, current = self.subject, self.current
+        ranked = rank_candidates(
+            todo, current, self.current_v, self.make_problem, subject.validation_J, subject.residual_count,
+            self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
+            claim=self.claim, scale=subject.scale(current),
+            prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
+        )  # fmt: skip
+        self.rounds.append(tuple(ranked))
+        self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
+        return ranked
+
+    def choose(self, ranked: list[Ranked]) -> Ranked | None:
+        """The best accepted candidate, a known parameter explaining the residual as well preferred; None when none
+        is accepted or the data cannot tell it from another."""
+        best = next((r for r in ranked if r.accepted), None)
+        if best is None:
+            return None
+        simpler = parsimonious(ranked, best, self.alpha)
+        if simpler is not None:
+            self.note(
+                f"{simpler.effect} explains the residual as well as {best.effect} (LR {simpler.statistic:.4g} "
+                f"against {best.statistic:.4g}): the known parameter is preferred"
+            )
+            best = simpler
+        rival = undistinguished(ranked, best, self.alpha)
+        if rival is not None:
+            self.note(
+                f"cannot tell {best.effect} (LR {best.statistic:.3g}) from {rival.effect} (LR {rival.statistic:.3g}) "
+                "apart on these data: neither added"
+            )
+            return None
+        return best
+
+    def refit(self, best: Ranked) -> tuple[Problem, tuple[str, ...], Fit]:
+        """Re-fit everything from the candidate's fit, the identifiable shape parameters of every claim freed (the
+        candidate's fit kept if the re-fit found nothing better): the problem, its unknowns and the fit."""
+        specs, subject = self.subject.specs, self.subject
+        cand = specs[best.effect]
+        extra = tuple(n for n in cand.companions if n not in best.fit.names)
+        names = best.fit.names + extra
+        problem, start = subject.problem_for(names)
+        x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
+        shapes = [n for e in (*self.claimed, best.effect) for n in specs[e].shape]
+        free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
+        refit = fit_free(problem, x0, free, self.refit_budget)
+        if refit.J > best.fit.J:  # keep the candidate's fit if the re-fit found nothing better
+            refit = Fit(names, x0, best.fit.J, refit.evaluations, best.fit.fixed)
+        return problem, names, refit
+
+    def try_claim(self, best: Ranked, candidates: int) -> None:
+        """Re-fit with `best` (one of `candidates` tested) and claim it if its strength interval excludes its null,
+        it is still needed after the re-fit and it lowers the validation J; else it is dropped."""
+        cand = self.subject.specs[best.effect]
+        problem, names, refit = self.refit(best)
+        ci = self.subject.intervals(refit)
+        if not strength_excludes_null(cand, refit, ci):
+            shown = ", ".join(
+                f"{n} = {refit.x[refit.names.index(n)]:.3g} ± {ci[refit.names.index(n)]:.2g}"
+                for n in cand.strength if n in refit.names
+            )  # fmt: skip
+            what = "its configured value" if cand.kind == "parameter" else "zero"
+            self.note(f"{best.effect} not claimed: its strength interval includes {what} ({shown})")
+            self.dropped.add(best.effect)
+            return
+        p_keep, without = self.removal_p(refit, cand, self.candidate_budget)
+        if p_keep >= self.level(candidates):
+            self.dropped.add(best.effect)
+            self.note(
+                f"{best.effect} dropped after the re-fit: without it J = {without.J:.4g} against {refit.J:.4g} "
+                f"(p = {p_keep:.2g}); its gain was the other parameters converging"
+            )
+            if without.J < self.current.J:
+                self.move_to(without)
+            return
+        self.note_estimates(cand, problem, names, refit)
+        new_v = self.subject.validation_J(refit.names, refit.x)
+        if not lowers_validation(*new_v, *self.current_v, 0.0):
+            runs = "" if not new_v[1] else " on every held-out run"
+            self.note(f"{best.effect} not claimed: after the re-fit it does not lower the validation J{runs}")
+            self.dropped.add(best.effect)
+            return
+        self.claimed.append(best.effect)
+        self.steps.append(Step(best.effect, self.current.J, refit.J, self.current_v[0], new_v[0], new_v[1]))
+        self.current, self.current_v = refit, new_v
+        self.say(f"added {best.effect}: J = {self.current.J:.4g}, validation J = {self.current_v[0]:.4g}")
+
+    def note_estimates(self, cand: Candidate, problem: Problem, names: tuple[str, ...], refit: Fit) -> None:
+        """Note (silently) the candidate's estimates on their search bound and its shape parameters held fixed."""
+        for n in own_unknowns(cand, names):  # an estimate on its search bound: say so
+            j = names.index(n)
+            lo, hi = problem.lower[j], problem.upper[j]
+            if n not in refit.fixed and min(refit.x[j] - lo, hi - refit.x[j]) <= 1e-6 * (hi - lo):
+                self.notes.append(f"{n} = {refit.x[j]:.4g} sits on its search bound [{lo:.4g}, {hi:.4g}]")
+        for n in refit.fixed:
+            if n in cand.shape:
+                self.notes.append(
+                    f"{n} held at {refit.x[names.index(n)]:.4g}: the data cannot tell it (Fisher information)"
+                )
+
+    def recheck_claims(self) -> None:
+        """The final model: drop every claim no longer needed beside the others."""
+        specs = self.subject.specs
+        for e in list(self.claimed):
+            p_keep, without = self.removal_p(self.current, specs[e], self.refit_budget)
+            if p_keep >= self.level(len(specs)):
+                self.claimed.remove(e)
+                self.note(f"{e} dropped at the end: with the later claims it is no longer needed (p = {p_keep:.2g})")
+                self.move_to(without)
+
+    def settle_companions(self, declared: int) -> None:
+        """Known parameters an effect freed beside its own (asymmetric damping's cf, cr; unknowns after the first
+        `declared`) whose effect was dropped: back to their configured value unless the data say they are off, then
+        claimed as parameter:<name>."""
+        specs = self.subject.specs
+        companions = {n for e in self.claimed for n in specs[e].companions}
+        for n in [n for n in self.current.names[declared:] if "." not in n and n not in companions]:
+            name = PARAMETER_PREFIX + n
+            if name in self.claimed or name not in specs:
+                continue
+            p_keep, without = self.removal_p(self.current, specs[name], self.refit_budget)
+            ci = self.subject.intervals(self.current)
+            if p_keep < self.level(len(specs)) and strength_excludes_null(specs[name], self.current, ci):
+                self.claimed.append(name)
+                self.notes.append(f"{n}, freed with a dropped effect, is off its configured value: claimed as {name}")
+            else:
+                self.move_to(without)
+                self.notes.append(
+                    f"{n}, freed with a dropped effect, is back at its configured value (p = {p_keep:.2g})"
+                )
+            self.say(self.notes[-1])
+
+
 def augment(
     subject: Subject,
     fit: Fit,
@@ -272,173 +477,18 @@ def augment(
     drop whatever the final model no longer needs. With claim=False only rank once. `order`: candidates to fit
     first (the non-parametric estimate's resemblance)."""
     specs = subject.specs
-    claimed: list[str] = []
-    rounds: list[tuple[Ranked, ...]] = []
-    steps: list[Step] = []
-    notes: list[str] = []
-    dropped: set[str] = set()
-    current = fit
-    current_v = subject.validation_J(fit.names, fit.x)
-    level_of = lambda n: alpha / max(n, 1)  # noqa: E731
-
-    def make_problem(names: tuple[str, ...], cand: Candidate):
-        new = tuple(n for n in cand.unknowns + cand.shape if n not in names)
-        problem, start = subject.problem_for(names + new)
-        return problem, start[len(names) :]
-
-    def removal_p(f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
-        """p-value of keeping `cand` in the fit f: a short fit without its own unknowns, the LR test."""
-        own = own_unknowns(cand, f.names)
-        reduced = tuple(n for n in f.names if n not in own)
-        problem_r, _ = subject.problem_for(reduced)
-        idx = [f.names.index(n) for n in reduced]
-        free = np.array([n not in f.fixed for n in reduced])
-        without = fit_free(problem_r, f.x[idx], free, budget)
-        k = len([n for n in own if n not in f.fixed])
-        return float(stats.chi2.sf(subject.statistic(f)(without.J, f.J), max(k, 1))), without
-
-    ordered = [e for e in order if e in specs] + [e for e in specs if e not in order]
+    run = _Augmentation(
+        subject, alpha, candidate_budget, refit_budget, claim, say,
+        ordered=[e for e in order if e in specs] + [e for e in specs if e not in order],
+        current=fit, current_v=subject.validation_J(fit.names, fit.x),
+    )  # fmt: skip
     for _ in range(max_rounds if claim else min(max_rounds, 1)):
-        if claimed and subject.noise_limit is not None and current.J <= subject.noise_limit:
-            notes.append(f"stopped: the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g})")
-            say(notes[-1])
+        if not run.round():
             break
-        todo = [
-            specs[e] for e in ordered
-            if e not in subject.declared and e not in claimed and e not in dropped
-            and not (specs[e].kind == "parameter" and specs[e].unknowns[0] in current.names)
-        ]  # fmt: skip
-        if not todo:
-            break
-        ranked = rank_candidates(
-            todo, current, current_v, make_problem, subject.validation_J, subject.residual_count, alpha,
-            candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain, claim=claim,
-            scale=subject.scale(current), prior={r.effect: r for r in rounds[-1]} if rounds else None,
-        )  # fmt: skip
-        rounds.append(tuple(ranked))
-        say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
-        best = next((r for r in ranked if r.accepted), None)
-        if best is None:
-            break
-        simpler = parsimonious(ranked, best, alpha)
-        if simpler is not None:
-            notes.append(
-                f"{simpler.effect} explains the residual as well as {best.effect} (LR {simpler.statistic:.4g} "
-                f"against {best.statistic:.4g}): the known parameter is preferred"
-            )
-            say(notes[-1])
-            best = simpler
-        rival = undistinguished(ranked, best, alpha)
-        if rival is not None:
-            notes.append(
-                f"cannot tell {best.effect} (LR {best.statistic:.3g}) from {rival.effect} (LR {rival.statistic:.3g}) "
-                "apart on these data: neither added"
-            )
-            say(notes[-1])
-            break
-        cand = specs[best.effect]
-        # re-fit everything from the candidate's fit, the identifiable shape parameters of every claim freed
-        extra = tuple(n for n in cand.companions if n not in best.fit.names)
-        names = best.fit.names + extra
-        problem, start = subject.problem_for(names)
-        x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
-        shapes = [n for e in (*claimed, best.effect) for n in specs[e].shape]
-        free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
-        refit = fit_free(problem, x0, free, refit_budget)
-        if refit.J > best.fit.J:  # keep the candidate's fit if the re-fit found nothing better
-            refit = Fit(names, x0, best.fit.J, refit.evaluations, best.fit.fixed)
-        ci = subject.intervals(refit)
-        if not strength_excludes_null(cand, refit, ci):
-            shown = ", ".join(
-                f"{n} = {refit.x[refit.names.index(n)]:.3g} ± {ci[refit.names.index(n)]:.2g}"
-                for n in cand.strength if n in refit.names
-            )  # fmt: skip
-            what = "its configured value" if cand.kind == "parameter" else "zero"
-            notes.append(f"{best.effect} not claimed: its strength interval includes {what} ({shown})")
-            say(notes[-1])
-            dropped.add(best.effect)
-            continue
-        p_keep, without = removal_p(refit, cand, candidate_budget)
-        if p_keep >= level_of(len(todo)):
-            dropped.add(best.effect)
-            notes.append(
-                f"{best.effect} dropped after the re-fit: without it J = {without.J:.4g} against {refit.J:.4g} "
-                f"(p = {p_keep:.2g}); its gain was the other parameters converging"
-            )
-            say(notes[-1])
-            if without.J < current.J:
-                current = without
-                current_v = subject.validation_J(current.names, current.x)
-            continue
-        for n in own_unknowns(cand, names):  # an estimate on its search bound: say so
-            j = names.index(n)
-            lo, hi = problem.lower[j], problem.upper[j]
-            if n not in refit.fixed and min(refit.x[j] - lo, hi - refit.x[j]) <= 1e-6 * (hi - lo):
-                notes.append(f"{n} = {refit.x[j]:.4g} sits on its search bound [{lo:.4g}, {hi:.4g}]")
-        for n in refit.fixed:
-            if n in specs[best.effect].shape:
-                notes.append(f"{n} held at {refit.x[names.index(n)]:.4g}: the data cannot tell it (Fisher information)")
-        new_v = subject.validation_J(refit.names, refit.x)
-        if not lowers_validation(*new_v, *current_v, 0.0):
-            runs = "" if not new_v[1] else " on every held-out run"
-            notes.append(f"{best.effect} not claimed: after the re-fit it does not lower the validation J{runs}")
-            say(notes[-1])
-            dropped.add(best.effect)
-            continue
-        claimed.append(best.effect)
-        steps.append(Step(best.effect, current.J, refit.J, current_v[0], new_v[0], new_v[1]))
-        current, current_v = refit, new_v
-        say(f"added {best.effect}: J = {current.J:.4g}, validation J = {current_v[0]:.4g}")
-    if claim and len(claimed) > 1:  # the final model: is every claim still needed beside the others?
-        for e in list(claimed):
-            p_keep, without = removal_p(current, specs[e], refit_budget)
-            if p_keep >= level_of(len(specs)):
-                claimed.remove(e)
-                notes.append(f"{e} dropped at the end: with the later claims it is no longer needed (p = {p_keep:.2g})")
-                say(notes[-1])
-                current = without
-                current_v = subject.validation_J(current.names, current.x)
-    # known parameters an effect freed beside its own (asymmetric damping's cf, cr) whose effect was dropped:
-    # back to their configured value unless the data say they are off, then claimed as parameter:<name>
-    companions = {n for e in claimed for n in specs[e].companions}
-    for n in [n for n in current.names[len(fit.names) :] if "." not in n and n not in companions]:
-        name = PARAMETER_PREFIX + n
-        if name in claimed or name not in specs:
-            continue
-        p_keep, without = removal_p(current, specs[name], refit_budget)
-        ci = subject.intervals(current)
-        if p_keep < level_of(len(specs)) and strength_excludes_null(specs[name], current, ci):
-            claimed.append(name)
-            notes.append(f"{n}, freed with a dropped effect, is off its configured value: claimed as {name}")
-        else:
-            current = without
-            current_v = subject.validation_J(current.names, current.x)
-            notes.append(f"{n}, freed with a dropped effect, is back at its configured value (p = {p_keep:.2g})")
-        say(notes[-1])
-    return Loop(current, tuple(claimed), tuple(rounds), tuple(steps), tuple(notes))
-
-
-def block_size(n: int) -> int:
-    """Samples per hold-out block: BLOCK, smaller on short data so that every run has held-out blocks."""
-    return max(1, min(BLOCK, n // (2 * HOLDOUT_EVERY)))
-
-
-def holdout_blocks(n: int) -> NDArray:
-    """(n,) True on the held-out samples: every HOLDOUT_EVERY-th block of block_size(n)."""
-    return (np.arange(n) // block_size(n)) % HOLDOUT_EVERY == HOLDOUT_EVERY - 1
-
-
-def masked(problem: Problem, keep: NDArray | None) -> Problem:
-    """The problem on the kept residuals only (cost: their chi² per sample); diverging candidates (NaN, inf)
-    are the optimizer's to penalise, without floating-point warnings."""
-
-    def cr(X):
-        with np.errstate(all="ignore"):
-            _, r = problem.residuals(X)
-            r = r if keep is None else r[:, keep]
-            return np.mean(r**2, axis=1), r
-
-    return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names)
+    if claim and len(run.claimed) > 1:  # the final model: is every claim still needed beside the others?
+        run.recheck_claims()
+    run.settle_companions(len(fit.names))
+    return Loop(run.current, tuple(run.claimed), tuple(run.rounds), tuple(run.steps), tuple(run.notes))
 
 
 def close(

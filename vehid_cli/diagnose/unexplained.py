@@ -36,6 +36,10 @@ M qdd + C qd + K q + D' f = B y), with g(0) = h(0) = 0 so the car still starts a
 * Each estimated curve is compared with the library's shapes by a one-parameter weighted least-squares fit
   (weights: inverse band variance; uncentred R², the curves all pass through 0).
 
+Where the parts live: the P-splines and the penalised least squares in psplines.py, the linear car's responses to
+strut forces in linear_response.py, the library's shapes, the resemblance and the candidates' order in shapes.py;
+here the result types and the estimate.
+
 Limitation: when the fitted car has effects of its own (declared or effect unknowns), their states and tangent
 stiffness are left out of the superposition: the force's response is that of the linear part only, a first-order
 approximation around the fitted trajectory. A missing law that is not additive in d and v (hysteresis, lag,
@@ -44,22 +48,21 @@ play) shows only as its best additive projection.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.optimize
 from numpy.typing import NDArray
 from scipy import stats
-from scipy.interpolate import BSpline
 
+from ..identify.objectives import Objective
+from ..identify.task import Task
 from ..models.fullcar import N_CORNERS, N_DOF
-from ..sim.modal import foh_discretisation
-from ..sim.nonlinear import fullcar_struts
+from .linear_response import LinearCar, car_at, channel_columns, responses
+from .psplines import Basis, PenalisedFit, basis, penalised_fit
+from .shapes import Resemblance, resemblance
 
 Z95 = 1.959963984540054
-ALPHA = 1e-3  # significance level below which candidate_order reorders (attribution's family-wise level)
 AXLES = (("front", (0, 1)), ("rear", (2, 3)))
 # The unknown whose change is a line through 0 of each axle's curve (a stiffness over deflection, a damping over
 # velocity): when it is fitted, the curve's line is not identifiable apart from it (see estimate_unexplained).
@@ -69,48 +72,9 @@ VARIABLES = ("deflection", "velocity")
 UNITS = {"deflection": "m", "velocity": "m/s"}
 SIGNIFICANCE = 1e-3  # the F test's level for "the residual holds a strut force" (the loop's alpha)
 SIGNIFICANT_Z = 3.0  # a curve is significant where |force| exceeds 3 standard errors somewhere on its grid
-LOG_LAMBDA = (-7.0, 8.0)  # search range of log10 lambda relative to the basis' own scale
-GAS_L, GAS_KAPPA = 0.1, 1.4  # the library's gas_spring defaults [m], [-]
-COULOMB_EPS, ASYM_EPS = 0.01, 0.02  # the library's coulomb_friction / asymmetric_damping v_eps [m/s]
-
-# Shape -> the library effects (and parameter candidates) it points to, with an affinity in [0, 1].
-# "{axle}" is filled with f / r. Secondary entries: a lagged damper adds stiffness, saturated Bouc-Wen
-# hysteresis looks like friction (and like stiffness at small amplitude), a bump stop like stiffening.
-SHAPE_EFFECTS: dict[str, tuple[tuple[str, float], ...]] = {
-    "linear_stiffness": (("parameter:k{axle}", 1.0), ("damper_lag", 0.5), ("hysteresis", 0.4)),
-    "progressive_spring": (("progressive_spring", 1.0), ("gas_spring", 0.5), ("backlash", 0.3)),
-    "gas_spring": (("gas_spring", 1.0), ("progressive_spring", 0.5)),
-    "dead_band": (("backlash", 1.0), ("progressive_spring", 0.5)),
-    "linear_damping": (("parameter:c{axle}", 1.0), ("damper_lag", 0.3), ("tyre_damping", 0.3)),
-    "coulomb_friction": (("coulomb_friction", 1.0), ("hysteresis", 0.7)),
-    "asymmetric_damping": (("asymmetric_damping", 1.0),),
-    "one_sided_damping": (("asymmetric_damping", 1.0),),
-    "quadratic_damping": (("asymmetric_damping", 0.6),),
-    "sqrt_damper": (("coulomb_friction", 0.7), ("hysteresis", 0.4)),
-}
-SHAPES = {
-    "deflection": ("linear_stiffness", "progressive_spring", "gas_spring", "dead_band"),
-    "velocity": (
-        "linear_damping", "coulomb_friction", "asymmetric_damping", "one_sided_damping", "quadratic_damping",
-        "sqrt_damper",
-    ),
-}  # fmt: skip
 
 
 # ------------------------------------------------------------------------------------------ results
-
-
-@dataclass(frozen=True)
-class Resemblance:
-    """How well each library shape, scaled by one least-squares amplitude, matches an estimated curve."""
-
-    best: str
-    r2: dict[str, float]  # uncentred weighted R² per shape (0 when the amplitude must have the other sign)
-    amplitude: dict[str, float]  # fitted amplitude per shape [N per unit of the shape]
-    detail: dict[str, str]  # how a profiled shape was chosen (dead band width, one-sided direction)
-
-    def to_json(self) -> dict:
-        return {"best": self.best, "r2": dict(self.r2), "amplitude": dict(self.amplitude), "detail": dict(self.detail)}
 
 
 @dataclass(frozen=True)
@@ -275,277 +239,10 @@ class Unexplained:
         }
 
 
-# ------------------------------------------------------------------------------------------ splines
-
-
-@dataclass(frozen=True)
-class _Basis:
-    """A cubic B-spline basis on [t[3], t[-4]] constrained to vanish at 0 (columns B Z), with its penalty."""
-
-    t: NDArray
-    Z: NDArray  # (nb, nb - 1)
-    P: NDArray  # (nb - 1, nb - 1): integral of (second derivative)² in the constrained coefficients
-
-    @property
-    def size(self) -> int:
-        return self.Z.shape[1]
-
-    def __call__(self, x: NDArray) -> NDArray:
-        """(len(x), size) constrained basis at x (clipped into the knot span)."""
-        lo, hi = self.t[3], self.t[-4]
-        xc = np.clip(np.asarray(x, dtype=float).ravel(), lo, hi)
-        B = BSpline.design_matrix(xc, self.t, 3).toarray()
-        return B @ self.Z
-
-
-def _basis(values: NDArray, n_knots: int) -> _Basis:
-    """Knots halfway between the values' quantiles and equal spacing over their range (dense where the data
-    are, still reaching the sparse extremes); 0 kept inside the span."""
-    v = np.asarray(values, dtype=float).ravel()
-    lo, hi = min(float(np.min(v)), 0.0), max(float(np.max(v)), 0.0)
-    span = hi - lo
-    if not span > 0:
-        raise ValueError("the strut does not move: no force law can be estimated from this trajectory")
-    lo, hi = lo - 1e-6 * span, hi + 1e-6 * span
-    p = np.linspace(0.0, 1.0, n_knots + 2)[1:-1]
-    inner = 0.5 * (np.quantile(v, p) + lo + p * (hi - lo))
-    inner = np.unique(inner[(inner > lo) & (inner < hi)])
-    t = np.r_[[lo] * 4, inner, [hi] * 4]
-    nb = t.size - 4
-    # penalty: exact 2-point Gauss quadrature per knot interval (B'' is linear on each)
-    edges = np.unique(t)
-    a, b = edges[:-1], edges[1:]
-    g = np.array([-1.0, 1.0]) / math.sqrt(3.0)
-    xq = (0.5 * (a + b)[:, None] + 0.5 * (b - a)[:, None] * g[None, :]).ravel()
-    wq = np.repeat(0.5 * (b - a), 2)
-    d2 = BSpline(t, np.eye(nb), 3).derivative(2)(xq)  # (nq, nb)
-    P = d2.T @ (wq[:, None] * d2)
-    c = BSpline.design_matrix(np.array([0.0]), t, 3).toarray()[0]
-    Q, _ = np.linalg.qr(c[:, None], mode="complete")
-    Z = Q[:, 1:]
-    return _Basis(t=t, Z=Z, P=Z.T @ P @ Z)
-
-
-# ------------------------------------------------------------------------------------------ the car's response
-
-
-@dataclass(frozen=True)
-class _LinearCar:
-    """The fitted car's linear part, discretised for strut-force inputs u (4 corners) with a first-order hold,
-    with the output rows of the layout's channels."""
-
-    Phi: NDArray
-    G1: NDArray
-    G2: NDArray
-    out_s: dict[str, NDArray]  # family -> (k, 14): the family's channels from the state
-    out_u: dict[str, NDArray]  # family -> (k, 4): direct feed-through of the strut forces
-    D: NDArray  # (4, 7) strut deflection from q
-
-
-def _output_rows(layout, family: str, points: NDArray) -> tuple[NDArray, NDArray]:
-    """(k, 3) body rows and (k, 4) wheel rows giving each channel of `family` from the body coordinates
-    (x_b, phi, theta) and the wheel hops (or their accelerations): a body sensor reads its point's row of `points`
-    (Layout.points, (nb, 3)), a wheel sensor its wheel, a deflection sensor the point above its corner minus the
-    wheel."""
-    index = {pt: i for i, pt in enumerate(layout._points)}
-    sensors = layout.of(family)
-    body = np.zeros((len(sensors), 3))
-    wheel = np.zeros((len(sensors), N_CORNERS))
-    for j, s in enumerate(sensors):
-        if s.point is not None:
-            body[j] = points[index[s.point]]
-        if s.kind.startswith("wheel"):
-            wheel[j, s.corner - 1] = 1.0
-        elif s.kind == "deflection":
-            wheel[j, s.corner - 1] = -1.0
-    return body, wheel
-
-
-def _linear_car(mats, dt: float, layout, points: NDArray) -> _LinearCar:
-    """The car `mats` (one set of matrices) discretised at dt [s], its outputs the channels of `layout` with body
-    point rows `points` (Layout.points of the car, (nb, 3); the paper's layout: the rows of G)."""
-    A, _ = mats.state_space()
-    D = fullcar_struts(mats)
-    Minv = np.linalg.inv(mats.M)
-    Bf = np.zeros((2 * N_DOF, N_CORNERS))
-    Bf[N_DOF:, :] = -Minv @ D.T  # generalised force -D' f
-    Phi, G1, G2 = foh_discretisation(A, Bf, dt)
-    out_s, out_u = {}, {}
-    for family in layout.families:
-        body, wheel = _output_rows(layout, family, points)
-        if family == "acc":  # accelerations: the rows of qdd = A_qdd s + B_qdd f
-            out_s[family] = body @ A[N_DOF : N_DOF + 3, :] + wheel @ A[N_DOF + 3 :, :]
-            out_u[family] = body @ Bf[N_DOF : N_DOF + 3, :] + wheel @ Bf[N_DOF + 3 :, :]
-        else:  # displacements: the rows of q
-            rows = np.zeros((body.shape[0], 2 * N_DOF))
-            rows[:, :3], rows[:, 3:N_DOF] = body, wheel
-            out_s[family] = rows
-            out_u[family] = np.zeros((body.shape[0], N_CORNERS))
-    return _LinearCar(Phi, G1, G2, out_s, out_u, D)
-
-
-def _car_at(exp, values: dict[str, float], dt: float) -> _LinearCar:
-    """The linear car `values` at dt [s] with the outputs of the experiment's layout."""
-    layout = exp.layout
-    return _linear_car(exp.matrices(values), dt, layout, layout.points(exp.parameters(values)))
-
-
-def _channel_columns(objective, family: str, car: _LinearCar, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
-    """The weighted residual entries of `family` (the objective's layout: time-major, observed entries only) that
-    the K input histories U (n, 4, K) with states s (n, 14, K) explain, (R_family, K): the channels' responses over
-    sigma, without what the profiled offsets absorb."""
-    Y = (car.out_s[family] @ s + car.out_u[family] @ U) / sigma[None, :, None]  # (n, k, K)
-    if objective.offsets:
-        objective.project(family, np.moveaxis(Y, -1, 0))  # in place, through the (K, n, k) view
-    Y = Y.reshape(Y.shape[0] * Y.shape[1], -1)
-    rows = objective.entries(family)
-    return Y if rows is None else Y[rows]
-
-
-def _responses(car: _LinearCar, U: NDArray) -> NDArray:
-    """States (n, 14, K) of the car at rest driven by K strut-force histories U (n, 4, K), one recursion."""
-    n = U.shape[0]
-    s = np.empty((n, 2 * N_DOF, U.shape[2]))
-    s[0] = 0.0
-    np.matmul(car.G1, U[:-1], out=s[1:])
-    s[1:] += car.G2 @ np.diff(U, axis=0)
-    Phi = car.Phi
-    for k in range(n - 1):
-        s[k + 1] += Phi @ s[k]
-    return s
-
-
-# ------------------------------------------------------------------------------------------ penalised fit
-
-
-@dataclass(frozen=True)
-class _Solution:
-    coef: NDArray
-    cov: NDArray  # (A'A + P_lambda)^-1 in the original column units
-    lam: NDArray  # per penalised block
-    edf: float  # trace of the hat matrix
-    rss: float
-    edf2: float  # tr(2 H - H H): the reference degrees of freedom of the test
-
-
-def _solve(
-    AtA: NDArray, Atr: NDArray, rtr: float, R: int, blocks: list[tuple[slice, NDArray]], criterion: str = "reml"
-) -> _Solution:
-    """min |r - A c|² + sum_j lam_j c_j' P_j c_j, the lam_j by REML (default) or GCV.
-
-    REML: the restricted likelihood with the scale profiled out, (R - M0) log(RSS + c' P_lam c) + log|H|
-    - sum_j rank_j log lam_j, H = A'A + P_lam, M0 the penalty's null-space dimension; GCV: R RSS / (R - edf)².
-    """
-    scale = np.sqrt(np.maximum(np.diag(AtA), 1e-300))
-    As = AtA / np.outer(scale, scale)
-    bs = Atr / scale
-    m = As.shape[0]
-    Ps, ranks = [], []
-    for sl, P in blocks:
-        Pj = np.zeros((m, m))
-        Pj[sl, sl] = P / np.outer(scale[sl], scale[sl])
-        Pj /= max(np.trace(Pj) / (sl.stop - sl.start), 1e-300)  # lam = 1: penalty on the scale of the data term
-        ev = np.linalg.eigvalsh(Pj[sl, sl])
-        ranks.append(int(np.sum(ev > 1e-9 * ev.max())))
-        Ps.append(Pj)
-    ridge = 1e-9 * np.eye(m)
-    null = m - sum(ranks)
-
-    def fit(rho: NDArray):
-        Pl = sum((10.0**r * P for r, P in zip(rho, Ps, strict=True)), np.zeros((m, m)))
-        H = As + ridge + Pl
-        try:
-            L = np.linalg.cholesky(H)
-        except np.linalg.LinAlgError:
-            return None
-        Hinv = np.linalg.inv(H)
-        c = Hinv @ bs
-        rss = max(rtr - 2.0 * c @ bs + c @ As @ c, 0.0)
-        F_ = Hinv @ As
-        edf = float(np.trace(F_))
-        edf2 = 2.0 * edf - float(np.sum(F_ * F_.T))
-        logdet = 2.0 * float(np.sum(np.log(np.diag(L))))
-        return c, Hinv, rss, edf, rss + float(c @ Pl @ c), logdet, edf2
-
-    def score(rho: NDArray) -> float:
-        out = fit(rho)
-        if out is None or out[3] >= R:
-            return np.inf
-        if criterion == "gcv":
-            return math.log(R * max(out[2], 1e-300) / (R - out[3]) ** 2)
-        ln10 = math.log(10.0)
-        return (R - null) * math.log(max(out[4], 1e-300)) + out[5] - ln10 * float(np.dot(ranks, rho))
-
-    grid = np.arange(LOG_LAMBDA[0], LOG_LAMBDA[1] + 1e-9, 0.5)
-    k = len(Ps)
-    common = min(grid, key=lambda g: score(np.full(k, g)))
-    rho = np.full(k, common)
-    if k:
-        res = scipy.optimize.minimize(score, rho, method="L-BFGS-B", bounds=[LOG_LAMBDA] * k, options={"eps": 1e-4})
-        if np.isfinite(res.fun) and score(res.x) <= score(rho):
-            rho = res.x
-    c, Hinv, rss, edf, _, _, edf2 = fit(rho)
-    return _Solution(c / scale, Hinv / np.outer(scale, scale), 10.0**rho, edf, rss, edf2)
-
-
-# ------------------------------------------------------------------------------------------ shapes
-
-
-def _shape_columns(variable: str, x: NDArray) -> dict[str, list[tuple[NDArray, int, str]]]:
-    """Each shape's candidate curves over x: (curve, sign constraint of the amplitude (0: free), detail)."""
-    xm = max(float(np.max(np.abs(x))), 1e-300)
-    if variable == "deflection":
-        u = np.maximum(x / GAS_L, -0.9)
-        gas = (1.0 - (1.0 + u) ** (-GAS_KAPPA)) - GAS_KAPPA * u
-        band = [(np.sign(x) * np.maximum(np.abs(x) - f * xm, 0.0), 1, f"dead band +-{f * xm:.4g} m")
-                for f in (0.2, 0.4, 0.6)]  # fmt: skip
-        return {
-            "linear_stiffness": [(x, 0, "")],
-            "progressive_spring": [(x**3, 1, "")],
-            "gas_spring": [(gas, 1, f"L = {GAS_L} m, kappa = {GAS_KAPPA}")],
-            "dead_band": band,
-        }
-    return {
-        "linear_damping": [(x, 0, "")],
-        "coulomb_friction": [(np.tanh(x / COULOMB_EPS), 1, f"v_eps = {COULOMB_EPS} m/s")],
-        "asymmetric_damping": [(x * np.tanh(x / ASYM_EPS), 0, f"v tanh(v / {ASYM_EPS}) (the library's)")],
-        "one_sided_damping": [(np.maximum(x, 0.0), 1, "rebound only"), (np.minimum(x, 0.0), 1, "compression only")],
-        "quadratic_damping": [(np.abs(x) * x, 0, "")],
-        "sqrt_damper": [(np.sign(x) * np.sqrt(np.abs(x)), 1, "")],
-    }
-
-
-def resemblance(variable: str, x: NDArray, f: NDArray, se: NDArray, free_line: bool = False) -> Resemblance:
-    """Best one-parameter match of the library's shapes to the curve f(x) [N] with standard errors se [N];
-    `free_line`: f is known modulo a line through 0 (and given without its projection on x), and so is each
-    shape (a linear stiffness or damping then matches nothing)."""
-    floor = 1e-2 * max(float(np.median(se[se > 0])) if np.any(se > 0) else 1.0, 1e-300)
-    w = 1.0 / np.maximum(se, floor) ** 2
-    total = float(np.sum(w * f * f))
-    r2, amp, detail = {}, {}, {}
-    for name, options in _shape_columns(variable, x).items():
-        best = (-np.inf, 0.0, "")
-        for s, sign, text in options:
-            if free_line:
-                s = s - x * float(x @ s) / float(x @ x)
-            ss = float(np.sum(w * s * s))
-            a = float(np.sum(w * f * s)) / ss if ss > 0 else 0.0
-            if sign and a * sign < 0:
-                a = 0.0
-            q = 1.0 - float(np.sum(w * (f - a * s) ** 2)) / total if total > 0 else 0.0
-            if q > best[0]:
-                best = (q, a, text)
-        r2[name], amp[name] = float(best[0]), float(best[1])
-        if best[2]:
-            detail[name] = best[2]
-    top = max(r2, key=lambda k: r2[k])
-    return Resemblance(top, r2, amp, detail)
-
-
 # ------------------------------------------------------------------------------------------ the estimate
 
 
-def _trajectories(task, names: tuple[str, ...], X: NDArray):
+def _trajectories(task: Task, names: tuple[str, ...], X: NDArray):
     """Simulate the batch X (P, D): responses and each corner's deflection and velocity (P, n, 4)."""
     exp = task.experiment
     values = {n: X[:, j] for j, n in enumerate(names)}
@@ -558,8 +255,260 @@ def _trajectories(task, names: tuple[str, ...], X: NDArray):
     return resp, d, v
 
 
+@dataclass(frozen=True)
+class _Linearisation:
+    """The fitted car at some values of its unknowns: the weighted residual (R_all,), the model's sensitivities to
+    the unknowns over sigma (R_all, p), each corner's strut deflection and velocity (n, 4) and their sensitivities
+    (p, n, 4), and its linear part."""
+
+    r: NDArray
+    Jm: NDArray
+    d: NDArray
+    v: NDArray
+    dd: NDArray
+    dv: NDArray
+    car: LinearCar
+
+
+@dataclass(frozen=True)
+class _FittedCar:
+    """What the estimate holds fixed: the task (one run) with its objective on the reference, the fitted unknowns'
+    names and the task's box for them, and whether they are re-fitted with the force (nuisance columns)."""
+
+    task: Task
+    names: tuple[str, ...]
+    objective: Objective
+    sigma: dict[str, NDArray]  # family -> (k,) the task's noise sigma of the family's channels
+    lo: NDArray
+    hi: NDArray
+    nuisance: bool
+
+    @classmethod
+    def of(cls, task: Task, reference: dict[str, NDArray], names: tuple[str, ...], nuisance: bool) -> _FittedCar:
+        """The fitted car `names` of `task` against `reference` (family -> (n, k)); `nuisance`: re-fit the unknowns."""
+        objective = task.objective(reference)
+        sigma = {f: np.asarray(task.sigma[f], dtype=float) for f in reference}
+        lo = np.array([task.lower[task.names.index(m)] if m in task.names else -np.inf for m in names])
+        hi = np.array([task.upper[task.names.index(m)] if m in task.names else np.inf for m in names])
+        return cls(task, names, objective, sigma, lo, hi, bool(nuisance and names))
+
+    def linearise(self, at: NDArray) -> _Linearisation:
+        """Residual, trajectories and the unknowns' sensitivities at `at` (one batched simulation)."""
+        exp, lo, hi = self.task.experiment, self.lo, self.hi
+        n = exp.t.size
+        steps = np.zeros(0)
+        if self.nuisance:
+            width = np.where(np.isfinite(hi - lo), hi - lo, np.abs(at))
+            h = 1e-6 * np.maximum(np.abs(at), np.maximum(1e-3 * width, 1e-9))
+            steps = np.where(at + h <= hi, h, -h)
+        X = np.vstack([at[None, :], at[None, :] + np.diag(steps)]) if steps.size else at[None, :]
+        resp, d_all, v_all = _trajectories(self.task, self.names, X)
+        res = np.asarray(self.objective.residuals(exp.read(resp)), dtype=float)  # (P, R_all)
+        if not np.all(np.isfinite(res[0])):
+            raise ValueError("the fitted model's residual is not finite")
+        if steps.size:
+            Jm = (-(res[1:] - res[0]) / steps[:, None]).T  # d model / dx / sigma
+            dd = (d_all[1:] - d_all[0]) / steps[:, None, None]
+            dv = (v_all[1:] - v_all[0]) / steps[:, None, None]
+        else:
+            Jm, dd, dv = np.zeros((res.shape[1], 0)), np.zeros((0, n, 4)), np.zeros((0, n, 4))
+        car = car_at(exp, {m: at[j] for j, m in enumerate(self.names)}, exp.dt)
+        return _Linearisation(res[0], Jm, d_all[0], v_all[0], dd, dv, car)
+
+    def force_columns(self, car: LinearCar, d: NDArray, v: NDArray, n_knots: int):
+        """The basis of each function (front g, front h, rear g, rear h) on the trajectory d, v (n, 4), its columns
+        applied as input forces at the corners of its axle: the bases, the car's states driven by them (n, 14, K)
+        and their weighted responses laid out like the residual (R_all, K)."""
+        n = self.task.experiment.t.size
+        bases, cols = [], []
+        for _axle, corners in AXLES:
+            for traj in (d, v):
+                b = basis(traj[:, corners], n_knots)
+                bases.append(b)
+                U = np.zeros((n, N_CORNERS, b.size))
+                for c in corners:
+                    U[:, c, :] = b(traj[:, c])
+                cols.append(U)
+        U = np.concatenate(cols, axis=2)  # (n, 4, K)
+        s = responses(car, U)
+        S = np.concatenate([channel_columns(self.objective, f, car, s, U, sg) for f, sg in self.sigma.items()], axis=0)
+        return tuple(bases), s, S
+
+
+def _fit_without_force(Jk: NDArray, rk0: NDArray) -> tuple[float, float]:
+    """RSS and degrees of freedom of the fit without the force on the kept residual rk0: the unknowns' linearised
+    re-fit (columns Jk) at x (x itself when it is the fit's optimum)."""
+    p = Jk.shape[1]
+    if p:
+        JtJ = Jk.T @ Jk + 1e-12 * np.trace(Jk.T @ Jk) * np.eye(p)
+        c0 = np.linalg.solve(JtJ, Jk.T @ rk0)
+        rss0 = min(float(np.sum((rk0 - Jk @ c0) ** 2)), float(rk0 @ rk0))
+        edf0 = float(np.trace(np.linalg.solve(JtJ, Jk.T @ Jk)))
+    else:
+        rss0, edf0 = float(rk0 @ rk0), 0.0
+    return rss0, edf0
+
+
+@dataclass(frozen=True)
+class _ForceFit:
+    """The force and the unknowns' re-fit on one trajectory d, v (n, 4): the bases, the states their forces drive,
+    the kept columns A = [J | S] (the p nuisance columns first), the kept residual and the penalised solution."""
+
+    d: NDArray
+    v: NDArray
+    bases: tuple[Basis, ...]
+    s: NDArray
+    A: NDArray
+    rk: NDArray
+    sol: PenalisedFit
+    p: int
+
+    @property
+    def theta(self) -> NDArray:
+        """The basis coefficients of the force."""
+        return self.sol.coef[self.p :]
+
+    @property
+    def dx(self) -> NDArray:
+        """The unknowns' re-fit."""
+        return self.sol.coef[: self.p]
+
+
+def _fit_force(
+    fitted: _FittedCar, lin: _Linearisation, d: NDArray, v: NDArray, keep: NDArray, n_knots: int, criterion: str
+) -> _ForceFit:
+    """The force on the trajectory d, v jointly with the unknowns' linear re-fit, over the kept residual entries,
+    one smoothing parameter per function (REML or GCV)."""
+    rk, Jk = lin.r[keep], lin.Jm[keep]
+    p = Jk.shape[1]
+    bases, s, S = fitted.force_columns(lin.car, d, v, n_knots)
+    A = np.hstack([Jk, S[keep]])
+    blocks, k0 = [], p
+    for b in bases:
+        blocks.append((slice(k0, k0 + b.size), b.P))
+        k0 += b.size
+    sol = penalised_fit(A.T @ A, A.T @ rk, float(rk @ rk), int(keep.sum()), blocks, criterion)
+    return _ForceFit(d, v, bases, s, A, rk, sol, p)
+
+
+@dataclass(frozen=True)
+class _Converged:
+    """The fixed-point iteration's end: the last fit, the unknowns' total re-fit from x, the corrections made."""
+
+    fit: _ForceFit
+    dx: NDArray
+    corrections: int
+
+
+def _iterate(
+    fitted: _FittedCar, lin: _Linearisation, x: NDArray, keep: NDArray, n_knots: int, iterations: int, criterion: str
+) -> _Converged:
+    """Fit the force on the fitted trajectory corrected by the estimate's own response and the unknowns' shift
+    (superposition), re-estimate on the corrected trajectory until it stops moving (at most `iterations` times);
+    when the unknowns' step moves the trajectory, a Gauss-Newton step: re-simulate there."""
+    x_cur = x.copy()
+    corr_d = np.zeros_like(lin.d)
+    corr_v = np.zeros_like(lin.v)
+    done = 0
+    for it in range(max(0, iterations) + 1):
+        d, v = lin.d + corr_d, lin.v + corr_v
+        fit = _fit_force(fitted, lin, d, v, keep, n_knots, criterion)
+        theta, dx, s = fit.theta, fit.dx, fit.s
+        # the trajectory of the corrected model: fitted + the unknowns' shift + the estimate's own response
+        new_d = (s[:, :N_DOF, :] @ theta) @ lin.car.D.T
+        new_v = (s[:, N_DOF:, :] @ theta) @ lin.car.D.T
+        shift_d, shift_v = np.tensordot(dx, lin.dd, axes=1), np.tensordot(dx, lin.dv, axes=1)
+        change = max(float(np.max(np.abs(new_d + shift_d - corr_d)) / np.ptp(d)),
+                     float(np.max(np.abs(new_v + shift_v - corr_v)) / np.ptp(v)))  # fmt: skip
+        if it == iterations or change < 1e-3:
+            break
+        done += 1
+        corr_d, corr_v = new_d, new_v
+        moved = float(np.max(np.abs(shift_d)) / np.ptp(d)) > 1e-4 or float(np.max(np.abs(shift_v)) / np.ptp(v)) > 1e-4
+        if fit.p and moved:  # a Gauss-Newton step of the unknowns: re-simulate there
+            x_cur = np.clip(x_cur + dx, fitted.lo, fitted.hi)
+            lin = fitted.linearise(x_cur)
+    return _Converged(fit, np.clip(x_cur + fit.dx, fitted.lo, fitted.hi) - x, done)
+
+
+@dataclass(frozen=True)
+class _FTest:
+    """Does the residual hold a strut force: the fit with the force against the fit without it."""
+
+    rss1: float  # kept residual power with the force
+    edf_force: float
+    df_test: float
+    sigma2: float
+    F: float
+    p_value: float
+
+
+def _f_test(fit: _ForceFit, rss0: float, edf0: float, R: int) -> _FTest:
+    """The F test of the force against the fit without it (RSS rss0 over edf0 degrees of freedom), on R entries."""
+    sol = fit.sol
+    rss1 = float(np.sum((fit.rk - fit.A @ sol.coef) ** 2))
+    edf_force = max(sol.edf - edf0, 1e-9)
+    df_test = max(sol.edf2 - edf0, edf_force)
+    dof = max(R - sol.edf, 1.0)
+    sigma2 = max(1.0, rss1 / dof)
+    F = max(rss0 - rss1, 0.0) / df_test / sigma2
+    p_value = float(stats.f.sf(F, df_test, dof))
+    return _FTest(rss1, edf_force, df_test, sigma2, F, p_value)
+
+
+def _curve(
+    variable: str, grid: NDArray, Bg: NDArray, sl: slice, line: int | None, fit: _ForceFit, V: NDArray, lam: float
+) -> Curve:
+    """One function's curve over `grid` (Bg its basis there, sl its columns) with its 95 % band (covariance V) and
+    resemblance; `line`: the column of the unknown whose re-fit is the curve's line through 0 (the curve is then
+    reported modulo lines), None when that unknown is not fitted."""
+    A, coef = fit.A, fit.sol.coef
+    if line is not None:  # its line and the unknown's re-fit are one: the curve modulo lines
+        rows = np.zeros((grid.size, coef.size))
+        rows[:, sl], rows[:, line] = Bg, grid
+        rows -= np.outer(grid, grid @ rows) / float(grid @ grid)
+        f = rows @ coef
+        se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, V, rows), 0.0))
+        own = A[:, line]  # its response, and the part of the curve's the unknown absorbs
+        contrib = A[:, sl] @ coef[sl]
+        contrib = contrib - own * float(own @ contrib) / max(float(own @ own), 1e-300)
+    else:
+        f = Bg @ coef[sl]
+        se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bg, V[sl, sl], Bg), 0.0))
+        contrib = A[:, sl] @ coef[sl]
+    i_peak = int(np.argmax(np.abs(f)))
+    z = np.abs(f) / np.maximum(se, 1e-300)
+    return Curve(
+        variable=variable, grid=grid, force=f, band=np.vstack([f - Z95 * se, f + Z95 * se]),
+        peak_force=float(abs(f[i_peak])), peak_at=float(grid[i_peak]),
+        z_max=float(np.max(np.where(se > 0, z, 0.0))), chi2_explained=float(np.mean(contrib**2)),
+        lam=float(lam), resembles=resemblance(variable, grid, f, se, free_line=line is not None),
+    )  # fmt: skip
+
+
+def _axle_estimates(fit: _ForceFit, names: tuple[str, ...], sigma2: float, grid_points: int) -> list[AxleEstimate]:
+    """Each axle's curves over the observed range of its trajectory, bands from the posterior covariance."""
+    V = sigma2 * fit.sol.cov
+    axles = []
+    j, k0 = 0, fit.p
+    for axle, corners in AXLES:
+        curves = []
+        for var, traj in (("deflection", fit.d), ("velocity", fit.v)):
+            b = fit.bases[j]
+            sl = slice(k0, k0 + b.size)
+            grid = np.linspace(float(np.min(traj[:, corners])), float(np.max(traj[:, corners])), grid_points)
+            Bg = b(grid)
+            own = LINE_UNKNOWN[(axle, var)]
+            line = names.index(own) if own in names[: fit.p] else None
+            curves.append(_curve(var, grid, Bg, sl, line, fit, V, fit.sol.lam[j]))
+            j += 1
+            k0 += b.size
+        axles.append(AxleEstimate(axle, curves[0], curves[1]))
+    return axles
+
+
 def estimate_unexplained(
-    task,
+    task: Task,
     reference: dict[str, NDArray],
     names: Sequence[str],
     x: NDArray,
@@ -581,170 +530,20 @@ def estimate_unexplained(
     x = np.asarray(x, dtype=float).ravel()
     if x.size != len(names):
         raise ValueError(f"{len(names)} names but {x.size} values")
-    exp = task.experiment
-    n, dt = exp.t.size, exp.dt
-    families = tuple(reference)
-    objective = task.objective(reference)
-    sigma = {f: np.asarray(task.sigma[f], dtype=float) for f in families}
-    use_nuisance = bool(nuisance and names)
-    lo = np.array([task.lower[task.names.index(m)] if m in task.names else -np.inf for m in names])
-    hi = np.array([task.upper[task.names.index(m)] if m in task.names else np.inf for m in names])
-
-    def linearise(at: NDArray):
-        """Residual, trajectories and the unknowns' sensitivities at `at` (one batched simulation)."""
-        steps = np.zeros(0)
-        if use_nuisance:
-            width = np.where(np.isfinite(hi - lo), hi - lo, np.abs(at))
-            h = 1e-6 * np.maximum(np.abs(at), np.maximum(1e-3 * width, 1e-9))
-            steps = np.where(at + h <= hi, h, -h)
-        X = np.vstack([at[None, :], at[None, :] + np.diag(steps)]) if steps.size else at[None, :]
-        resp, d_all, v_all = _trajectories(task, names, X)
-        res = np.asarray(objective.residuals(exp.read(resp)), dtype=float)  # (P, R_all)
-        if not np.all(np.isfinite(res[0])):
-            raise ValueError("the fitted model's residual is not finite")
-        if steps.size:
-            Jm = (-(res[1:] - res[0]) / steps[:, None]).T  # d model / dx / sigma
-            dd = (d_all[1:] - d_all[0]) / steps[:, None, None]
-            dv = (v_all[1:] - v_all[0]) / steps[:, None, None]
-        else:
-            Jm, dd, dv = np.zeros((res.shape[1], 0)), np.zeros((0, n, 4)), np.zeros((0, n, 4))
-        car = _car_at(exp, {m: at[j] for j, m in enumerate(names)}, dt)
-        return res[0], Jm, d_all[0], v_all[0], dd, dv, car
-
-    r, Jm, d0, v0, dd, dv, car = linearise(x)
-    R_all = r.size
+    fitted = _FittedCar.of(task, reference, names, nuisance)
+    lin = fitted.linearise(x)
+    R_all = lin.r.size
     keep = np.ones(R_all, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
     if keep.shape != (R_all,):
         raise ValueError(f"keep must have {R_all} entries (family, time, channel), got {keep.shape}")
     R = int(keep.sum())
-    p = Jm.shape[1]
-    rk0 = r[keep]
-    # the fit without the force: the unknowns' linearised re-fit at x (x itself when it is the fit's optimum)
-    if p:
-        Jk = Jm[keep]
-        JtJ = Jk.T @ Jk + 1e-12 * np.trace(Jk.T @ Jk) * np.eye(p)
-        c0 = np.linalg.solve(JtJ, Jk.T @ rk0)
-        rss0 = min(float(np.sum((rk0 - Jk @ c0) ** 2)), float(rk0 @ rk0))
-        edf0 = float(np.trace(np.linalg.solve(JtJ, Jk.T @ Jk)))
-    else:
-        rss0, edf0 = float(rk0 @ rk0), 0.0
-
-    x_cur = x.copy()
-    corr_d = np.zeros_like(d0)
-    corr_v = np.zeros_like(v0)
-    done = 0
-    for it in range(max(0, iterations) + 1):
-        d, v = d0 + corr_d, v0 + corr_v
-        rk, Jk = r[keep], Jm[keep]
-        # basis of each function on the current trajectory, inputs at the corners of its axle
-        bases, cols = [], []
-        for _axle, corners in AXLES:
-            for traj in (d, v):
-                b = _basis(traj[:, corners], n_knots)
-                bases.append(b)
-                U = np.zeros((n, N_CORNERS, b.size))
-                for c in corners:
-                    U[:, c, :] = b(traj[:, c])
-                cols.append(U)
-        U = np.concatenate(cols, axis=2)  # (n, 4, K)
-        s = _responses(car, U)
-        S = np.concatenate([_channel_columns(objective, f, car, s, U, sigma[f]) for f in families], axis=0)
-        A = np.hstack([Jk, S[keep]])
-        blocks, k0 = [], p
-        for b in bases:
-            blocks.append((slice(k0, k0 + b.size), b.P))
-            k0 += b.size
-        sol = _solve(A.T @ A, A.T @ rk, float(rk @ rk), R, blocks, criterion)
-        theta, dx = sol.coef[p:], sol.coef[:p]
-        # the trajectory of the corrected model: fitted + the unknowns' shift + the estimate's own response
-        new_d = (s[:, :N_DOF, :] @ theta) @ car.D.T
-        new_v = (s[:, N_DOF:, :] @ theta) @ car.D.T
-        shift_d, shift_v = np.tensordot(dx, dd, axes=1), np.tensordot(dx, dv, axes=1)
-        change = max(float(np.max(np.abs(new_d + shift_d - corr_d)) / np.ptp(d)),
-                     float(np.max(np.abs(new_v + shift_v - corr_v)) / np.ptp(v)))  # fmt: skip
-        if it == iterations or change < 1e-3:
-            break
-        done += 1
-        corr_d, corr_v = new_d, new_v
-        moved = float(np.max(np.abs(shift_d)) / np.ptp(d)) > 1e-4 or float(np.max(np.abs(shift_v)) / np.ptp(v)) > 1e-4
-        if p and moved:  # a Gauss-Newton step of the unknowns: re-simulate there
-            x_cur = np.clip(x_cur + dx, lo, hi)
-            r, Jm, d0, v0, dd, dv, car = linearise(x_cur)
-    dx_total = np.clip(x_cur + dx, lo, hi) - x
-
-    # significance against the fit without the force
-    rss1 = float(np.sum((rk - A @ sol.coef) ** 2))
-    edf_force = max(sol.edf - edf0, 1e-9)
-    df_test = max(sol.edf2 - edf0, edf_force)
-    dof = max(R - sol.edf, 1.0)
-    sigma2 = max(1.0, rss1 / dof)
-    F = max(rss0 - rss1, 0.0) / df_test / sigma2
-    p_value = float(stats.f.sf(F, df_test, dof))
-
-    # curves, bands, resemblance
-    V = sigma2 * sol.cov
-    axles = []
-    j, k0 = 0, p
-    for axle, corners in AXLES:
-        curves = []
-        for var, traj in (("deflection", d), ("velocity", v)):
-            b = bases[j]
-            sl = slice(k0, k0 + b.size)
-            grid = np.linspace(float(np.min(traj[:, corners])), float(np.max(traj[:, corners])), grid_points)
-            Bg = b(grid)
-            own = LINE_UNKNOWN[(axle, var)]
-            if own in names[:p]:  # its line and the unknown's re-fit are one: the curve modulo lines
-                rows = np.zeros((grid.size, sol.coef.size))
-                rows[:, sl], rows[:, names.index(own)] = Bg, grid
-                rows -= np.outer(grid, grid @ rows) / float(grid @ grid)
-                f = rows @ sol.coef
-                se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, V, rows), 0.0))
-                line = A[:, names.index(own)]  # its response, and the part of the curve's the unknown absorbs
-                contrib = A[:, sl] @ sol.coef[sl]
-                contrib = contrib - line * float(line @ contrib) / max(float(line @ line), 1e-300)
-            else:
-                f = Bg @ sol.coef[sl]
-                se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bg, V[sl, sl], Bg), 0.0))
-                contrib = A[:, sl] @ sol.coef[sl]
-            i_peak = int(np.argmax(np.abs(f)))
-            z = np.abs(f) / np.maximum(se, 1e-300)
-            curves.append(
-                Curve(
-                    variable=var, grid=grid, force=f, band=np.vstack([f - Z95 * se, f + Z95 * se]),
-                    peak_force=float(abs(f[i_peak])), peak_at=float(grid[i_peak]),
-                    z_max=float(np.max(np.where(se > 0, z, 0.0))), chi2_explained=float(np.mean(contrib**2)),
-                    lam=float(sol.lam[j]), resembles=resemblance(var, grid, f, se, free_line=own in names[:p]),
-                )
-            )  # fmt: skip
-            j += 1
-            k0 += b.size
-        axles.append(AxleEstimate(axle, curves[0], curves[1]))
+    rk0 = lin.r[keep]
+    rss0, edf0 = _fit_without_force(lin.Jm[keep], rk0)
+    end = _iterate(fitted, lin, x, keep, n_knots, iterations, criterion)
+    test = _f_test(end.fit, rss0, edf0, R)
+    axles = _axle_estimates(end.fit, names, test.sigma2, grid_points)
     return Unexplained(
-        front=axles[0], rear=axles[1], chi2_before=float(np.mean(rk0**2)), chi2_after=rss1 / R,
-        edf=float(edf_force), edf_total=float(sol.edf), df_test=float(df_test), F=float(F), p_value=p_value,
-        sigma2=float(sigma2), samples=R, iterations=done, dx=dx_total, names=names,
+        front=axles[0], rear=axles[1], chi2_before=float(np.mean(rk0**2)), chi2_after=test.rss1 / R,
+        edf=float(test.edf_force), edf_total=float(end.fit.sol.edf), df_test=float(test.df_test), F=float(test.F),
+        p_value=test.p_value, sigma2=float(test.sigma2), samples=R, iterations=end.corrections, dx=end.dx, names=names,
     )  # fmt: skip
-
-
-def candidate_order(unexplained: Unexplained, effect_names: Sequence[str], alpha: float = ALPHA) -> list[str]:
-    """`effect_names` (library effects and ``parameter:kf``-style candidates) ordered best first by how well the
-    significant estimated curves resemble each one's shape (R² x affinity of the shape to the effect, weighted by
-    the residual power each curve explains); names the estimate does not point to keep their order after the
-    others. Unchanged when the estimate is not significant (p >= alpha)."""
-    names = list(effect_names)
-    if not unexplained.p_value < alpha:
-        return names
-    score = {name: 0.0 for name in names}
-    total = sum(c.chi2_explained for a in (unexplained.front, unexplained.rear) for c in (a.g, a.h)) or 1.0
-    for a in (unexplained.front, unexplained.rear):
-        tag = a.axle[0]
-        for c in (a.g, a.h):
-            if not c.significant:
-                continue
-            weight = c.chi2_explained / total
-            for shape, r2 in c.resembles.r2.items():
-                for effect, affinity in SHAPE_EFFECTS[shape]:
-                    effect = effect.format(axle=tag)
-                    if effect in score:
-                        score[effect] = max(score[effect], weight * max(r2, 0.0) * affinity)
-    return sorted(names, key=lambda e: (-score[e], names.index(e)))

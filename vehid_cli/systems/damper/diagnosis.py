@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +44,8 @@ from ...diagnose.attribution import (
     lsq_fit,
     parameter_candidate,
 )
-from ...diagnose.loop import HOLDOUT_EVERY, Diagnosis, ModelReport, Subject, block_size, close, holdout_blocks
+from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks
+from ...diagnose.loop import Diagnosis, ModelReport, Subject, close
 from ...diagnose.quality import assess_bench
 from ...diagnose.residuals import analyse_bench, autocorrelation
 from ...models.bench import BenchHistory
@@ -94,6 +97,154 @@ def _effects_of(names) -> tuple[str, ...]:
     return tuple(dict.fromkeys(n.partition(".")[0] for n in names if "." in n))
 
 
+@dataclass(frozen=True)
+class BenchRuns:
+    """The measured runs of a bench diagnosis: the training run (its file and history), the held-out runs (their
+    files, and histories by stem), and the training samples kept out of the held-out blocks (None: all, when there
+    are held-out runs)."""
+
+    file: str | Path
+    train: BenchHistory
+    validate_files: tuple[str | Path, ...]
+    held_out: dict[str, BenchHistory]
+    keep: NDArray | None
+
+    @classmethod
+    def load(
+        cls, config: DamperConfig, data_file: str | Path | None, validate_files: tuple[str | Path, ...] | None
+    ) -> BenchRuns:
+        """`data_file` (else the config's data.file) and `validate_files` (else the config's data.validate), read
+        with the config's columns and units."""
+        data_file = data_file if data_file is not None else (config.data.file if config.data is not None else None)
+        if data_file is None:
+            raise InputError("diagnose needs measured data: give --data FILE or data.file", source=config.source)
+        train = load_measured(config, data_file)
+        if validate_files is None:
+            validate_files = tuple(config.data.validate_files) if config.data is not None else ()
+        held_out = {Path(str(p)).stem: load_measured(config, p) for p in validate_files}
+        keep = None if held_out else ~holdout_blocks(train.t.size)
+        return cls(data_file, train, tuple(validate_files), held_out, keep)
+
+    @property
+    def validation_source(self) -> str:
+        """Where the validation J comes from, for the report."""
+        if self.held_out:
+            return "held-out runs: " + ", ".join(os.path.normpath(str(p)) for p in self.validate_files)
+        n = self.train.t.size
+        return f"held-out blocks of {self.file} (every {HOLDOUT_EVERY}th block of {block_size(n)} samples)"
+
+
+def noise_sigma(train: BenchHistory) -> float:
+    """The force's noise sigma [N] estimated from the training run (third differences), at least 1e-9 of its spread."""
+    sigma = float(MEASURED.estimated("force", train.force[:, None])[0])
+    return max(sigma, 1e-9 * float(np.std(train.force)))
+
+
+@dataclass(frozen=True)
+class BenchLoop:
+    """The damper's side of the loop: Eq. 7's J over any unknowns (the declared ones at the configured values, the
+    candidates' at their starts) on the training and the held-out data, the LR test and interval scale over the
+    effective samples of an AR(1) residual, and the report of a fit."""
+
+    runs: BenchRuns
+    spec: DamperSpec
+    declared_names: tuple[str, ...]
+    starts: dict[str, float]
+    limits: dict[str, tuple[float, float]]
+    substeps: int
+    sigma: float  # the force's noise sigma [N]
+
+    @property
+    def residual_count(self) -> int:
+        """Training samples."""
+        keep = self.runs.keep
+        return int(self.runs.train.t.size if keep is None else keep.sum())
+
+    def spec_for(self, names) -> DamperSpec:
+        """The configured damper with the effects among `names` (their parameters at the defaults and starts)."""
+        spec, starts = self.spec, self.starts
+        effects = _effects_of(names)
+        values = {f"{e}.{p.name}": p.default for e in effects for p in LIBRARY[e].params}
+        values.update({k: v for k, v in starts.items() if k.partition(".")[0] in effects})
+        return spec.with_effects(effects, {**values, **{k: v for k, v in spec.values.items() if k in values}})
+
+    def problem_on(self, names: tuple[str, ...], history: BenchHistory, mask: NDArray | None) -> Problem:
+        """Eq. 7's J over `names` on `history` (the samples `mask` keeps): squared residuals over the force's
+        variance, summed."""
+        s = self.spec_for(names)
+        substeps = self.substeps
+        force = history.force if mask is None else history.force[mask]
+        scale = np.sqrt(force.size * np.var(force))  # sum of squared residuals = Eq. 7's J
+
+        def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
+            with np.errstate(all="ignore"):
+                sim = s.simulate_batch(names, X, history, substeps).force
+                r = (history.force[None, :] - sim) / scale
+                r = r if mask is None else r[:, mask]
+                return np.sum(r**2, axis=1), r
+
+        lower = np.array([self.limits[n][0] for n in names], dtype=float)
+        upper = np.array([self.limits[n][1] for n in names], dtype=float)
+        return Problem(lower, upper, lambda X: cost_and_residuals(X)[0], cost_and_residuals, 1.0, names)
+
+    def problem_for(self, names: tuple[str, ...]) -> tuple[Problem, NDArray]:
+        """The training problem over `names` (a finite penalty for unstable candidates) and its start."""
+        s = self.spec_for(names)
+        start = np.array([self.starts.get(n, s.values.get(n, 0.0)) if n not in self.declared_names else s.values[n]
+                          for n in names], dtype=float)  # fmt: skip
+        p = self.problem_on(names, self.runs.train, self.runs.keep)
+        start = np.clip(start, p.lower, p.upper)
+        return _with_penalty(p, start), start
+
+    def validation_J(self, names: tuple[str, ...], x: NDArray) -> tuple[float, dict[str, float] | None]:
+        """J on the held-out blocks, or its mean over the held-out runs (and per run)."""
+        X = np.asarray(x, dtype=float)[None, :]
+        runs = self.runs
+        if not runs.held_out:
+            c = self.problem_on(names, runs.train, ~runs.keep).cost(X)[0]
+            return (float(c) if np.isfinite(c) else float("inf")), None
+        per = {k: float(self.problem_on(names, h, None).cost(X)[0]) for k, h in runs.held_out.items()}
+        per = {k: (v if np.isfinite(v) else float("inf")) for k, v in per.items()}
+        return float(np.mean(list(per.values()))), per
+
+    def n_eff(self, problem: Problem, x: NDArray) -> float:
+        """Effective training samples at x: R (1 - rho) / (1 + rho), rho the lag-1 autocorrelation of the residual."""
+        _, r = problem.residuals(np.asarray(x, dtype=float)[None, :])
+        rho = float(np.clip(autocorrelation(r[0], 1)[1], 0.0, 0.99)) if np.all(np.isfinite(r)) else 0.0
+        return self.residual_count * (1.0 - rho) / (1.0 + rho)
+
+    def statistic(self, current: Fit) -> Callable[[float, float], float]:
+        """The likelihood ratio against the fit `current`, the noise variance profiled out, over n_eff samples."""
+        ne = self.n_eff(self.problem_for(current.names)[0], current.x)
+        return lambda J0, J1: float(ne * np.log(J0 / J1)) if 0 < J1 < J0 else 0.0
+
+    def scale(self, f: Fit) -> float:
+        """Variance of one residual entry at a fit, AR(1)-inflated."""
+        return f.J / max(self.n_eff(self.problem_for(f.names)[0], f.x), 1.0)
+
+    def report(self, f: Fit, effects: Sequence[str]) -> ModelReport:
+        """The fit `f` with `effects`: intervals, J, validation J (per held-out run), the residual analysis."""
+        train = self.runs.train
+        s = self.spec_for(f.names)
+        force = s.simulate_batch(f.names, np.asarray(f.x)[None, :], train, self.substeps).force[0]
+        ci = fit_intervals(self.problem_for(f.names)[0], f, self.scale(f))
+        vJ, per = self.validation_J(f.names, f.x)
+        an = analyse_bench(train, force, self.sigma)
+        return ModelReport(tuple(effects), f.names, f.x, ci, f.J, an.chi2_per_sample, vJ, None, an, per, f.fixed)
+
+
+def fit_declared(config: DamperConfig, bench: BenchLoop, refit_budget: int, say: Callable[[str], None]) -> Fit:
+    """The declared model: the configured algorithm from the configured values, then a least-squares polish."""
+    ident = config.identify
+    problem, x0 = bench.problem_for(bench.declared_names)
+    budget = ident.budget or ident.algorithm.population * ident.algorithm.iterations
+    opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, max(1, budget // ident.algorithm.population))
+    res = opt.minimize(problem, run_streams(ident.seed, 0).optimizer, budget=budget, x0=x0)
+    fit = lsq_fit(problem, res.x, refit_budget)
+    say(f"declared {bench.spec.model}: J = {fit.J:.4g} ({res.evaluations + fit.evaluations} evaluations)")
+    return fit
+
+
 def diagnose_damper(
     config: DamperConfig,
     data_file: str | Path | None = None,
@@ -108,113 +259,26 @@ def diagnose_damper(
     """Close the loop for the configured damper on the measured run `data_file` (see the module doc)."""
     t_start = time.perf_counter()
     say = log or (lambda _msg: None)
-    data_file = data_file if data_file is not None else (config.data.file if config.data is not None else None)
-    if data_file is None:
-        raise InputError("diagnose needs measured data: give --data FILE or data.file", source=config.source)
-    train = load_measured(config, data_file)
-    if validate_files is None:
-        validate_files = tuple(config.data.validate_files) if config.data is not None else ()
-    held_out = {Path(str(p)).stem: load_measured(config, p) for p in validate_files}
-    substeps = config.bench.substeps
+    runs = BenchRuns.load(config, data_file, validate_files)
     spec = configured_spec(config)
     declared_names = tuple(config.identify.unknowns)
-    specs = bench_candidates(spec, train, declared_names)
+    specs = bench_candidates(spec, runs.train, declared_names)
     effect_limits, starts = candidate_ranges(specs)
     limits = {**config.search_box(), **effect_limits}
-
-    n = train.t.size
-    if held_out:
-        keep = None
-        vsource = "held-out runs: " + ", ".join(os.path.normpath(str(p)) for p in validate_files)
-    else:
-        keep = ~holdout_blocks(n)
-        vsource = f"held-out blocks of {data_file} (every {HOLDOUT_EVERY}th block of {block_size(n)} samples)"
-
-    def spec_for(names) -> DamperSpec:
-        effects = _effects_of(names)
-        values = {f"{e}.{p.name}": p.default for e in effects for p in LIBRARY[e].params}
-        values.update({k: v for k, v in starts.items() if k.partition(".")[0] in effects})
-        return spec.with_effects(effects, {**values, **{k: v for k, v in spec.values.items() if k in values}})
-
-    def problem_on(names: tuple[str, ...], history: BenchHistory, mask) -> Problem:
-        s = spec_for(names)
-        force = history.force if mask is None else history.force[mask]
-        scale = np.sqrt(force.size * np.var(force))  # sum of squared residuals = Eq. 7's J
-
-        def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
-            with np.errstate(all="ignore"):
-                sim = s.simulate_batch(names, X, history, substeps).force
-                r = (history.force[None, :] - sim) / scale
-                r = r if mask is None else r[:, mask]
-                return np.sum(r**2, axis=1), r
-
-        lower = np.array([limits[n][0] for n in names], dtype=float)
-        upper = np.array([limits[n][1] for n in names], dtype=float)
-        return Problem(lower, upper, lambda X: cost_and_residuals(X)[0], cost_and_residuals, 1.0, names)
-
-    def problem_for(names: tuple[str, ...]) -> tuple[Problem, NDArray]:
-        s = spec_for(names)
-        start = np.array([starts.get(n, s.values.get(n, 0.0)) if n not in declared_names else s.values[n]
-                          for n in names], dtype=float)  # fmt: skip
-        p = problem_on(names, train, keep)
-        start = np.clip(start, p.lower, p.upper)
-        return _with_penalty(p, start), start
-
-    def validation_J(names: tuple[str, ...], x: NDArray) -> tuple[float, dict[str, float] | None]:
-        X = np.asarray(x, dtype=float)[None, :]
-        if not held_out:
-            c = problem_on(names, train, ~keep).cost(X)[0]
-            return (float(c) if np.isfinite(c) else float("inf")), None
-        per = {k: float(problem_on(names, h, None).cost(X)[0]) for k, h in held_out.items()}
-        per = {k: (v if np.isfinite(v) else float("inf")) for k, v in per.items()}
-        return float(np.mean(list(per.values()))), per
-
-    R_train = int(n if keep is None else keep.sum())
-
-    def n_eff(problem: Problem, x: NDArray) -> float:
-        """Effective training samples at x: R (1 - rho) / (1 + rho), rho the lag-1 autocorrelation of the residual."""
-        _, r = problem.residuals(np.asarray(x, dtype=float)[None, :])
-        rho = float(np.clip(autocorrelation(r[0], 1)[1], 0.0, 0.99)) if np.all(np.isfinite(r)) else 0.0
-        return R_train * (1.0 - rho) / (1.0 + rho)
-
-    def statistic(current: Fit):
-        ne = n_eff(problem_for(current.names)[0], current.x)
-        return lambda J0, J1: float(ne * np.log(J0 / J1)) if 0 < J1 < J0 else 0.0
-
-    def scale(f: Fit) -> float:
-        """Variance of one residual entry at a fit, AR(1)-inflated."""
-        return f.J / max(n_eff(problem_for(f.names)[0], f.x), 1.0)
-
-    # 1. the declared model: the configured algorithm from the configured values, then a least-squares polish
-    ident = config.identify
-    problem, x0 = problem_for(declared_names)
-    budget = ident.budget or ident.algorithm.population * ident.algorithm.iterations
-    opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, max(1, budget // ident.algorithm.population))
-    res = opt.minimize(problem, run_streams(ident.seed, 0).optimizer, budget=budget, x0=x0)
-    fit = lsq_fit(problem, res.x, refit_budget)
-    say(f"declared {spec.model}: J = {fit.J:.4g} ({res.evaluations + fit.evaluations} evaluations)")
-    sigma = float(MEASURED.estimated("force", train.force[:, None])[0])
-    sigma = max(sigma, 1e-9 * float(np.std(train.force)))
-
-    def report(f: Fit, effects) -> ModelReport:
-        s = spec_for(f.names)
-        force = s.simulate_batch(f.names, np.asarray(f.x)[None, :], train, substeps).force[0]
-        ci = fit_intervals(problem_for(f.names)[0], f, scale(f))
-        vJ, per = validation_J(f.names, f.x)
-        an = analyse_bench(train, force, sigma)
-        return ModelReport(tuple(effects), f.names, f.x, ci, f.J, an.chi2_per_sample, vJ, None, an, per, f.fixed)
-
-    before = report(fit, ())
-    quality = assess_bench(train, sigma, declared_names, before)
+    bench = BenchLoop(runs, spec, declared_names, starts, limits, config.bench.substeps, noise_sigma(runs.train))
+    fit = fit_declared(config, bench, refit_budget, say)
+    before = bench.report(fit, ())
+    quality = assess_bench(runs.train, bench.sigma, declared_names, before)
     subject = Subject(
-        specs=specs, declared=frozenset(), problem_for=problem_for, validation_J=validation_J,
-        residual_count=R_train, statistic=statistic, scale=scale, min_gain=MIN_GAIN,
+        specs=specs, declared=frozenset(), problem_for=bench.problem_for, validation_J=bench.validation_J,
+        residual_count=bench.residual_count, statistic=bench.statistic, scale=bench.scale, min_gain=MIN_GAIN,
     )  # fmt: skip
     return close(
-        subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, say=say, t_start=t_start, chi2_residuals=n, validation_source=vsource,
-        sigma_source=f"force noise sigma {sigma:.4g} N estimated from the training run (third differences)",
-        system="damper", validation_from_file=bool(held_out),
+        subject, fit, before, bench.report, quality, alpha=alpha, max_rounds=max_rounds,
+        candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start,
+        chi2_residuals=runs.train.t.size, validation_source=runs.validation_source,
+        sigma_source=f"force noise sigma {bench.sigma:.4g} N estimated from the training run (third differences)",
+        system="damper", validation_from_file=bool(runs.held_out),
         J_definition="Fleps-Dezasse Eq. 7: mean squared force error over the variance of the measured force",
     )  # fmt: skip
 

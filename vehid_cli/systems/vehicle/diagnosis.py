@@ -6,7 +6,8 @@ itself is `diagnose.loop.close`."""
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from ...diagnose.attribution import (
     ALPHA,
     CANDIDATE_BUDGET,
     Z95,
+    Candidate,
     Fit,
     candidate_ranges,
     candidate_specs,
@@ -25,26 +27,18 @@ from ...diagnose.attribution import (
     fit_intervals,
     lsq_fit,
 )
-from ...diagnose.loop import (
-    HOLDOUT_EVERY,
-    MAX_ROUNDS,
-    REFIT_BUDGET,
-    Diagnosis,
-    ModelReport,
-    Subject,
-    block_size,
-    chi2_limit,
-    close,
-    holdout_blocks,
-    masked,
-)
+from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks, masked
+from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Diagnosis, ModelReport, Subject, chi2_limit, close
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
 from ...diagnose.residuals import ResidualAnalysis, analyse
-from ...diagnose.unexplained import candidate_order, estimate_unexplained
+from ...diagnose.shapes import candidate_order
+from ...diagnose.unexplained import Unexplained, estimate_unexplained
 from ...identify.source import as_paths
 from ...identify.task import JointTask, Task, build_task, build_tasks
 from ...optimizers import get_optimizer
 from ...optimizers.base import Problem
+
+References = dict[str, NDArray] | tuple[dict[str, NDArray], ...]  # one run's reference data, or each run's
 
 
 def prepare_config(config: Config) -> Config:
@@ -64,6 +58,144 @@ def holdout_mask(task: Task | JointTask, reference) -> NDArray:
     return np.concatenate(
         [holdout_blocks(t.experiment.t.size)[t.objective(r).sample_times()] for t, r in zip(tasks, refs, strict=True)]
     )
+
+
+@dataclass(frozen=True)
+class ValidationSplit:
+    """Where the validation J is computed: the --validate run (its task and reference; every training residual
+    kept), else held-out blocks of the training data (`keep` the training entries, `held` the held-out ones, in the
+    objective's residual layout); `source` says which."""
+
+    task: Task | JointTask
+    reference: References
+    keep: NDArray | None
+    held: NDArray | None
+    source: str
+
+
+def validation_split(
+    config: Config, task: Task | JointTask, ref: References, files: Sequence[str], validate_file: str | Path | None
+) -> ValidationSplit:
+    """The --validate run `validate_file` when given, else every HOLDOUT_EVERY-th block of the training runs."""
+    if validate_file is not None:
+        vtask = build_task(config, validate_file)
+        return ValidationSplit(vtask, vtask.reference(0), None, None, f"--validate {validate_file}")
+    held = holdout_mask(task, ref)
+    runs = task.tasks if isinstance(task, JointTask) else (task,)
+    sizes = sorted({block_size(t.experiment.t.size) for t in runs})
+    names_of = " + ".join(str(f) for f in files)
+    source = f"held-out blocks of {names_of} (every {HOLDOUT_EVERY}th block of {' or '.join(map(str, sizes))} samples)"
+    return ValidationSplit(task, ref, ~held, held, source)
+
+
+@dataclass(frozen=True)
+class CarLoop:
+    """The car's side of the loop: its training and validation problems over any unknowns (the task's own first,
+    the others' ranges from the candidates' specs) and the report of a fit."""
+
+    task: Task | JointTask
+    ref: References
+    split: ValidationSplit
+    ranges: dict  # "limits" and "start" of the candidates' unknowns
+    files: tuple[str, ...]
+    analyse_residuals: bool = True
+
+    @property
+    def joint(self) -> bool:
+        """Several runs fitted jointly (a JointTask)?"""
+        return isinstance(self.task, JointTask)
+
+    @staticmethod
+    def problem_of(t: Task | JointTask, reference: References, mask: NDArray | None) -> Problem:
+        """The wls problem of `t` on `reference`, on the residual entries `mask` keeps."""
+        return masked(t.problem(reference), mask)
+
+    def augmented(self, t: Task | JointTask, names: tuple[str, ...]) -> Task | JointTask:
+        """`t` with the unknowns `names` (the task's own first), their ranges from the candidates' specs."""
+        extra = [n for n in names if n not in t.names]
+        return t.with_unknowns(extra, limits=self.ranges["limits"], start=self.ranges["start"]) if extra else t
+
+    def validation_J(self, names: tuple[str, ...], x: NDArray) -> tuple[float, None]:
+        """J on the validation data (held-out blocks or the --validate run) at `names` = x."""
+        split = self.split
+        vt = self.augmented(split.task, names)
+        cost = self.problem_of(vt, split.reference, split.held).cost(np.asarray(x, dtype=float)[None, :])[0]
+        return (float(cost) if np.isfinite(cost) else float("inf")), None
+
+    def problem_for(self, names: tuple[str, ...]) -> tuple[Problem, NDArray]:
+        """The training problem over `names` and their start values."""
+        t = self.augmented(self.task, names)
+        return self.problem_of(t, self.ref, self.split.keep), t.nominal
+
+    def analyses(self, t: Task | JointTask, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
+        """The residual analysis of each run (its file and its analysis)."""
+        if not self.joint:
+            return ((str(self.files[0]), analyse(t, self.ref, f.names, f.x)),)
+        return tuple(
+            (str(file), analyse(tk, r, f.names, f.x)) for file, tk, r in zip(self.files, t.tasks, self.ref, strict=True)
+        )
+
+    def report(self, f: Fit, effs: Sequence[str]) -> ModelReport:
+        """The fit `f` with the effects `effs`: intervals, J, validation J, NRE and its bound (truth known), the
+        residual analysis."""
+        task = self.task
+        t = self.augmented(task, f.names)
+        ci = fit_intervals(self.problem_of(t, self.ref, self.split.keep), f, f.J)
+        nre = bound = None
+        if task.truth is not None:  # the NRE of the declared unknowns, and its bound (sd = half-width / 1.96)
+            idx = [f.names.index(n) for n in task.names]
+            nre = float(np.linalg.norm(100.0 * (f.x[idx] - task.truth) / task.truth))
+            bound = float(np.linalg.norm(100.0 * ci[idx] / Z95 / task.truth))
+        vJ, _ = self.validation_J(f.names, f.x)
+        per_run = self.analyses(t, f) if self.analyse_residuals else ()
+        an = per_run[0][1] if per_run else None
+        chi2 = f.J if an is None else (joint_chi2([a for _, a in per_run]) if self.joint else an.chi2_per_sample)
+        return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an, fixed=f.fixed,
+                           nre_bound_percent=bound, run_analyses=per_run if self.joint else ())  # fmt: skip
+
+
+def fit_declared(
+    config: Config,
+    task: Task | JointTask,
+    problem: Problem,
+    precheck_ok: bool,
+    refit_budget: int,
+    say: Callable[[str], None],
+) -> Fit:
+    """The declared model, by the configured algorithm (the campaign's run 0 streams), then polished to the
+    likelihood's minimum; when the data failed the pre-check (no claim will be made) a local fit from the
+    configured values, enough for the record."""
+    ident = config.identify
+    if precheck_ok:
+        opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, ident.algorithm.iterations)
+        x0 = task.nominal if ident.start == "nominal" else None
+        res = opt.minimize(problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
+        fit = lsq_fit(problem, res.x, refit_budget)  # polish to the likelihood's minimum
+        evaluations = res.evaluations + fit.evaluations
+    else:  # no claim will be made: a local fit from the configured values is enough for the record
+        fit = lsq_fit(problem, task.nominal, refit_budget)
+        evaluations = fit.evaluations
+    say(f"declared model: J = {fit.J:.4g} ({evaluations} evaluations)")
+    return fit
+
+
+def unexplained_force(
+    task: Task | JointTask,
+    ref: References,
+    keep: NDArray | None,
+    fit: Fit,
+    specs: dict[str, Candidate],
+    files: Sequence[str],
+) -> tuple[Unexplained, tuple[str, ...], tuple[str, ...]]:
+    """The strut force the declared model misses, non-parametrically (from the first run alone when several are
+    fitted jointly), the candidates in the order its resemblance suggests, and the notes to add."""
+    joint = isinstance(task, JointTask)
+    first, first_ref = (task.tasks[0], ref[0]) if joint else (task, ref)
+    first_keep = None if keep is None else keep[: first.residual_samples]
+    missing = estimate_unexplained(first, first_ref, fit.names, fit.x, keep=first_keep)
+    order = tuple(candidate_order(missing, tuple(specs)))
+    notes = (f"the unexplained strut force is estimated from the first run ({files[0]}) alone",) if joint else ()
+    return missing, order, notes
 
 
 def diagnose(
@@ -86,106 +218,32 @@ def diagnose(
     config = prepare_config(config)
     files = as_paths(data_file)
     task = build_tasks(config, files)
-    joint = isinstance(task, JointTask)
-    names_of = " + ".join(str(f) for f in files)
     ref = task.reference(0)
     R_total = task.residual_samples
-    if validate_file is not None:
-        vtask = build_task(config, validate_file)
-        vref = vtask.reference(0)
-        keep = vkeep = None
-        vsource = f"--validate {validate_file}"
-    else:
-        vtask, vref = task, ref
-        held = holdout_mask(task, ref)
-        keep, vkeep = ~held, held
-        runs = task.tasks if joint else (task,)
-        sizes = sorted({block_size(t.experiment.t.size) for t in runs})
-        vsource = (
-            f"held-out blocks of {names_of} (every {HOLDOUT_EVERY}th block of {' or '.join(map(str, sizes))} samples)"
-        )
-    R_train = int(R_total if keep is None else keep.sum())
-
-    def problem_of(t: Task | JointTask, reference, mask) -> Problem:
-        return masked(t.problem(reference), mask)
-
-    def augmented(t, names: tuple[str, ...], extra_task: dict):
-        """`t` with the unknowns `names` (the task's own first), their ranges from the candidates' specs."""
-        extra = [n for n in names if n not in t.names]
-        return t.with_unknowns(extra, limits=extra_task["limits"], start=extra_task["start"]) if extra else t
-
+    split = validation_split(config, task, ref, files, validate_file)
+    R_train = int(R_total if split.keep is None else split.keep.sum())
     specs = candidate_specs(config)
-    declared = set(config.vehicle.effect_values())
     limits, starts = candidate_ranges(specs)
-    ranges = {"limits": limits, "start": starts}
-
-    def validation_J(names: tuple[str, ...], x: NDArray) -> tuple[float, None]:
-        vt = augmented(vtask, names, ranges)
-        cost = problem_of(vt, vref, vkeep).cost(np.asarray(x, dtype=float)[None, :])[0]
-        return (float(cost) if np.isfinite(cost) else float("inf")), None
-
-    def problem_for(names: tuple[str, ...]) -> tuple[Problem, NDArray]:
-        t = augmented(task, names, ranges)
-        return problem_of(t, ref, keep), t.nominal
-
+    car = CarLoop(task, ref, split, {"limits": limits, "start": starts}, files, analyse_residuals)
     # 0. can the data tell at all? (before any fit: length, noise, excitation)
     pre = precheck_vehicle(task, ref)
-    # 1. the declared model, by the configured algorithm (the campaign's run 0 streams), then polished
-    ident = config.identify
-    base_problem = problem_of(task, ref, keep)
-    if pre.ok:
-        opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, ident.algorithm.iterations)
-        x0 = task.nominal if ident.start == "nominal" else None
-        res = opt.minimize(base_problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
-        fit = lsq_fit(base_problem, res.x, refit_budget)  # polish to the likelihood's minimum
-        evaluations = res.evaluations + fit.evaluations
-    else:  # no claim will be made: a local fit from the configured values is enough for the record
-        fit = lsq_fit(base_problem, task.nominal, refit_budget)
-        evaluations = fit.evaluations
-    say(f"declared model: J = {fit.J:.4g} ({evaluations} evaluations)")
-
-    def analyses(t, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
-        """The residual analysis of each run (its file and its analysis)."""
-        if not joint:
-            return ((str(files[0]), analyse(t, ref, f.names, f.x)),)
-        return tuple((str(file), analyse(tk, r, f.names, f.x)) for file, tk, r in zip(files, t.tasks, ref, strict=True))
-
-    def report(f: Fit, effs) -> ModelReport:
-        t = augmented(task, f.names, ranges)
-        ci = fit_intervals(problem_of(t, ref, keep), f, f.J)
-        nre = bound = None
-        if task.truth is not None:  # the NRE of the declared unknowns, and its bound (sd = half-width / 1.96)
-            idx = [f.names.index(n) for n in task.names]
-            nre = float(np.linalg.norm(100.0 * (f.x[idx] - task.truth) / task.truth))
-            bound = float(np.linalg.norm(100.0 * ci[idx] / Z95 / task.truth))
-        vJ, _ = validation_J(f.names, f.x)
-        per_run = analyses(t, f) if analyse_residuals else ()
-        an = per_run[0][1] if per_run else None
-        chi2 = f.J if an is None else (joint_chi2([a for _, a in per_run]) if joint else an.chi2_per_sample)
-        return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an, fixed=f.fixed,
-                           nre_bound_percent=bound, run_analyses=per_run if joint else ())  # fmt: skip
-
-    before = report(fit, ())
+    # 1. the declared model, by the configured algorithm, then polished
+    fit = fit_declared(config, task, car.problem_of(task, ref, split.keep), pre.ok, refit_budget, say)
+    before = car.report(fit, ())
     quality = assess_vehicle(task, ref, before, pre)
-    missing, order = None, ()
-    notes: tuple[str, ...] = ()
+    missing, order, notes = None, (), ()
     if quality.ok:  # the strut force the declared model misses, non-parametrically: which candidates to fit first
-        first, first_ref = (task.tasks[0], ref[0]) if joint else (task, ref)
-        first_keep = None if keep is None else keep[: first.residual_samples]
-        missing = estimate_unexplained(first, first_ref, fit.names, fit.x, keep=first_keep)
-        order = tuple(candidate_order(missing, tuple(specs)))
-        if joint:
-            notes = (f"the unexplained strut force is estimated from the first run ({files[0]}) alone",)
+        missing, order, notes = unexplained_force(task, ref, split.keep, fit, specs, files)
     subject = Subject(
-        specs=specs, declared=frozenset(declared), problem_for=problem_for, validation_J=validation_J,
-        residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train), scale=lambda f: f.J,
-        noise_limit=chi2_limit(R_train),
+        specs=specs, declared=frozenset(config.vehicle.effect_values()), problem_for=car.problem_for,
+        validation_J=car.validation_J, residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
+        scale=lambda f: f.J, noise_limit=chi2_limit(R_train),
     )  # fmt: skip
     return close(
-        subject, fit, before, report, quality, alpha=alpha, max_rounds=max_rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, say=say, t_start=t_start, order=order, unexplained=missing,
-        chi2_residuals=R_total, validation_source=vsource, sigma_source=task.sigma_source,
-        validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if joint else (),
+        subject, fit, before, car.report, quality, alpha=alpha, max_rounds=max_rounds,
+        candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start, order=order,
+        unexplained=missing, chi2_residuals=R_total, validation_source=split.source, sigma_source=task.sigma_source,
+        validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if car.joint else (),
         extra_notes=notes,
     )  # fmt: skip
 

@@ -1,0 +1,104 @@
+"""The fitted car's linear part (M, C, K) as a map from strut-force histories to the layout's channels: one exact
+first-order-hold recursion for many input histories at once, their responses weighted by the task's sigma and laid
+out like the objective's residual (observed samples only, each channel's mean removed when offsets are profiled).
+
+Forces are in the kernel's convention: f at the 4 corners enters as M qdd + C qd + K q + D' f = B y, D the strut
+deflection from q.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..models.fullcar import N_CORNERS, N_DOF
+from ..sim.modal import foh_discretisation
+from ..sim.nonlinear import fullcar_struts
+
+
+@dataclass(frozen=True)
+class LinearCar:
+    """The fitted car's linear part, discretised for strut-force inputs u (4 corners) with a first-order hold,
+    with the output rows of the layout's channels."""
+
+    Phi: NDArray
+    G1: NDArray
+    G2: NDArray
+    out_s: dict[str, NDArray]  # family -> (k, 14): the family's channels from the state
+    out_u: dict[str, NDArray]  # family -> (k, 4): direct feed-through of the strut forces
+    D: NDArray  # (4, 7) strut deflection from q
+
+
+def _output_rows(layout, family: str, points: NDArray) -> tuple[NDArray, NDArray]:
+    """(k, 3) body rows and (k, 4) wheel rows giving each channel of `family` from the body coordinates
+    (x_b, phi, theta) and the wheel hops (or their accelerations): a body sensor reads its point's row of `points`
+    (Layout.points, (nb, 3)), a wheel sensor its wheel, a deflection sensor the point above its corner minus the
+    wheel."""
+    index = {pt: i for i, pt in enumerate(layout._points)}
+    sensors = layout.of(family)
+    body = np.zeros((len(sensors), 3))
+    wheel = np.zeros((len(sensors), N_CORNERS))
+    for j, s in enumerate(sensors):
+        if s.point is not None:
+            body[j] = points[index[s.point]]
+        if s.kind.startswith("wheel"):
+            wheel[j, s.corner - 1] = 1.0
+        elif s.kind == "deflection":
+            wheel[j, s.corner - 1] = -1.0
+    return body, wheel
+
+
+def linear_car(mats, dt: float, layout, points: NDArray) -> LinearCar:
+    """The car `mats` (one set of matrices) discretised at dt [s], its outputs the channels of `layout` with body
+    point rows `points` (Layout.points of the car, (nb, 3); the paper's layout: the rows of G)."""
+    A, _ = mats.state_space()
+    D = fullcar_struts(mats)
+    Minv = np.linalg.inv(mats.M)
+    Bf = np.zeros((2 * N_DOF, N_CORNERS))
+    Bf[N_DOF:, :] = -Minv @ D.T  # generalised force -D' f
+    Phi, G1, G2 = foh_discretisation(A, Bf, dt)
+    out_s, out_u = {}, {}
+    for family in layout.families:
+        body, wheel = _output_rows(layout, family, points)
+        if family == "acc":  # accelerations: the rows of qdd = A_qdd s + B_qdd f
+            out_s[family] = body @ A[N_DOF : N_DOF + 3, :] + wheel @ A[N_DOF + 3 :, :]
+            out_u[family] = body @ Bf[N_DOF : N_DOF + 3, :] + wheel @ Bf[N_DOF + 3 :, :]
+        else:  # displacements: the rows of q
+            rows = np.zeros((body.shape[0], 2 * N_DOF))
+            rows[:, :3], rows[:, 3:N_DOF] = body, wheel
+            out_s[family] = rows
+            out_u[family] = np.zeros((body.shape[0], N_CORNERS))
+    return LinearCar(Phi, G1, G2, out_s, out_u, D)
+
+
+def car_at(exp, values: dict[str, float], dt: float) -> LinearCar:
+    """The linear car `values` at dt [s] with the outputs of the experiment's layout."""
+    layout = exp.layout
+    return linear_car(exp.matrices(values), dt, layout, layout.points(exp.parameters(values)))
+
+
+def channel_columns(objective, family: str, car: LinearCar, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
+    """The weighted residual entries of `family` (the objective's layout: time-major, observed entries only) that
+    the K input histories U (n, 4, K) with states s (n, 14, K) explain, (R_family, K): the channels' responses over
+    sigma, without what the profiled offsets absorb."""
+    Y = (car.out_s[family] @ s + car.out_u[family] @ U) / sigma[None, :, None]  # (n, k, K)
+    if objective.offsets:
+        objective.project(family, np.moveaxis(Y, -1, 0))  # in place, through the (K, n, k) view
+    Y = Y.reshape(Y.shape[0] * Y.shape[1], -1)
+    rows = objective.entries(family)
+    return Y if rows is None else Y[rows]
+
+
+def responses(car: LinearCar, U: NDArray) -> NDArray:
+    """States (n, 14, K) of the car at rest driven by K strut-force histories U (n, 4, K), one recursion."""
+    n = U.shape[0]
+    s = np.empty((n, 2 * N_DOF, U.shape[2]))
+    s[0] = 0.0
+    np.matmul(car.G1, U[:-1], out=s[1:])
+    s[1:] += car.G2 @ np.diff(U, axis=0)
+    Phi = car.Phi
+    for k in range(n - 1):
+        s[k + 1] += Phi @ s[k]
+    return s
