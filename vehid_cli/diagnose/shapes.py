@@ -12,48 +12,71 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-ALPHA = 1e-3  # significance level below which candidate_order reorders (attribution's family-wise level)
-GAS_L, GAS_KAPPA = 0.1, 1.4  # the library's gas_spring defaults [m], [-]
-COULOMB_EPS, ASYM_EPS = 0.01, 0.02  # the library's coulomb_friction / asymmetric_damping v_eps [m/s]
+from ..core.result import Result
+from ..models.effects import LIBRARY, Shape
 
-# Shape -> the library effects (and parameter candidates) it points to, with an affinity in [0, 1].
-# "{axle}" is filled with f / r. Secondary entries: a lagged damper adds stiffness, saturated Bouc-Wen
-# hysteresis looks like friction (and like stiffness at small amplitude), a bump stop like stiffening.
-SHAPE_EFFECTS: dict[str, tuple[tuple[str, float], ...]] = {
-    "linear_stiffness": (("parameter:k{axle}", 1.0), ("damper_lag", 0.5), ("hysteresis", 0.4)),
-    "progressive_spring": (("progressive_spring", 1.0), ("gas_spring", 0.5), ("backlash", 0.3)),
-    "gas_spring": (("gas_spring", 1.0), ("progressive_spring", 0.5)),
-    "dead_band": (("backlash", 1.0), ("progressive_spring", 0.5)),
-    "linear_damping": (("parameter:c{axle}", 1.0), ("damper_lag", 0.3), ("tyre_damping", 0.3)),
-    "coulomb_friction": (("coulomb_friction", 1.0), ("hysteresis", 0.7)),
-    "asymmetric_damping": (("asymmetric_damping", 1.0),),
-    "one_sided_damping": (("asymmetric_damping", 1.0),),
-    "quadratic_damping": (("asymmetric_damping", 0.6),),
-    "sqrt_damper": (("coulomb_friction", 0.7), ("hysteresis", 0.4)),
+VARIABLES = ("deflection", "velocity")
+
+ALPHA = 1e-3  # significance level below which candidate_order reorders (attribution's family-wise level)
+
+# Shapes no effect of the library owns: a linear stiffness or damping (a mis-set known spring or damper), and laws the
+# library only approximates. The effects' own shapes, and which shapes point to which effect, come from the registry
+# (`models.effects`: Effect.shapes, Effect.resembles).
+GENERIC_SHAPES = (
+    Shape("linear_stiffness", "deflection", lambda x: [(x, 0, "")], rank=0),
+    Shape("linear_damping", "velocity", lambda x: [(x, 0, "")], rank=0),
+    Shape("one_sided_damping", "velocity",
+          lambda x: [(np.maximum(x, 0.0), 1, "rebound only"), (np.minimum(x, 0.0), 1, "compression only")], rank=3),
+    Shape("quadratic_damping", "velocity", lambda x: [(np.abs(x) * x, 0, "")], rank=4),
+    Shape("sqrt_damper", "velocity", lambda x: [(np.sign(x) * np.sqrt(np.abs(x)), 1, "")], rank=5),
+)  # fmt: skip
+# "{axle}" is filled with f / r: a linear curve points to the axle's own spring or damper
+PARAMETER_AFFINITY = {
+    "linear_stiffness": (("parameter:k{axle}", 1.0),),
+    "linear_damping": (("parameter:c{axle}", 1.0),),
 }
-SHAPES = {
-    "deflection": ("linear_stiffness", "progressive_spring", "gas_spring", "dead_band"),
-    "velocity": (
-        "linear_damping", "coulomb_friction", "asymmetric_damping", "one_sided_damping", "quadratic_damping",
-        "sqrt_damper",
-    ),
-}  # fmt: skip
+
+
+def all_shapes() -> dict[str, tuple[Shape, ...]]:
+    """The shapes of each variable (deflection, velocity), the generic ones and every registered effect's, in rank
+    order (ties go to the earlier)."""
+    found = [*GENERIC_SHAPES, *(s for e in LIBRARY.values() for s in e.shapes)]
+    return {v: tuple(sorted((s for s in found if s.variable == v), key=lambda s: s.rank)) for v in VARIABLES}
+
+
+def shape_effects() -> dict[str, tuple[tuple[str, float], ...]]:
+    """Shape -> the parameter candidates and library effects it points to, with an affinity in [0, 1]: a lagged
+    damper adds stiffness, saturated Bouc-Wen hysteresis looks like friction (and like stiffness at small
+    amplitude), a bump stop like stiffening (each effect says which shapes resemble it)."""
+    out: dict[str, list[tuple[str, float]]] = {s.name: [] for v in all_shapes().values() for s in v}
+    for shape, pairs in PARAMETER_AFFINITY.items():
+        out[shape].extend(pairs)
+    for e in LIBRARY.values():
+        for shape, affinity in e.resembles.items():
+            out.setdefault(shape, []).append((e.name, affinity))
+    return {k: tuple(v) for k, v in out.items()}
+
+
+def __getattr__(name: str):
+    """SHAPES (variable -> shape names) and SHAPE_EFFECTS follow the registry."""
+    if name == "SHAPES":
+        return {v: tuple(s.name for s in shapes) for v, shapes in all_shapes().items()}
+    if name == "SHAPE_EFFECTS":
+        return shape_effects()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # ------------------------------------------------------------------------------------------ results
 
 
 @dataclass(frozen=True)
-class Resemblance:
+class Resemblance(Result):
     """How well each library shape, scaled by one least-squares amplitude, matches an estimated curve."""
 
     best: str
     r2: dict[str, float]  # uncentred weighted R² per shape (0 when the amplitude must have the other sign)
     amplitude: dict[str, float]  # fitted amplitude per shape [N per unit of the shape]
     detail: dict[str, str]  # how a profiled shape was chosen (dead band width, one-sided direction)
-
-    def to_json(self) -> dict:
-        return {"best": self.best, "r2": dict(self.r2), "amplitude": dict(self.amplitude), "detail": dict(self.detail)}
 
 
 class EstimatedCurve(Protocol):
@@ -88,26 +111,7 @@ class Estimate(Protocol):
 
 def _shape_columns(variable: str, x: NDArray) -> dict[str, list[tuple[NDArray, int, str]]]:
     """Each shape's candidate curves over x: (curve, sign constraint of the amplitude (0: free), detail)."""
-    xm = max(float(np.max(np.abs(x))), 1e-300)
-    if variable == "deflection":
-        u = np.maximum(x / GAS_L, -0.9)
-        gas = (1.0 - (1.0 + u) ** (-GAS_KAPPA)) - GAS_KAPPA * u
-        band = [(np.sign(x) * np.maximum(np.abs(x) - f * xm, 0.0), 1, f"dead band +-{f * xm:.4g} m")
-                for f in (0.2, 0.4, 0.6)]  # fmt: skip
-        return {
-            "linear_stiffness": [(x, 0, "")],
-            "progressive_spring": [(x**3, 1, "")],
-            "gas_spring": [(gas, 1, f"L = {GAS_L} m, kappa = {GAS_KAPPA}")],
-            "dead_band": band,
-        }
-    return {
-        "linear_damping": [(x, 0, "")],
-        "coulomb_friction": [(np.tanh(x / COULOMB_EPS), 1, f"v_eps = {COULOMB_EPS} m/s")],
-        "asymmetric_damping": [(x * np.tanh(x / ASYM_EPS), 0, f"v tanh(v / {ASYM_EPS}) (the library's)")],
-        "one_sided_damping": [(np.maximum(x, 0.0), 1, "rebound only"), (np.minimum(x, 0.0), 1, "compression only")],
-        "quadratic_damping": [(np.abs(x) * x, 0, "")],
-        "sqrt_damper": [(np.sign(x) * np.sqrt(np.abs(x)), 1, "")],
-    }
+    return {s.name: s.curves(x) for s in all_shapes()[variable]}
 
 
 def resemblance(variable: str, x: NDArray, f: NDArray, se: NDArray, free_line: bool = False) -> Resemblance:
@@ -146,6 +150,7 @@ def candidate_order(unexplained: Estimate, effect_names: Sequence[str], alpha: f
     if not unexplained.p_value < alpha:
         return names
     score = {name: 0.0 for name in names}
+    pointers = shape_effects()
     total = sum(c.chi2_explained for a in (unexplained.front, unexplained.rear) for c in (a.g, a.h)) or 1.0
     for a in (unexplained.front, unexplained.rear):
         tag = a.axle[0]
@@ -154,7 +159,7 @@ def candidate_order(unexplained: Estimate, effect_names: Sequence[str], alpha: f
                 continue
             weight = c.chi2_explained / total
             for shape, r2 in c.resembles.r2.items():
-                for effect, affinity in SHAPE_EFFECTS[shape]:
+                for effect, affinity in pointers.get(shape, ()):
                     effect = effect.format(axle=tag)
                     if effect in score:
                         score[effect] = max(score[effect], weight * max(r2, 0.0) * affinity)
