@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import polish
@@ -302,7 +303,7 @@ def candidate_fit(
 
 
 @dataclass(frozen=True)
-class Ranked:
+class Ranked(Result):
     """One candidate's test."""
 
     effect: str

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from ..core.result import Result
 from ..optimizers.base import Problem
 from .attribution import (
     PARAMETER_PREFIX,
@@ -55,7 +56,7 @@ def chi2_limit(residual_count: int) -> float:
 
 
 @dataclass(frozen=True)
-class ModelReport:
+class ModelReport(Result):
     """One model's fit: estimates with 95 % intervals (NaN: held fixed or undetermined), J, validation J, NRE."""
 
     effects: tuple[str, ...]
@@ -98,7 +99,7 @@ class ModelReport:
 
 
 @dataclass(frozen=True)
-class Step:
+class Step(Result):
     """One candidate the loop added: J on the training data and on the validation data, before and after."""
 
     effect: str
@@ -119,7 +120,7 @@ class Step:
 
 
 @dataclass(frozen=True)
-class Diagnosis:
+class Diagnosis(Result):
     """The loop's outcome: the declared and the final model, every round's ranking, what was added."""
 
     before: ModelReport

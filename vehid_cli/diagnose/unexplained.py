@@ -55,6 +55,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from ..core.result import Result
 from ..identify.objectives import Objective
 from ..identify.task import Task
 from ..models.fullcar import N_CORNERS, N_DOF
@@ -78,7 +79,7 @@ SIGNIFICANT_Z = 3.0  # a curve is significant where |force| exceeds 3 standard e
 
 
 @dataclass(frozen=True)
-class Curve:
+class Curve(Result):
     """One estimated function of one axle: g(d) [N] over d [m] or h(v) [N] over v [m/s], with its 95 % band."""
 
     variable: str  # "deflection" or "velocity"
@@ -113,7 +114,7 @@ class Curve:
 
 
 @dataclass(frozen=True)
-class AxleEstimate:
+class AxleEstimate(Result):
     """The missing force law of one axle, F = g(d) + h(v)."""
 
     axle: str  # "front" or "rear"
@@ -162,7 +163,7 @@ class AxleEstimate:
 
 
 @dataclass(frozen=True)
-class Unexplained:
+class Unexplained(Result):
     """The non-parametric estimate of the missing strut force and how much of the residual it explains."""
 
     front: AxleEstimate

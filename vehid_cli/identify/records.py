@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from ..config import AnyConfig
 from ..core.files import atomic_path
 from ..core.jsonio import finite_or_none
+from ..core.result import Result
 from ..optimizers.base import Problem
 from .crlb import CramerRao
 
@@ -163,10 +164,10 @@ def summarise(
 
 
 @dataclass(frozen=True)
-class Campaign:
+class Campaign(Result):
     """A finished campaign of any system: the task's description, every run, the bound and the summary, plus what
     the system concluded after the runs (`findings`: the damper's identified model, held-out J, real-time check
-    and force traces; None for the car)."""
+    and force traces; None for the car). Its JSON is SPEC section 5's, its file layout `campaign/results.py`'s."""
 
     config: AnyConfig
     data_file: str | None
