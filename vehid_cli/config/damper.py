@@ -269,7 +269,7 @@ class DamperConfig(SystemConfig):
         return tuple(self.damper.table)
 
     def values(self) -> dict[str, float]:
-        """All parameter values: the configured ones over the neutral defaults (damper_fit.default_values)."""
+        """All parameter values: the configured ones over the neutral defaults (models.damper.default_values)."""
         effects = {
             f"{e}.{p.name}": float(given.get(p.name, p.default))
             for e, given in self.damper.effects.items()

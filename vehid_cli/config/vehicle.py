@@ -41,7 +41,7 @@ class Vehicle(_Section):
     effects: dict[str, dict[str, Finite] | None] | None = Field(
         None,
         description="nonlinear effects beside the linear car: effect name -> its parameters "
-        "(vehid_cli/models/effects.py; missing parameters at their defaults); "
+        "(vehid_cli/models/effects/, one module each; missing parameters at their defaults); "
         "needs simulation.integrator rk4 or newmark",
     )
 

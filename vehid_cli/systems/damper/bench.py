@@ -99,7 +99,7 @@ def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, see
 
 
 MEASURED = NoiseModel(0.0)  # a measured bench run: the force noise estimated from the data (third differences)
-MIN_RUN_S = 0.1  # [s] shortest bench run: damper_fit.realtime_check resamples it at steps up to 50 ms
+MIN_RUN_S = 0.1  # [s] shortest bench run: fit.realtime_check resamples it at steps up to 50 ms
 
 
 def read_bench(

@@ -13,7 +13,7 @@ library's effects as candidates, add the best accepted one, re-fit, repeat (the 
   little, and a 2 % gain is the least worth a new parameter in a damper model.
 
 Candidates (canonical names, SPEC section 5): ``hysteresis``, ``asymmetric_damping``, ``damper_lag`` and
-``coulomb_friction`` from the effect library (models/effects.py ``bench_effects``), ``gas_spring`` as the
+``coulomb_friction`` from the effect library (their bench forms, models/effects/), ``gas_spring`` as the
 damper's own gas force k1 (x - x0) and ``backlash`` as its exact play of width ``gap`` (models/damper.py).
 An effect the declared model already has (friction in Bingham or Bouc-Wen, hysteresis in Bouc-Wen, a gas
 force or a gap among the unknowns) is not a candidate. Search ranges scale with the data: the force, stroke

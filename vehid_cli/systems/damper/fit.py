@@ -37,7 +37,7 @@ def cost_J(measured: NDArray, simulated: NDArray) -> NDArray:
 class DamperSpec:
     """A damper model with every parameter valued: the row the kernel runs, by name; plus library effects
     around it on the bench (``effects``, their parameters valued as ``<effect>.<param>``, e.g.
-    ``hysteresis.alpha``; see models/effects.py ``bench_effects``)."""
+    ``hysteresis.alpha``; see models/effects/law.py ``bench_law``)."""
 
     model: str
     values: Mapping[str, float]
