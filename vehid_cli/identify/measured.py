@@ -45,6 +45,7 @@ class MeasuredRun:
     outputs: dict[str, NDArray]  # family -> (n, k) [m/s² or m], the layout's channels of that family
     observed: dict[str, NDArray] | None  # family -> (n, k) bool: the channel's own samples (None: every sample)
     source: str
+    raw: dict[str, NDArray] | None = None  # family -> (n, k) the channels as read [SI], before offsets are removed
 
     @property
     def dt(self) -> float:
@@ -85,6 +86,7 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
         path, channels, units, time=data.time, window=data.window, rate=data.rate, variable=data.variable,
         time_unit=data.time_unit, resample=data.resample,
     )  # fmt: skip
+    raw = {f: np.column_stack([record.channel(n) for n in layout.names(f)]) for f in families}
     if data.offsets == "remove":
         record = remove_offset(record, sensors, "first_second")
     outputs, observed = {}, {}
@@ -94,7 +96,9 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
         observed[family] = np.column_stack([_observed(record, n) for n in names])
     every = all(mask.all() for mask in observed.values())
     road = _road(config, record, road_names)
-    return MeasuredRun(t=record.t, road=road, outputs=outputs, observed=None if every else observed, source=source)
+    return MeasuredRun(
+        t=record.t, road=road, outputs=outputs, observed=None if every else observed, source=source, raw=raw
+    )
 
 
 def _observed(record: Record, name: str) -> NDArray:

@@ -47,6 +47,7 @@ class Task:
     observed: dict[str, NDArray] | None = None  # family -> (n, k) bool: each channel's own samples (None: all)
     offsets: bool = False  # one unknown offset per channel, profiled out (data.offsets: identify)
     drawn: dict[str, NDArray] | None = None  # simulated data: the noise sigma each run's noise is drawn with
+    raw: dict[str, NDArray] | None = None  # measured data: the channels as read, before offsets were removed
 
     @property
     def dim(self) -> int:
@@ -231,7 +232,7 @@ def build_task(config: Config, data_file: str | Path | None = None) -> Task:
     truth = nominal if ident.truth == "config" else None
     return Task(
         config, experiment, names, lower, upper, nominal, truth, families, None, run.outputs, sigma, source,
-        str(data_file), observed=run.observed, offsets=offsets,
+        str(data_file), observed=run.observed, offsets=offsets, raw=run.raw,
     )  # fmt: skip
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Collection, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 
@@ -47,6 +47,7 @@ class Table:
 
     columns: dict[str, NDArray]
     source: str
+    blank: dict[str, NDArray] = field(default_factory=dict)  # name -> (n,) bool: empty cells (read_table's blanks)
 
     def column(self, name: str) -> NDArray:
         if name not in self.columns:
@@ -87,12 +88,13 @@ def _timestamp(cell: str, decimal_comma: bool) -> datetime | None:
     return None
 
 
-def read_table(path: str | Path, *, timestamps: Collection[str] = ()) -> Table:
+def read_table(path: str | Path, *, timestamps: Collection[str] = (), blanks: bool = False) -> Table:
     """Read a numeric CSV with a header row and `#` comments. Raises InputError naming file, row and column.
 
     Columns are separated by ',', ';' or tabs (from the header line); with ';' or tabs, decimal commas read.
     A column named in `timestamps` may hold ISO 8601 date-times (logger exports): it reads as seconds after the
-    first row's."""
+    first row's. With `blanks`, an empty cell is NaN (a channel sampled more slowly than the file's rows: a logger's
+    multi-rate export); without, it is an error."""
     source = str(path)
     text = read_text(path, "file", "a CSV file", encoding="utf-8-sig")  # tolerate a BOM (spreadsheet exports)
     lines = [
@@ -115,6 +117,7 @@ def read_table(path: str | Path, *, timestamps: Collection[str] = ()) -> Table:
     if not rows:
         raise InputError("no data rows after the header", source=source)
     values = np.empty((len(rows), len(names)))
+    empty = np.zeros(values.shape, dtype=bool)
     stamps: dict[int, list[datetime]] = {c: [] for c, n in enumerate(names) if n in set(timestamps)}
     for r, (no, line) in enumerate(rows):
         cells = line.split(sep)
@@ -126,6 +129,10 @@ def read_table(path: str | Path, *, timestamps: Collection[str] = ()) -> Table:
                 source=source,
             )
         for c, cell in enumerate(cells):
+            if blanks and not cell.strip() and c not in stamps:
+                values[r, c] = np.nan
+                empty[r, c] = True
+                continue
             try:
                 values[r, c] = _number(cell, decimal_comma)
             except ValueError:
@@ -152,7 +159,8 @@ def read_table(path: str | Path, *, timestamps: Collection[str] = ()) -> Table:
             raise InputError(
                 f"column '{names[c]}' mixes date-times with and without a time zone", source=source
             ) from None
-    return Table(columns={n: values[:, i] for i, n in enumerate(names)}, source=source)
+    blank = {n: empty[:, i] for i, n in enumerate(names) if empty[:, i].any()}
+    return Table(columns={n: values[:, i] for i, n in enumerate(names)}, source=source, blank=blank)
 
 
 def check_time(t: NDArray, source: str, column: str = "t") -> float:

@@ -2,7 +2,10 @@
 
 Reading goes through the measurement table reader (`io.measurement.read_table`): the time column is the one named
 by `time=`, else `t`, `time` (`TIME_NAMES`), else the stamps are k / rate; its stamps may be numbers or ISO 8601
-date-times (a logger's export), read as seconds after the first. A CSV declares no units: pass them (`units=`).
+date-times (a logger's export), read as seconds after the first. A column's header may carry its unit
+(`ACC_FL [g]`, `POT1 (mm)`: the column is then also found as `ACC_FL`); otherwise a CSV declares no units: pass
+them (`units=`). A logger's multi-rate export leaves a slower channel's cells empty between its samples: each
+channel is read at the rows that hold it.
 
 Writing: one time column `t` [s] and the channels, numbers to 17 significant digits (they read back exactly);
 `#` lines before the header hold the comment, the start and the units for people, but `read_record` reads no units
@@ -12,7 +15,9 @@ from a CSV: pass them (`units=`). One rate only: channels with different time st
 from __future__ import annotations
 
 import datetime as dt
+import re
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +29,32 @@ from ..measurement import read_table
 from .base import TIME_NAMES, LoggerFormat, Raw, groups, missing, register, time_vector
 
 CSV_FORBIDDEN = (",", ";", "\t", "\n", "\r")  # read_table's separators and line ends
+HEADER_UNIT = re.compile(r"^(?P<name>.*?\S)\s*[\[(](?P<unit>[^\[\]()]+)[\])]$")  # ACC_FL [g], POT1 (mm)
+
+
+@dataclass(frozen=True)
+class Table:
+    """A CSV's columns by name, a column's unit when its header declares one (`name [unit]` or `name (unit)`: the
+    column is then also found by its bare name), and the rows each column leaves empty."""
+
+    columns: dict[str, NDArray]
+    source: str
+    units: dict[str, str] = field(default_factory=dict)
+    blank: dict[str, NDArray] = field(default_factory=dict)  # name -> (n,) bool: the rows without its sample
+
+
+def _with_header_units(table) -> Table:
+    """The table's columns, each also under its bare name when its header carries a unit (which is kept)."""
+    columns, blank = table.columns, dict(table.blank)
+    out, units = dict(columns), {}
+    for header, values in columns.items():
+        m = HEADER_UNIT.match(header)
+        if m and m["name"] not in columns:
+            out[m["name"]] = values
+            units[m["name"]] = units[header] = m["unit"].strip()
+            if header in blank:
+                blank[m["name"]] = blank[header]
+    return Table(out, table.source, units, blank)
 
 
 @register
@@ -40,7 +71,7 @@ class Csv(LoggerFormat):
         self, path: Path, channels: Mapping[str, str], *, time: str | None, rate: float | None, variable: str | None
     ) -> dict[str, Raw]:
         candidates = (time,) if time else TIME_NAMES
-        table = read_table(path, timestamps=candidates)
+        table = _with_header_units(read_table(path, timestamps=candidates, blanks=True))
         src = table.source
         t, tname = time_vector(
             time,
@@ -51,11 +82,17 @@ class Csv(LoggerFormat):
             rate,
             n=next(iter(table.columns.values())).size,
         )
+        if not np.all(np.isfinite(t)):
+            raise InputError(f"the time column '{tname}' has empty cells: every row needs its time", source=src)
         raw = {}
         for ours, theirs in channels.items():
             if theirs not in table.columns:
                 raise missing("column", theirs, list(table.columns), src, key=ours)
-            raw[ours] = Raw(t, table.columns[theirs], time=tname)
+            values, unit = table.columns[theirs], table.units.get(theirs, "")
+            own = ~table.blank.get(theirs, np.zeros(values.size, dtype=bool))  # a slower channel's rows (multi-rate)
+            if not own.any():
+                raise InputError(f"column '{theirs}' ('{ours}') is empty", source=src)
+            raw[ours] = Raw(t, values, unit, time=tname) if own.all() else Raw(t[own], values[own], unit, time=tname)
         return raw
 
     def write(

@@ -1,0 +1,135 @@
+"""Pre-fit checks of every measured channel against the configured model (`vehid check`, and the first thing `identify`
+and `diagnose` do): each registered fault of the measurement chain (`models/faults/`) checks each channel against the
+configured car's prediction of it on the run's own road, and the noise is held against the one the fit will assume.
+
+A finding that makes any fit meaningless (a sign, a swap, a unit factor: `Fault.stops`) stops `identify` with exit 2
+naming the channel, the evidence and the fix (unless --no-checks); lesser ones are warnings; `diagnose` takes every
+finding into its loop as a `sensor:<channel>:<fault>` candidate.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.result import Result
+from ..identify.task import Task
+from ..models.faults import FAIL, FAULTS, OK, WARNING, Channel, Finding
+from ..models.noise import estimate_noise_sigma
+
+NOISE_RATIO = 3.0  # the noise this many times above or below the assumed one is worth a warning
+STATUS_ORDER = {OK: 0, WARNING: 1, FAIL: 2}
+
+
+@dataclass(frozen=True)
+class Checks(Result):
+    """The findings of every check on every channel of one run (or several: `run` names each finding's)."""
+
+    findings: tuple[Finding, ...]
+    runs: tuple[str, ...] = ()  # the file of each finding (several runs checked together), else empty
+
+    def to_json(self) -> list[dict]:
+        out = [f.to_json() for f in self.findings]
+        if self.runs:
+            for doc, run in zip(out, self.runs, strict=True):
+                doc["run"] = run
+        return out
+
+    @property
+    def problems(self) -> tuple[Finding, ...]:
+        """The warnings and failures, worst first."""
+        return tuple(sorted((f for f in self.findings if f.status != OK), key=lambda f: -STATUS_ORDER[f.status]))
+
+    @property
+    def stopping(self) -> tuple[Finding, ...]:
+        """The failures that make a fit meaningless (a sign, a swap, a unit factor)."""
+        return tuple(f for f in self.findings if f.status == FAIL and f.fault and _stops(f.fault))
+
+    def worst(self, channel: str) -> str:
+        """The worst status of a channel's checks."""
+        statuses = [f.status for f in self.findings if f.channel == channel]
+        return max(statuses, key=lambda s: STATUS_ORDER[s], default=OK)
+
+    def stop_message(self) -> str:
+        """Why identify stops: each failure with its evidence and fix."""
+        lines = [f"{f.message}; fix: {f.fix}" if f.fix else f.message for f in self.stopping]
+        return (
+            "the measurement chain is wrong, so any fit would be meaningless: " + " | ".join(lines)
+            + " (vehid check shows every channel; --no-checks fits anyway)"
+        )  # fmt: skip
+
+    def warnings(self) -> list[str]:
+        """One line per warning (and per failure that does not stop a fit)."""
+        return [f"{f.check} {f.channel}: {f.message}" for f in self.problems if f not in self.stopping]
+
+    def merged(self, other: Checks, run: str, other_run: str) -> Checks:
+        """Two runs' findings in one list, each tagged with its run."""
+        mine = self.runs or (run,) * len(self.findings)
+        theirs = other.runs or (other_run,) * len(other.findings)
+        return Checks(self.findings + other.findings, mine + theirs)
+
+
+def _stops(fault: str) -> bool:
+    base = FAULTS.get(fault.partition(":")[0])
+    return bool(base is not None and base.stops)
+
+
+def channels_of(task: Task, reference: dict[str, NDArray], units: dict[str, str] | None = None) -> tuple[Channel, ...]:
+    """Every measured channel of the task beside the configured model's prediction, at its own samples."""
+    exp = task.experiment
+    prediction = exp.outputs()
+    raw = task.raw or {}
+    offsets_free = task.offsets or task.config.data.offsets == "remove"
+    out = []
+    for family in task.families:
+        names = exp.layout.names(family)
+        kinds = {s.name: s.kind for s in exp.layout.sensors}
+        for k, name in enumerate(names):
+            own = np.ones(exp.t.size, dtype=bool) if task.observed is None else task.observed[family][:, k]
+            y = np.asarray(reference[family][own, k], dtype=float)
+            p = np.asarray(prediction[family][own, k], dtype=float)
+            r = None if family not in raw else np.asarray(raw[family][own, k], dtype=float)
+            out.append(Channel(
+                name=name, family=family, column=k, kind=kinds.get(name, family), t=exp.t[own], y=y - y.mean(),
+                pred=p - p.mean(), sigma=float(task.sigma[family][k]), raw=r, pred_mean=float(p.mean()),
+                unit=(units or {}).get(name, ""), offsets_free=offsets_free,
+            ))  # fmt: skip
+    return tuple(out)
+
+
+def noise_finding(ch: Channel, assumed_from_data: bool) -> Finding:
+    """The channel's noise (third differences of its samples) against the sigma the fit will weight it with."""
+    est = float(estimate_noise_sigma(ch.recorded[:, None])[0])
+    q = est / ch.sigma if ch.sigma > 0 else float("nan")
+    if assumed_from_data or not np.isfinite(q) or 1 / NOISE_RATIO <= q <= NOISE_RATIO:
+        return Finding(ch.name, "noise", OK, q, f"noise {q:.2g} x the assumed sigma")
+    what = "understated: the fit will trust it too much" if q > 1 else "overstated: intervals will be too wide"
+    return Finding(
+        ch.name, "noise", WARNING, q,
+        f"{ch.name}'s noise is {q:.2g} x the sigma the fit assumes ({ch.sigma:.3g} SI): the assumed noise is {what}",
+        fix="check noise.sigma / the sensor's own sigma",
+    )  # fmt: skip
+
+
+def check_channels(channels: Sequence[Channel], assumed_from_data: bool = False) -> Checks:
+    """Every registered fault's check and the noise check on every channel (in the channels' order)."""
+    channels = tuple(channels)
+    findings = []
+    for ch in channels:
+        for fault in FAULTS.values():
+            found = fault.check(ch, channels)
+            if found is not None:
+                findings.append(found)
+        findings.append(noise_finding(ch, assumed_from_data))
+    return Checks(tuple(findings))
+
+
+def check_task(task: Task, reference: dict[str, NDArray] | None = None) -> Checks:
+    """The checks of a task's measured run (`reference`: its data, default the measured channels)."""
+    reference = task.measured if reference is None else reference
+    units = dict(task.config.data.units)
+    from_data = task.sigma_source.startswith("estimated")
+    return check_channels(channels_of(task, reference, units), from_data)

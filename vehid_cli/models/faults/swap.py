@@ -1,0 +1,44 @@
+"""Two connectors swapped: channel a records what b measures and b what a measures. Seen as each channel resembling
+the other's prediction clearly better than its own."""
+
+from __future__ import annotations
+
+from .base import FAIL, Channel, Context, Correction, Fault, Finding, correlation
+
+MARGIN = 0.15  # how much better the other's prediction must fit, both ways
+
+
+def check(ch: Channel, channels: tuple[Channel, ...]) -> Finding | None:
+    own = correlation(ch.y, ch.pred)
+    best = None
+    for other in channels:
+        if other.name == ch.name or other.family != ch.family or other.y.size != ch.y.size:
+            continue
+        mine, theirs = correlation(ch.y, other.pred), correlation(other.y, ch.pred)
+        back = correlation(other.y, other.pred)
+        if mine > own + MARGIN and theirs > back + MARGIN and (best is None or mine > best[1]):
+            best = (other, mine, theirs)
+    if best is None:
+        return Finding(ch.name, "swap", "ok", own, "its own prediction fits it best")
+    other, mine, theirs = best
+    return Finding(
+        ch.name, "swap", FAIL, mine,
+        f"{ch.name} looks like {other.name}'s prediction (correlation {mine:+.2f} against {own:+.2f} with its own) "
+        f"and {other.name} like {ch.name}'s ({theirs:+.2f}): the two connectors are swapped",
+        fault=f"swap:{other.name}", start={f"swap:{other.name}": 1.0},
+        fix=f"swap them in the config: data.swap: [[{ch.name}, {other.name}]] (or swap the connectors)",
+    )  # fmt: skip
+
+
+def correct(y, theta, ctx: Context):
+    w = theta[:, :1]
+    return (1.0 - w) * y + w * ctx.partner
+
+
+def correction(ch: Channel, finding: Finding) -> Correction:
+    name = finding.fault.partition(":")[2]
+    return Correction((f"swap:{name}",), ((0.0, 1.0),), (1.0,), (0.0,))
+
+
+FAULT = Fault("swap", __doc__.splitlines()[0], stops=True, check=check, correct=correct, correction=correction,
+              order=30, pair=True)  # fmt: skip
