@@ -96,6 +96,12 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
     runs.create_dataset("truth_cost", data=np.array([r.truth_cost for r in recs]))
     runs.create_dataset("chi2", data=np.array([r.chi2 for r in recs]))
     runs.create_dataset("initial_cost", data=np.array([r.initial_cost for r in recs]))
+    if campaign.channels:
+        chi2 = np.array([r.channel_chi2 if r.channel_chi2.size == len(campaign.channels) else
+                         np.full(len(campaign.channels), np.nan) for r in recs])  # fmt: skip
+        runs.create_dataset("channel_chi2", data=chi2).attrs["channels"] = json.dumps(list(campaign.channels))
+    h5.attrs["checks"] = json.dumps(list(campaign.checks))
+    h5.attrs["warnings"] = json.dumps(list(campaign.warnings))
     runs.create_dataset("history_evals", data=_padded([r.history_evals for r in recs], -1).astype(np.int64))
     runs.create_dataset("history_cost", data=_padded([r.history_cost for r in recs], np.nan))
     sg = h5.create_group("summary")
@@ -142,6 +148,8 @@ def read_campaign_h5(path: str | Path):
             tcost = runs["truth_cost"][()]
             chi2 = runs["chi2"][()]
             initial = runs["initial_cost"][()] if "initial_cost" in runs else np.full(len(est), np.nan)
+            channel_chi2 = runs["channel_chi2"][()] if "channel_chi2" in runs else np.zeros((len(est), 0))
+            channels = tuple(json.loads(runs["channel_chi2"].attrs["channels"])) if "channel_chi2" in runs else ()
             hev, hco = runs["history_evals"][()], runs["history_cost"][()]
             records = tuple(
                 RunRecord(
@@ -156,6 +164,7 @@ def read_campaign_h5(path: str | Path):
                     truth_cost=float(tcost[i]),
                     chi2=float(chi2[i]),
                     initial_cost=float(initial[i]),
+                    channel_chi2=channel_chi2[i],
                 )
                 for i in range(len(est))
             )
@@ -186,7 +195,9 @@ def read_campaign_h5(path: str | Path):
                 sigma_source=str(h5.attrs["sigma_source"]), records=records, bound=bound, summary=summary,
                 data_sha256=str(h5.attrs.get("data_sha256", "")) or None, system=system, findings=findings,
                 data_files=tuple(json.loads(str(h5.attrs.get("data_files", "[]")))),
-                objective=str(h5.attrs["objective"]),
+                objective=str(h5.attrs["objective"]), channels=channels,
+                checks=tuple(json.loads(str(h5.attrs.get("checks", "[]")))),
+                warnings=tuple(json.loads(str(h5.attrs.get("warnings", "[]")))),
             )  # fmt: skip
         except (KeyError, ValueError, TypeError, OSError, RuntimeError, yaml.YAMLError) as exc:  # reactions to damage
             raise InputError(f"campaign file is damaged or incomplete ({exc})", source=source) from None

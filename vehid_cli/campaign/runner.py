@@ -18,6 +18,8 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..config import AnyConfig
 from ..core.errors import InputError
@@ -25,6 +27,7 @@ from ..core.files import atomic_path, remove_stale_temporaries
 from ..core.locking import exclusive
 from ..core.provenance import git_commit
 from ..core.store import check_integrity, open_results
+from ..identify.crlb import CramerRao
 from ..identify.records import Campaign, RunRecord, summarise
 from ..identify.source import DataFiles, DataSource
 from ..systems import System, build_system
@@ -132,13 +135,19 @@ def run_campaign(
     on_run: Callable[[int, int], None] | None = None,
     log: Log | None = None,
     system: System | None = None,
+    checks: bool = True,
 ) -> Campaign:
     """Run every run of the configured campaign (resuming from `checkpoint_dir` if it holds some), for any system.
 
     The runs execute on `executor` (default: a `LocalExecutor(jobs)` for this campaign alone); each finished
     run is checkpointed before the next result is taken. `on_run(done, total)` reports progress; `log` receives
-    warnings (damaged checkpoint records) and notes ("resumed N of M runs")."""
+    warnings (damaged checkpoint records) and notes ("resumed N of M runs"). With `checks` (the default), measured
+    data whose channels fail a check that makes any fit meaningless (a sign, a swap, a unit factor) is an InputError
+    naming each channel, the evidence and the fix, before any run."""
     system = system if system is not None else build_system(config, data_file)
+    found = system.checks()
+    if checks and found is not None and found.stopping:
+        raise InputError(found.stop_message(), source=system.data_file)
     n_runs = system.runs
     start = time.perf_counter()
     bound = system.bound()  # before the runs: a bad experiment fails before any work
@@ -167,8 +176,12 @@ def run_campaign(
         for record in results:
             finished(record)
     records = tuple(done[i] for i in range(n_runs))
+    warnings = [] if found is None else found.warnings()
+    if not checks and found is not None and found.stopping:
+        warnings.insert(0, "checks overridden (--no-checks): " + found.stop_message())
     if n_runs == 1 and system.box.truth is None:  # one fit on measured data: its interval comes from the bound there
-        bound = system.bound(records[0].estimate)
+        bound, note = single_fit_bound(system, records[0])
+        warnings += note
     findings = system.conclude(records)
     box = system.box
     summary = summarise(
@@ -179,7 +192,25 @@ def run_campaign(
         lower=box.lower, upper=box.upper, sigma=system.sigma, sigma_source=system.sigma_source, records=records,
         bound=bound, summary=summary, data_sha256=system.source.digest, system=system.name,
         findings=findings, data_files=system.data_files(), objective=system.objective_label(config),
+        channels=system.channel_names, checks=() if found is None else tuple(found.to_json()), warnings=tuple(warnings),
     )  # fmt: skip
+
+
+def single_fit_bound(system: System, record: RunRecord) -> tuple[CramerRao, list[str]]:
+    """The interval of one fit on measured data: the bound at the estimate for the assumed noise, widened by
+    sqrt(chi²) when the residual is larger than that noise (the residual's own variance: what `diagnose` uses
+    too), with a note saying so."""
+    bound = system.bound(record.estimate)
+    R = max(system.residual_samples, 1)
+    limit = 1.0 + 5.0 * np.sqrt(2.0 / R)
+    if np.isfinite(record.chi2) and record.chi2 > limit:
+        factor = float(np.sqrt(record.chi2))
+        note = (
+            f"the residual is {record.chi2:.3g} x the assumed noise power: the 95 % intervals are the bound's widened "
+            f"by sqrt(chi2) = {factor:.3g} (the residual's own variance, as vehid diagnose reports them)"
+        )
+        return bound.widened(factor), [note]
+    return bound, []
 
 
 def check_same_campaign(output: Path, config: AnyConfig, data_file: DataFiles) -> None:
@@ -235,6 +266,7 @@ def run_campaign_to_file(
     attrs: Mapping[str, str] | None = None,
     lock: bool = True,
     force: bool = False,
+    checks: bool = True,
 ) -> Campaign:
     """Run (or resume) a campaign, write its HDF5 file atomically, then drop its checkpoint (kept if the write
     fails: the rerun finishes from it). A checkpoint beside a finished file of this campaign is stale: removed,
@@ -259,7 +291,8 @@ def run_campaign_to_file(
                     log(f"note: {output} is complete for this config; removed the stale checkpoint {partial}")
                 return finished
         campaign = run_campaign(
-            config, data_file, jobs=jobs, executor=executor, checkpoint_dir=partial, on_run=on_run, log=log
+            config, data_file, jobs=jobs, executor=executor, checkpoint_dir=partial, on_run=on_run, log=log,
+            checks=checks,
         )
         write_campaign_h5(output, campaign, attrs=attrs)
         Checkpoint(partial, "").remove()

@@ -14,6 +14,7 @@ from typing import Annotated
 import typer
 
 from .. import __version__
+from .check import check
 from .common import out
 from .design import design
 from .diagnose import diagnose
@@ -60,7 +61,7 @@ def main(
     """vehid: vehicle and suspension parameter identification."""
 
 
-for _command in (simulate, identify, sweep, design, report, diagnose):
+for _command in (simulate, check, identify, sweep, design, report, diagnose):
     app.command()(_command)
 
 

@@ -66,6 +66,12 @@ def identify(
     force: Annotated[
         bool, typer.Option("--force", help="Overwrite an output file that holds a campaign of another config.")
     ] = False,
+    no_checks: Annotated[
+        bool,
+        typer.Option(
+            "--no-checks", help="Fit even when a channel fails a check that makes the fit meaningless (vehid check)."
+        ),
+    ] = False,
 ) -> None:
     """Run a statistical identification campaign (a car or a damper): one HDF5 file, and the summary table.
 
@@ -92,7 +98,7 @@ def identify(
         objective = system_class(cfg).objective_label(cfg)
         bar = progress.add_task(f"{cfg.identify.algorithm.name}/{objective}", total=None)
         campaign = run_campaign_to_file(
-            cfg, target, data or None, executor=pool, log=warn, force=force,
+            cfg, target, data or None, executor=pool, log=warn, force=force, checks=not no_checks,
             on_run=lambda d, n: progress.update(bar, completed=d, total=n),
         )  # fmt: skip
     if json_out is not None:

@@ -8,6 +8,7 @@ simulator (all 2D perturbed cars in one call). Everything is reported relative t
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -39,6 +40,14 @@ class CramerRao:
 
     def unidentifiable(self) -> list[str]:
         return [n for n, ok in zip(self.names, self.identifiable, strict=True) if not ok]
+
+    def widened(self, factor: float) -> CramerRao:
+        """The bound with every standard deviation `factor` times wider (the information over factor²): the residual's
+        own variance instead of the assumed noise's, when the residual is larger than the noise."""
+        return dataclasses.replace(
+            self, fisher=self.fisher / factor**2, re_sd_percent=self.re_sd_percent * factor,
+            nre_rms_percent=self.nre_rms_percent * factor,
+        )  # fmt: skip
 
 
 def _central_points(values: NDArray, h: NDArray) -> NDArray:

@@ -66,6 +66,17 @@ class Objective:
             parts.append((np.arange(n * k) if flat is None else flat) // k)
         return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
 
+    def entry_channels(self) -> NDArray:
+        """(R,) the channel of each weighted residual entry, in `residuals`' order: channels numbered family by
+        family in the reference's order, column by column."""
+        parts, first = [], 0
+        for family, ref in self.reference.items():
+            n, k = ref.shape[-2:]
+            flat = self._keep.get(family)
+            parts.append(first + (np.arange(n * k) if flat is None else flat) % k)
+            first += k
+        return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
+
     def project(self, family: str, d: NDArray) -> NDArray:
         """d (..., n, k) without what the profiled offsets absorb (its per-channel mean over the observed samples),
         in place; d itself without offsets. The residual's linear response to a change of the model's output."""

@@ -6,7 +6,7 @@ collects them, `results` writes and reads them, `report` renders them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +20,7 @@ from ..core.result import Result
 from ..optimizers.base import Problem
 from .crlb import CramerRao
 
+BOUND_TOL = 1e-6  # an estimate within this fraction of its box's width of a bound sits on it
 PENALTY = Problem.__dataclass_fields__["penalty"].default  # the cost of a NaN/Inf evaluation (optimizers/base.py)
 
 
@@ -38,6 +39,7 @@ class RunRecord:
     truth_cost: float = float("nan")  # cost of the true parameters on this run's data (NaN: truth unknown)
     chi2: float = float("nan")  # noise-weighted residual power per sample at the estimate (~1 for an adequate model)
     initial_cost: float = float("nan")  # cost at the start point (a damper fit's J before; NaN: not recorded)
+    channel_chi2: NDArray = field(default_factory=lambda: np.zeros(0))  # chi² per sample of each measured channel
 
     @property
     def at_penalty(self) -> bool:
@@ -71,6 +73,7 @@ class RunRecord:
                 truth_cost=float(z["truth_cost"]),
                 chi2=float(z["chi2"]),
                 initial_cost=float(z["initial_cost"]) if "initial_cost" in z else float("nan"),
+                channel_chi2=z["channel_chi2"] if "channel_chi2" in z else np.zeros(0),
             )
 
 
@@ -186,6 +189,73 @@ class Campaign(Result):
     findings: Any = None
     data_files: tuple[str, ...] = ()  # every measured run identified from (several: jointly); data_file names them
     objective: str = ""  # what a run's cost is (f1, f2, wls; J for a damper): System.objective_label
+    channels: tuple[str, ...] = ()  # the measured channels of the records' channel_chi2
+    checks: tuple[dict, ...] = ()  # the pre-fit checks' findings (SPEC section 6), measured data only
+    warnings: tuple[str, ...] = ()  # what a user must know beyond the table (the checks', intervals', ...)
+
+    @property
+    def at_bound(self) -> dict[str, int]:
+        """Unknowns whose estimate sits on a bound of its search box, with in how many runs (an interval there means
+        nothing: the optimum lies beyond the box)."""
+        width = self.upper - self.lower
+        out = {}
+        for j, name in enumerate(self.names):
+            hits = sum(
+                bool(min(r.estimate[j] - self.lower[j], self.upper[j] - r.estimate[j]) <= BOUND_TOL * width[j])
+                for r in self.records
+            )  # fmt: skip
+            if hits:
+                out[name] = hits
+        return out
+
+    @property
+    def per_channel(self) -> dict[str, dict[str, float]]:
+        """Each measured channel's chi² per sample at the estimates (the median over runs)."""
+        rows = [r.channel_chi2 for r in self.records if r.channel_chi2.size == len(self.channels)]
+        if not rows or not self.channels:
+            return {}
+        med = np.nanmedian(np.array(rows), axis=0)
+        return {n: {"chi2_per_sample": float(v)} for n, v in zip(self.channels, med, strict=True)}
+
+    def worst_channels(self, low: bool = False, count: int = 3) -> list[tuple[str, float]]:
+        """The channels whose chi² per sample is farthest from 1 above (or, `low`, below), worst first."""
+        pairs = [(n, d["chi2_per_sample"]) for n, d in self.per_channel.items() if np.isfinite(d["chi2_per_sample"])]
+        pairs.sort(key=lambda p: p[1], reverse=not low)
+        return pairs[:count]
+
+    def advice(self) -> list[str]:
+        """What a user must know about the campaign beyond its table, in plain words: an estimate on its bound, a
+        residual far from the noise (either side) with the channels that make it, what the sensors cannot identify,
+        evaluations that got the penalty."""
+        s, out = self.summary, []
+        runs = len(self.records)
+        for name, hits in self.at_bound.items():
+            where = "" if runs == 1 else f" in {hits} of {runs} runs"
+            out.append(
+                f"{name} sits on a bound of its search box{where}: the optimum lies beyond it and no interval means "
+                "anything there; widen identify.bounds or identify.limits, or check the data (vehid check)"
+            )
+        low_limit = 1.0 - 5.0 * np.sqrt(2.0 / max(s.residual_samples, 1))
+        if s.model_inadequate:
+            worst = ", ".join(f"{n} {v:.3g}" for n, v in self.worst_channels())
+            out.append(
+                f"at the estimates the residual power is {s.chi2_median:.3g} times the noise power the data implies "
+                f"(an adequate model gives at most {s.chi2_limit:.3g}, noise from {self.sigma_source}): the model "
+                "lacks something, the measurement chain is wrong or the noise is understated; the estimates are then "
+                "biased"
+                + (f"; worst channels (chi2 per sample): {worst}" if worst else "")
+            )
+        elif np.isfinite(s.chi2_median) and s.chi2_median < low_limit:
+            lowest = ", ".join(f"{n} {v:.3g}" for n, v in self.worst_channels(low=True))
+            out.append(
+                f"at the estimates the residual power is only {s.chi2_median:.3g} times the assumed noise power (noise "
+                f"from {self.sigma_source}): the noise is overstated, so the intervals are too wide"
+                + (f"; lowest channels (chi2 per sample): {lowest}" if lowest else "")
+            )
+        unidentifiable = self.bound.unidentifiable()
+        if unidentifiable:
+            out.append(f"the sensors cannot identify {', '.join(unidentifiable)} (Fisher information)")
+        return out
 
     def to_json(self) -> dict:
         """SPEC section 5 `identify` object (plus a few extra keys); strict JSON once through `core.jsonio`."""
@@ -223,5 +293,9 @@ class Campaign(Result):
             "algorithm": self.config.identify.algorithm.name,
             "noise_level": self.config.noise.level,
             "system": self.system,
+            "at_bound": list(self.at_bound),
+            "per_channel": {n: {k: finite_or_none(v) for k, v in d.items()} for n, d in self.per_channel.items()},
+            "checks": [dict(c) for c in self.checks],
+            "warnings": list(self.warnings) + self.advice(),
             **({} if self.findings is None else self.findings.json_keys(self)),
         }

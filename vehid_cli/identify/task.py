@@ -140,6 +140,15 @@ class Task:
         return Problem(self.lower, self.upper, cost, cost_and_residuals, names=names)
 
     @property
+    def channel_names(self) -> tuple[str, ...]:
+        """The objective's channels (its families' layout names, family by family)."""
+        return tuple(n for f in self.families for n in self.experiment.layout.names(f))
+
+    def residual_channels(self, reference: dict[str, NDArray]) -> NDArray:
+        """(R,) the index into `channel_names` of each weighted residual entry."""
+        return self.objective(reference).entry_channels()
+
+    @property
     def residual_samples(self) -> int:
         """R: how many weighted residuals the objective's channels give (each channel's observed samples)."""
         if self.observed is not None:
@@ -299,6 +308,13 @@ class JointTask:
     @property
     def residual_samples(self) -> int:
         return sum(t.residual_samples for t in self.tasks)
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        return self.tasks[0].channel_names
+
+    def residual_channels(self, references: tuple[dict[str, NDArray], ...]) -> NDArray:
+        return np.concatenate([t.residual_channels(r) for t, r in zip(self.tasks, references, strict=True)])
 
     def reference(self, run: int) -> tuple[dict[str, NDArray], ...]:
         return tuple(t.reference(run) for t in self.tasks)

@@ -8,6 +8,7 @@ from pathlib import Path
 import h5py
 import yaml
 from rich.console import Console
+from rich.markup import escape
 
 from ..campaign.results import CAMPAIGN_KIND, read_campaign_h5
 from ..campaign.sweep import read_index
@@ -119,21 +120,11 @@ def rich_tables(campaigns: list[Campaign], files: list[str]) -> list:
 
 
 def campaign_notes(c: Campaign) -> list[str]:
-    """What a user must know about a finished campaign beyond its table: a residual far above the noise,
-    unidentifiable parameters, evaluations that got the penalty (rich markup)."""
-    s, notes = c.summary, []
-    if s.model_inadequate:
-        notes.append(
-            f"[yellow]warning:[/] at the estimates the residual power is {s.chi2_median:.3g} times the noise power "
-            f"the data implies (an adequate model gives at most {s.chi2_limit:.3g}, noise from "
-            f"{c.sigma_source}): the model lacks something, or noise.level is too small; the estimates are "
-            "then biased"
-        )
-    unidentifiable = c.bound.unidentifiable()
-    if unidentifiable:
-        notes.append(
-            f"[yellow]warning:[/] the sensors cannot identify {', '.join(unidentifiable)} (Fisher information)"
-        )
+    """What a user must know about a finished campaign beyond its table (rich markup): the findings of the checks
+    and the intervals' notes made during the run, an estimate on its bound, a residual far from the noise with its
+    worst channels, unidentifiable parameters, evaluations that got the penalty."""
+    s = c.summary
+    notes = [f"[yellow]warning:[/] {escape(w)}" for w in (*c.warnings, *c.advice())]
     total = int(s.evaluations.sum())
     if s.penalised:
         note = (

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..config import AnyConfig, load_config
 from ..core.errors import InputError
+from ..diagnose.checks import Checks
 from ..identify.source import DataFiles, DataSource, as_paths
 from .base import Box, Log, Simulated, System
 from .damper.findings import Findings
@@ -79,7 +80,20 @@ def diagnose_config(
     return cls.diagnose(cfg, as_paths(data), as_paths(tuple(validate)), log)
 
 
+def check_config(config: str | Path, overrides: Sequence[str] = (), data: DataFiles = None) -> tuple[System, Checks]:
+    """`vehid check`: every measured channel of `data` (else the config's runs) against the configured model."""
+    cfg = load_config(config, overrides)
+    system = build_system(cfg, data)
+    if system.source.simulated:
+        raise InputError("vehid check holds measured data against the model: give --data FILE (or data.files)",
+                         source=str(config))  # fmt: skip
+    found = system.checks()
+    if found is None:
+        raise InputError(f"vehid check has no checks for a {system.name} yet", source=str(config), key="system")
+    return system, found
+
+
 __all__ = [
     "SYSTEMS", "Box", "DamperSystem", "Findings", "Simulated", "System", "VehicleSystem", "build_system",
-    "diagnose_config", "register_system", "simulation_suffixes", "system_class", "write_simulation",
+    "check_config", "diagnose_config", "register_system", "simulation_suffixes", "system_class", "write_simulation",
 ]  # fmt: skip

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from ..config import AnyConfig
 from ..core.errors import InputError
 from ..core.streams import run_streams
+from ..diagnose.checks import Checks
 from ..identify.crlb import CramerRao
 from ..identify.records import Campaign, RunRecord
 from ..identify.source import DataSource
@@ -92,6 +93,20 @@ class System(ABC):
     def residual_samples(self) -> int:
         """R: how many weighted residuals the objective gives (behind chi²)."""
         return 0
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        """The measured channels the fit compares (per-channel chi² and checks name them)."""
+        return ("all",)
+
+    def residual_channels(self, reference: Any) -> NDArray:
+        """(R,) the index into `channel_names` of each weighted residual entry of `problem(reference)`."""
+        return np.zeros(0, dtype=int)
+
+    def checks(self) -> Checks | None:
+        """The pre-fit checks of the measured data against the configured model (None: simulated data, or a system
+        without checks)."""
+        return None
 
     def data_files(self) -> tuple[str, ...]:
         """Every file the campaign's results depend on (their bytes enter the campaign key)."""
@@ -176,7 +191,8 @@ class System(ABC):
         """Run `index`: its own data (noise) and its own optimizer stream, within the evaluation budget."""
         ident = self.config.identify
         streams = run_streams(ident.seed, index)
-        problem = self.problem(self.reference(index))
+        reference = self.reference(index)
+        problem = self.problem(reference)
         # Diagnostic, not charged to the budget: the truth's cost on this run's data tells a converged run.
         truth = self.box.truth
         truth_cost = float(problem.cost(truth[None, :])[0]) if truth is not None else float("nan")
@@ -194,7 +210,19 @@ class System(ABC):
             index=index, estimate=result.x, cost=result.cost, evaluations=result.evaluations,
             penalised=result.penalised, wall_s=result.wall_s, history_evals=result.history_evals,
             history_cost=result.history_cost, truth_cost=truth_cost, chi2=chi2,
+            channel_chi2=self._channel_chi2(reference, residuals[0]),
         )  # fmt: skip
+
+    def _channel_chi2(self, reference: Any, residuals: NDArray) -> NDArray:
+        """Each channel's mean squared weighted residual (C,), in `channel_names` order (NaN: no entries)."""
+        which = self.residual_channels(reference)
+        C = len(self.channel_names)
+        if which.size != residuals.size:  # a system that does not tell: the whole residual as one channel
+            return np.array([float(np.mean(residuals**2))] * C) if C == 1 else np.full(C, np.nan)
+        sums = np.bincount(which, weights=residuals**2, minlength=C)
+        counts = np.bincount(which, minlength=C)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return sums / counts
 
     def conclude(self, records: tuple[RunRecord, ...]) -> Any:
         """What the system adds to the finished campaign (None: nothing beyond the records)."""

@@ -63,12 +63,14 @@ def parameter_table(res: Campaign, file: str) -> Table:
     spread = "± 95 % (bound)" if single else "sd over runs %"
     for col in ("parameter", "truth", "configured", "estimate", "RE %", spread, "CRLB sd %"):
         table.add_column(col, justify="left" if col == "parameter" else "right")
-    re, b = res.summary.re_percent, res.bound
+    re, b, at_bound = res.summary.re_percent, res.bound, res.at_bound
     for j, name in enumerate(res.names):
+        spread = _g(1.96 * b.sd[j], ".3g") if single else _g(res.summary.re_sd_percent[j], ".3f")
+        if name in at_bound:  # the optimum lies beyond the box: no interval means anything
+            spread = "on bound" if single else f"{spread} (at a bound in {at_bound[name]} runs)"
         table.add_row(
-            name, _g(None if res.truth is None else res.truth[j]), _g(res.nominal[j]), _g(res.summary.mean[j]),
-            _g(None if re is None else re[j], ".3f"),
-            _g(1.96 * b.sd[j], ".3g") if single else _g(res.summary.re_sd_percent[j], ".3f"),
+            name + (" AT BOUND" if name in at_bound and single else ""), _g(None if res.truth is None else res.truth[j]),
+            _g(res.nominal[j]), _g(res.summary.mean[j]), _g(None if re is None else re[j], ".3f"), spread,
             _g(b.re_sd_percent[j], ".3f"),
         )  # fmt: skip
     rt = res.findings.realtime

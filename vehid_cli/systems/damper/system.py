@@ -159,6 +159,10 @@ class DamperSystem(System):
         """The search box by name."""
         return {n: (lo, hi) for n, lo, hi in zip(self.names, self.box.lower, self.box.upper, strict=True)}
 
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        return ("force",)
+
     @classmethod
     def results_attributes(cls, config: DamperConfig) -> dict[str, str]:
         return {"model": config.damper.model}

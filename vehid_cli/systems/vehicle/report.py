@@ -43,10 +43,12 @@ def summary_table(c: Campaign) -> Table:
     table = Table(title=campaign_title(c), title_justify="left")
     for col in ("parameter", "truth", "mean", "RE of mean %", "sd over runs %", "CRLB sd %", "sd/CRLB"):
         table.add_column(col, justify="left" if col == "parameter" else "right")
+    at_bound = c.at_bound
     for j, name in enumerate(c.names):
         finite = np.isfinite(b.re_sd_percent[j]) and b.re_sd_percent[j] > 0
         ratio = s.re_sd_percent[j] / b.re_sd_percent[j] if finite else None
         flag = "" if b.identifiable[j] else " (not identifiable)"
+        flag += f" (at a bound in {at_bound[name]} runs)" if name in at_bound else ""
         table.add_row(
             name + flag,
             _g(None if c.truth is None else c.truth[j]),
@@ -74,10 +76,14 @@ def single_fit_table(c: Campaign) -> Table:
     table = Table(title=campaign_title(c), title_justify="left")
     for col in ("parameter", "truth", "estimate", "± 95 % (bound)", "CRLB sd %", "RE %"):
         table.add_column(col, justify="left" if col == "parameter" else "right")
+    at_bound = c.at_bound
     for j, name in enumerate(c.names):
         flag = "" if b.identifiable[j] else " (not identifiable)"
+        interval = _g(1.96 * b.sd[j])
+        if name in at_bound:  # the optimum lies beyond the box: no interval means anything
+            flag, interval = flag + " AT BOUND", f"on bound [{c.lower[j]:.4g}, {c.upper[j]:.4g}]"
         table.add_row(
-            name + flag, _g(None if c.truth is None else c.truth[j]), _g(r.estimate[j]), _g(1.96 * b.sd[j]),
+            name + flag, _g(None if c.truth is None else c.truth[j]), _g(r.estimate[j]), interval,
             _f(b.re_sd_percent[j]), _f(None if s.re_percent is None else s.re_percent[j]),
         )  # fmt: skip
     table.caption = (

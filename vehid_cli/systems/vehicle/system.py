@@ -17,6 +17,7 @@ from ...core.errors import InputError
 from ...core.provenance import provenance
 from ...core.store import h5_file
 from ...core.streams import run_streams
+from ...diagnose.checks import Checks, check_task
 from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao
 from ...identify.experiment import SimulatedRun, build_experiment, simulate_measurement
@@ -52,6 +53,27 @@ class VehicleSystem(System):
         self.box = Box(t.names, t.lower, t.upper, t.nominal, t.truth)
         self.sigma = run_sigma(t)
         self.sigma_source = t.sigma_source
+        self._checks: Checks | None = None
+
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        return self.task.channel_names
+
+    def residual_channels(self, reference) -> NDArray:
+        return self.task.residual_channels(reference)
+
+    def checks(self) -> Checks | None:
+        """Every measured channel of every run against the configured car (`diagnose.checks`), computed once."""
+        if self.source.simulated:
+            return None
+        if self._checks is None:
+            tasks = self.task.tasks if isinstance(self.task, JointTask) else (self.task,)
+            found = [check_task(t) for t in tasks]
+            merged = found[0]
+            for t, more in zip(tasks[1:], found[1:], strict=True):
+                merged = merged.merged(more, tasks[0].data_file, t.data_file)
+            self._checks = merged
+        return self._checks
 
     @classmethod
     def objective_label(cls, config: Config) -> str:
