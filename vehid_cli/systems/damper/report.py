@@ -68,10 +68,10 @@ def parameter_table(res: Campaign, file: str) -> Table:
         spread = _g(1.96 * b.sd[j], ".3g") if single else _g(res.summary.re_sd_percent[j], ".3f")
         if name in at_bound:  # the optimum lies beyond the box: no interval means anything
             spread = "on bound" if single else f"{spread} (at a bound in {at_bound[name]} runs)"
-        label = name + (" AT BOUND" if name in at_bound and single else "")
+        row_name = name + (" AT BOUND" if name in at_bound and single else "")
         table.add_row(
-            label, _g(None if res.truth is None else res.truth[j]), _g(res.nominal[j]), _g(res.summary.mean[j]), _g(None if re is None else re[j], ".3f"), spread,
-            _g(b.re_sd_percent[j], ".3f"),
+            row_name, _g(None if res.truth is None else res.truth[j]), _g(res.nominal[j]), _g(res.summary.mean[j]),
+            _g(None if re is None else re[j], ".3f"), spread, _g(b.re_sd_percent[j], ".3f"),
         )  # fmt: skip
     rt = res.findings.realtime
     parts = [f"J train {_J_train(res)}"]
