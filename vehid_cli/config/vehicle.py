@@ -122,6 +122,7 @@ class Vehicle(_Section):
 
 
 ROAD_CHANNELS = ("road1", "road2", "road3", "road4", "track1", "track2")  # the road's names in data.channels
+FAMILIES = ("acc", "disp")  # a unit for every channel of a family: data.units.acc
 
 
 class Bump(_Section):
@@ -258,7 +259,14 @@ class VehicleData(_Section):
         description="our name (a sensor of the layout, road1..road4, track1, track2) -> the channel's name in the "
         "file; a name left out is looked up as itself",
     )
-    units: dict[str, str] = Field({}, description="our name -> the unit of its channel in the file (g, mm, ...)")
+    units: dict[str, str] = Field(
+        {},
+        description="our name (or a family, acc or disp, for all its channels) -> the unit of its channel in the file "
+        "(g, mm, ...); a channel without one takes its family's, else the unit its file declares (MDF4, HDF5, a CSV "
+        "header 'NAME [g]'), else SI",
+    )
+    invert: tuple[str, ...] = Field((), description="channels whose sign the chain inverts (a sensor upside down)")
+    swap: tuple[tuple[str, str], ...] = Field((), description="pairs of channels whose connectors are swapped")
     time: str | None = Field(None, description="the time column/vector (CSV, MAT, HDF5; default t or time)")
     time_unit: str = Field("s", description="unit of a numeric time column")
     window: tuple[NonNeg, Pos] | None = Field(None, description="use only start <= t < stop [s] of each run")
@@ -352,6 +360,25 @@ class Config(SystemConfig):
             raise _KeyedError(
                 "sensors", f"sensors '{self.sensors}' selects no channel of the layout ({', '.join(sorted(families))})"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _data_names(self) -> Config:
+        """Every name in data.channels, data.units, data.invert and data.swap is a channel of the layout (or a road
+        input; a family for a unit): a typo would otherwise be ignored silently."""
+        layout = self.sensor_layout()
+        channels = tuple(s.name for s in layout.sensors)
+        known = channels + ROAD_CHANNELS
+        data = self.data
+        entries = [("channels", n, known) for n in data.channels] + [("units", n, known + FAMILIES) for n in data.units]
+        entries += [("invert", n, channels) for n in data.invert]
+        entries += [("swap", n, channels) for pair in data.swap for n in pair]
+        for key, name, allowed in entries:
+            if name not in allowed:
+                hint = _did_you_mean(name, allowed)
+                listing = "" if hint else f" (the layout's channels: {', '.join(channels)})"
+                raise _KeyedError(f"data.{key}.{name}" if key in ("channels", "units") else f"data.{key}",
+                                  f"'{name}' is not a channel of the layout{hint}{listing}")  # fmt: skip
         return self
 
     @model_validator(mode="after")

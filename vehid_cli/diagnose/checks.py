@@ -114,11 +114,24 @@ def noise_finding(ch: Channel, assumed_from_data: bool) -> Finding:
     )  # fmt: skip
 
 
-def check_channels(channels: Sequence[Channel], assumed_from_data: bool = False) -> Checks:
-    """Every registered fault's check and the noise check on every channel (in the channels' order)."""
+def unit_finding(name: str, unit: str, origin: str) -> Finding:
+    """Where a channel's unit came from: the config, the file, or nowhere (SI by default: said, not silent)."""
+    if origin.startswith("default"):
+        return Finding(name, "unit", WARNING, float("nan"), f"{name} is read as SI: {origin}",
+                       fix=f"give its unit: data.units.{name} (or data.units.acc / disp)")  # fmt: skip
+    return Finding(name, "unit", OK, float("nan"), f"read in {unit} ({origin})")
+
+
+def check_channels(
+    channels: Sequence[Channel], assumed_from_data: bool = False, units: dict[str, tuple[str, str]] | None = None
+) -> Checks:
+    """Every registered fault's check and the noise check on every channel (in the channels' order), and where its
+    unit came from (`units`: channel -> (unit, origin); None: a format whose units are SI by definition)."""
     channels = tuple(channels)
     findings = []
     for ch in channels:
+        if units and ch.name in units:
+            findings.append(unit_finding(ch.name, *units[ch.name]))
         for fault in FAULTS.values():
             found = fault.check(ch, channels)
             if found is not None:
@@ -130,6 +143,6 @@ def check_channels(channels: Sequence[Channel], assumed_from_data: bool = False)
 def check_task(task: Task, reference: dict[str, NDArray] | None = None) -> Checks:
     """The checks of a task's measured run (`reference`: its data, default the measured channels)."""
     reference = task.measured if reference is None else reference
-    units = dict(task.config.data.units)
+    units = {n: u for n, (u, origin) in (task.units or {}).items() if not origin.startswith("default")}
     from_data = task.sigma_source.startswith("estimated")
-    return check_channels(channels_of(task, reference, units), from_data)
+    return check_channels(channels_of(task, reference, units), from_data, task.units)

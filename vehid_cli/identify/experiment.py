@@ -195,9 +195,15 @@ def check_time_step(config: Config, dt: float, key: str) -> None:
     f_max = float(omega[-1]) / (2 * math.pi)
     dt_max = 1.0 / (MIN_SAMPLES_PER_PERIOD * f_max)
     if dt > dt_max * (1 + 1e-9):
+        hint = ""
+        if "time step" in key and dt * 1e-3 <= dt_max:  # a measured run whose step fits only in milliseconds
+            hint = (
+                f"; the time stamps step by {dt:g}, which fits a logger at {1 / (dt * 1e-3):g} Hz if they are in "
+                "ms: set data.time_unit: ms"
+            )
         raise InputError(
             f"time step {dt:g} s is too coarse for the wheel-hop mode at {f_max:.2f} Hz: use dt <= {dt_max:.3g} s "
-            f"({MIN_SAMPLES_PER_PERIOD} samples per period of the fastest mode)",
+            f"({MIN_SAMPLES_PER_PERIOD} samples per period of the fastest mode){hint}",
             source=config.source,
             key=key,
         )

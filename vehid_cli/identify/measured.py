@@ -17,7 +17,7 @@ rear wheels meet it wheelbase/speed later), or the configured road on the run's 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,10 +26,12 @@ from numpy.typing import NDArray
 from ..config import Config
 from ..core.errors import InputError
 from ..core.streams import experiment_rng
+from ..core.units import SI_FACTORS
 from ..io.measurement import read_measurement
 from ..io.read import read_record
 from ..io.record import Record, remove_offset
 from ..models.road import road_function
+from ..models.sensors import FAMILY
 from .experiment import Experiment, check_time_step
 
 ROAD = ("road1", "road2", "road3", "road4")
@@ -46,6 +48,7 @@ class MeasuredRun:
     observed: dict[str, NDArray] | None  # family -> (n, k) bool: the channel's own samples (None: every sample)
     source: str
     raw: dict[str, NDArray] | None = None  # family -> (n, k) the channels as read [SI], before offsets are removed
+    units: dict[str, tuple[str, str]] | None = None  # channel -> (the unit it was read in, where that came from)
 
     @property
     def dt(self) -> float:
@@ -81,11 +84,13 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
     road_names = {"actuators": ROAD, "tracks": TRACKS, "config": ()}[config.road.input]
     ours = sensors + list(road_names)
     channels = {name: data.channels.get(name, name) for name in ours}
-    units = {name: unit for name, unit in data.units.items() if name in channels}
+    units = configured_units(config, ours)
     record = read_record(
         path, channels, units, time=data.time, window=data.window, rate=data.rate, variable=data.variable,
         time_unit=data.time_unit, resample=data.resample,
     )  # fmt: skip
+    check_units(config, record, units, path)
+    record = rewired(record, data.invert, data.swap)
     raw = {f: np.column_stack([record.channel(n) for n in layout.names(f)]) for f in families}
     if data.offsets == "remove":
         record = remove_offset(record, sensors, "first_second")
@@ -96,9 +101,55 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
         observed[family] = np.column_stack([_observed(record, n) for n in names])
     every = all(mask.all() for mask in observed.values())
     road = _road(config, record, road_names)
+    origin = {n: (units[n], "data.units" if n in data.units else "data.units (its family)") for n in units}
+    origin |= {n: (record.declared[n], "the file") for n in sensors if n not in units and record.declared.get(n)}
+    origin |= {n: ("SI", "default: no unit in data.units, its family or the file") for n in sensors if n not in origin}
     return MeasuredRun(
-        t=record.t, road=road, outputs=outputs, observed=None if every else observed, source=source, raw=raw
+        t=record.t, road=road, outputs=outputs, observed=None if every else observed, source=source, raw=raw,
+        units=origin,
     )
+
+
+def configured_units(config: Config, names) -> dict[str, str]:
+    """Each channel's unit as the config gives it: its own entry in data.units, else its family's (data.units.acc,
+    data.units.disp; road inputs are displacements); a channel without either takes the unit its file declares."""
+    layout, units = config.sensor_layout(), config.data.units
+    family = {s.name: FAMILY[s.kind] for s in layout.sensors} | dict.fromkeys(ROAD + TRACKS, "disp")
+    out = {}
+    for name in names:
+        unit = units.get(name) or units.get(family.get(name, ""))
+        if unit:
+            out[name] = unit
+    return out
+
+
+def check_units(config: Config, record: Record, units: dict[str, str], path) -> None:
+    """A unit the config gives that the file contradicts (it declares another for the channel) is an InputError
+    naming the config's key: the two cannot both be right."""
+    for name, unit in units.items():
+        theirs = record.declared.get(name, "")
+        if theirs and theirs in SI_FACTORS and SI_FACTORS.get(unit) != SI_FACTORS[theirs]:
+            key = f"data.units.{name}" if name in config.data.units else "data.units (its family)"
+            raise InputError(
+                f"the config reads '{name}' in {unit} ({key}) but {path} declares {theirs} for it; remove the "
+                "config's unit to take the file's, or correct the one that is wrong",
+                source=config.source,
+                key=key,
+            )
+
+
+def rewired(record: Record, invert, swap) -> Record:
+    """The record with the chain's declared mistakes undone: data.invert's channels negated, data.swap's pairs
+    exchanged (their samples and sample times)."""
+    if not invert and not swap:
+        return record
+    channels, stamps, rates = dict(record.channels), dict(record.stamps), dict(record.rates)
+    for name in invert:
+        channels[name] = -channels[name]
+    for a, b in swap:
+        for table in (channels, stamps, rates):
+            table[a], table[b] = table[b], table[a]
+    return replace(record, channels=channels, stamps=stamps, rates=rates)
 
 
 def _observed(record: Record, name: str) -> NDArray:

@@ -48,6 +48,7 @@ class Task:
     offsets: bool = False  # one unknown offset per channel, profiled out (data.offsets: identify)
     drawn: dict[str, NDArray] | None = None  # simulated data: the noise sigma each run's noise is drawn with
     raw: dict[str, NDArray] | None = None  # measured data: the channels as read, before offsets were removed
+    units: dict[str, tuple[str, str]] | None = None  # measured data: channel -> (its unit, where it came from)
 
     @property
     def dim(self) -> int:
@@ -241,7 +242,7 @@ def build_task(config: Config, data_file: str | Path | None = None) -> Task:
     truth = nominal if ident.truth == "config" else None
     return Task(
         config, experiment, names, lower, upper, nominal, truth, families, None, run.outputs, sigma, source,
-        str(data_file), observed=run.observed, offsets=offsets, raw=run.raw,
+        str(data_file), observed=run.observed, offsets=offsets, raw=run.raw, units=run.units,
     )  # fmt: skip
 
 

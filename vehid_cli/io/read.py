@@ -71,6 +71,7 @@ def read_record(
     units = dict(units or {})
     fmt = _format_of(path, channels, units, rate, nominal_rate, time_unit, window)
     raw = fmt.read(path, channels, time=time, rate=rate, variable=variable)
+    declared = {ours: r.unit.strip() for ours, r in raw.items()}
     steps = _in_si(raw, channels, units, time_unit, nominal_rate, src)
     rates = {ours: rate_of(r, steps[ours]) for ours, r in raw.items()}
     if not resample:
@@ -84,7 +85,7 @@ def read_record(
     near = NATIVE_MATCH / grid_rate
     stamps = {ours: r.t - start for ours, r in raw.items()}
     stamps = {ours: s[(s >= t[0] - near) & (s <= t[-1] + near)] for ours, s in stamps.items()}
-    return Record(t=t, channels=values, source=src, rates=rates, stamps=stamps)
+    return Record(t=t, channels=values, source=src, rates=rates, stamps=stamps, declared=declared)
 
 
 def _format_of(

@@ -5,7 +5,7 @@ their offsets (accelerometers' gravity and bias)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +30,7 @@ class Record:
     # name -> its own sample times [s] on the axis of `t` (the file's stamps less the record's start), those
     # within [t[0], t[-1]] (to 1e-3 of a grid step): after a window, those inside the window
     stamps: dict[str, NDArray]
+    declared: dict[str, str] = field(default_factory=dict)  # name -> the unit its file declares ('' none)
 
     @property
     def rate(self) -> float:
