@@ -84,13 +84,14 @@ class Candidate:
     start: dict[str, float] = field(default_factory=dict)
     shape: tuple[str, ...] = ()  # shape parameters, freed where the data can tell them
     shape_limits: dict[str, tuple[float, float]] = field(default_factory=dict)
-    kind: str = "effect"  # "effect" or "parameter"
+    kind: str = "effect"  # "effect", "parameter" or "sensor" (a fault of the measurement chain)
     strength: tuple[str, ...] = ()
     null: dict[str, float] = field(default_factory=dict)
     starts: tuple[dict[str, float], ...] = ()
     linear: bool = True
     group: str = ""  # a known parameter's group (springs, dampers, ...)
     companions: tuple[str, ...] = ()  # known parameters the effect replaces, freed with it once it is selected
+    df: int | None = None  # degrees of freedom of its test (None: one per unknown it frees)
 
 
 def parameter_candidate(name: str, configured: float, group: str = "", limits=None) -> Candidate:
@@ -395,7 +396,7 @@ def rank_candidates(
         fit = candidate_fit(problem, base, x_added, cand, budget, scale, own)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
-        k = len(added) - len(fit.fixed)
+        k = cand.df if cand.df is not None else len(added) - len(fit.fixed)
         p = float(stats.chi2.sf(lr, k))
         vJ, per = validation_J(names, fit.x) if fit.J < base.J else (base_vJ, base_per)
         better = lowers_validation(vJ, per, base_vJ, base_per, min_gain)

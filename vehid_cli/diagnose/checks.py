@@ -17,8 +17,9 @@ from numpy.typing import NDArray
 
 from ..core.result import Result
 from ..identify.task import Task
-from ..models.faults import FAIL, FAULTS, OK, WARNING, Channel, Finding
+from ..models.faults import FAIL, FAULTS, OK, WARNING, Channel, Finding, fault_of
 from ..models.noise import estimate_noise_sigma
+from .attribution import Candidate
 
 NOISE_RATIO = 3.0  # the noise this many times above or below the assumed one is worth a warning
 STATUS_ORDER = {OK: 0, WARNING: 1, FAIL: 2}
@@ -77,29 +78,6 @@ def _stops(fault: str) -> bool:
     return bool(base is not None and base.stops)
 
 
-def channels_of(task: Task, reference: dict[str, NDArray], units: dict[str, str] | None = None) -> tuple[Channel, ...]:
-    """Every measured channel of the task beside the configured model's prediction, at its own samples."""
-    exp = task.experiment
-    prediction = exp.outputs()
-    raw = task.raw or {}
-    offsets_free = task.offsets or task.config.data.offsets == "remove"
-    out = []
-    for family in task.families:
-        names = exp.layout.names(family)
-        kinds = {s.name: s.kind for s in exp.layout.sensors}
-        for k, name in enumerate(names):
-            own = np.ones(exp.t.size, dtype=bool) if task.observed is None else task.observed[family][:, k]
-            y = np.asarray(reference[family][own, k], dtype=float)
-            p = np.asarray(prediction[family][own, k], dtype=float)
-            r = None if family not in raw else np.asarray(raw[family][own, k], dtype=float)
-            out.append(Channel(
-                name=name, family=family, column=k, kind=kinds.get(name, family), t=exp.t[own], y=y - y.mean(),
-                pred=p - p.mean(), sigma=float(task.sigma[family][k]), raw=r, pred_mean=float(p.mean()),
-                unit=(units or {}).get(name, ""), offsets_free=offsets_free,
-            ))  # fmt: skip
-    return tuple(out)
-
-
 def noise_finding(ch: Channel, assumed_from_data: bool) -> Finding:
     """The channel's noise (third differences of its samples) against the sigma the fit will weight it with."""
     est = float(estimate_noise_sigma(ch.recorded[:, None])[0])
@@ -140,9 +118,38 @@ def check_channels(
     return Checks(tuple(findings))
 
 
+def check_runs(tasks: Sequence[Task]) -> Checks:
+    """The checks of every run (several: each finding tagged with its run's file)."""
+    found = [check_task(t) for t in tasks]
+    merged = found[0]
+    for t, more in zip(tasks[1:], found[1:], strict=True):
+        merged = merged.merged(more, tasks[0].data_file, t.data_file)
+    return merged
+
+
 def check_task(task: Task, reference: dict[str, NDArray] | None = None) -> Checks:
     """The checks of a task's measured run (`reference`: its data, default the measured channels)."""
-    reference = task.measured if reference is None else reference
-    units = {n: u for n, (u, origin) in (task.units or {}).items() if not origin.startswith("default")}
     from_data = task.sigma_source.startswith("estimated")
-    return check_channels(channels_of(task, reference, units), from_data, task.units)
+    return check_channels(task.channel_views(reference), from_data, task.units)
+
+
+def sensor_candidates(checks: Checks, channels: Sequence[Channel]) -> dict[str, Candidate]:
+    """A `sensor:<channel>:<fault>` candidate for each finding that points to a fault (a swap once per pair): its
+    unknowns ``sensor:<channel>:<param>`` with the ranges, start and null value of the fault's correction."""
+    views = {c.name: c for c in channels}
+    out: dict[str, Candidate] = {}
+    for f in checks.problems:
+        if not f.fault or f.channel not in views:
+            continue
+        name = f"sensor:{f.channel}:{f.fault}"
+        fault = fault_of(f.fault)
+        if fault.pair and f"sensor:{f.fault.partition(':')[2]}:{fault.name}:{f.channel}" in out:
+            continue  # the pair's other half names the same swap
+        spec = fault.correction(views[f.channel], f)
+        unknowns = tuple(f"sensor:{f.channel}:{p}" for p in spec.params)
+        out[name] = Candidate(
+            name, unknowns, dict(zip(unknowns, spec.limits, strict=True)), dict(zip(unknowns, spec.start, strict=True)),
+            kind="sensor", strength=unknowns, null=dict(zip(unknowns, spec.null, strict=True)), linear=False,
+            df=spec.df,
+        )  # fmt: skip
+    return out

@@ -140,6 +140,7 @@ class Diagnosis(Result):
     chi2_limit: float | None = None  # residual power per sample above which the residual is not noise
     unexplained: Unexplained | None = None  # the non-parametric strut force left unexplained (car, incomplete)
     data_files: tuple[str, ...] = ()  # several runs fitted jointly (empty: one run)
+    checks: tuple[dict, ...] = ()  # the pre-fit checks of the measurement chain (SPEC section 6)
 
     @property
     def residual_ratio(self) -> float | None:
@@ -195,6 +196,7 @@ class Diagnosis(Result):
             "noise": self.sigma_source,
             "wall_s": self.wall_s,
             "notes": list(self.notes),
+            "checks": [dict(c) for c in self.checks],
         } | ({"data_files": list(self.data_files)} if self.data_files else {})
 
 
@@ -237,7 +239,7 @@ class Loop:
 def own_unknowns(cand: Candidate, names: tuple[str, ...]) -> list[str]:
     """A claimed candidate's own unknowns among `names`: an effect's parameters (not the car's it also
     freed), a known parameter itself."""
-    if cand.kind == "parameter":
+    if cand.kind in ("parameter", "sensor"):
         return [n for n in cand.unknowns if n in names]
     return [n for n in names if n.partition(".")[0] == cand.effect]
 
@@ -301,7 +303,7 @@ class _Augmentation:
         idx = [f.names.index(n) for n in reduced]
         free = np.array([n not in f.fixed for n in reduced])
         without = fit_free(problem_r, f.x[idx], free, budget)
-        k = len([n for n in own if n not in f.fixed])
+        k = cand.df if cand.df is not None else len([n for n in own if n not in f.fixed])
         return float(stats.chi2.sf(self.subject.statistic(f)(without.J, f.J), max(k, 1))), without
 
     def round(self) -> bool:
@@ -388,7 +390,7 @@ class _Augmentation:
                 f"{n} = {refit.x[refit.names.index(n)]:.3g} ± {ci[refit.names.index(n)]:.2g}"
                 for n in cand.strength if n in refit.names
             )  # fmt: skip
-            what = "its configured value" if cand.kind == "parameter" else "zero"
+            what = {"parameter": "its configured value", "sensor": "its no-fault value"}.get(cand.kind, "zero")
             self.note(f"{best.effect} not claimed: its strength interval includes {what} ({shown})")
             self.dropped.add(best.effect)
             return

@@ -21,6 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from ..identify.corrections import corrected, is_sensor_unknown
+
 BAND_Z = 1.959963984540054  # two-sided 95 %
 
 
@@ -195,10 +197,14 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
     layout; a channel slower than the grid is analysed at its own samples (NaN elsewhere in `residual`)."""
     exp = task.experiment
     objective = task.objective(reference)
-    values = {n: np.asarray(v, dtype=float) for n, v in zip(names, x, strict=True)}
+    every = {n: np.asarray(v, dtype=float) for n, v in zip(names, x, strict=True)}
+    values = {n: v for n, v in every.items() if not is_sensor_unknown(n)}  # the car's; the chain's corrected below
     with np.errstate(all="ignore"):
         resp = exp.simulate(values)
     sim = exp.read(resp)
+    if task.corrections:
+        batch = corrected(task.corrections, {f: v[None] for f, v in sim.items()}, every)
+        sim = {f: v[0] for f, v in batch.items()}
     parts, channels = [], []
     for family in reference:
         r = objective.error(family, sim[family]) / task.sigma[family]

@@ -20,7 +20,9 @@ from ..config import Config
 from ..core.errors import InputError
 from ..core.streams import run_streams
 from ..models.effects import LIBRARY
+from ..models.faults import Channel, Context, Finding, fault_of
 from ..optimizers.base import Problem
+from .corrections import SensorCorrection, corrected, is_sensor_unknown, split_sensor
 from .crlb import CramerRao, bound_from_information, cramer_rao, information
 from .experiment import Experiment, build_experiment, measurement_noise
 from .measured import experiment_of, read_run
@@ -49,6 +51,7 @@ class Task:
     drawn: dict[str, NDArray] | None = None  # simulated data: the noise sigma each run's noise is drawn with
     raw: dict[str, NDArray] | None = None  # measured data: the channels as read, before offsets were removed
     units: dict[str, tuple[str, str]] | None = None  # measured data: channel -> (its unit, where it came from)
+    corrections: tuple[SensorCorrection, ...] = ()  # the measurement chain's corrections among the unknowns
 
     @property
     def dim(self) -> int:
@@ -79,7 +82,10 @@ class Task:
             if name in names:
                 raise InputError(f"unknown '{name}' is listed twice", key="identify.unknowns")
             values = self.config.vehicle.values()
-            if is_effect_unknown(name):
+            if is_sensor_unknown(name):
+                lo, hi = (limits or {}).get(name, (-np.inf, np.inf))
+                x0 = (start or {}).get(name, 0.0)
+            elif is_effect_unknown(name):
                 lo, hi = effect_box(name)
                 x0 = effect_nominal(self.config, name)
             elif name in values:  # a vehicle parameter: the configured bounds factors
@@ -97,6 +103,7 @@ class Task:
             lower.append(lo)
             upper.append(hi)
             nominal.append(float(np.clip(x0, lo, hi)))
+        added = tuple(n for n in extra if is_sensor_unknown(n))
         return dataclasses.replace(
             self,
             names=tuple(names),
@@ -104,7 +111,55 @@ class Task:
             upper=np.array(upper, dtype=float),
             nominal=np.array(nominal, dtype=float),
             truth=None if len(names) > len(self.names) else self.truth,
+            corrections=self.corrections + tuple(self._correction(n, (start or {}).get(n, 0.0)) for n in added),
         )
+
+    def channel_views(self, reference: dict[str, NDArray] | None = None) -> tuple[Channel, ...]:
+        """Every measured channel beside the configured model's prediction of it, at its own samples (what the
+        checks of the measurement chain read)."""
+        reference = self.measured if reference is None else reference
+        exp = self.experiment
+        prediction = exp.outputs()
+        raw = self.raw or {}
+        units = {n: u for n, (u, origin) in (self.units or {}).items() if not origin.startswith("default")}
+        free = self.offsets or self.config.data.offsets == "remove"
+        kinds = {s.name: s.kind for s in exp.layout.sensors}
+        out = []
+        for family in self.families:
+            for k, name in enumerate(exp.layout.names(family)):
+                own = self._own(family, k)
+                y, p = reference[family][own, k], prediction[family][own, k]
+                out.append(Channel(
+                    name=name, family=family, column=k, kind=kinds.get(name, family), t=exp.t[own], y=y - y.mean(),
+                    pred=p - p.mean(), sigma=float(self.sigma[family][k]),
+                    raw=None if family not in raw else raw[family][own, k], pred_mean=float(p.mean()),
+                    unit=units.get(name, ""), offsets_free=free,
+                ))  # fmt: skip
+        return tuple(out)
+
+    def _own(self, family: str, k: int) -> NDArray:
+        """(n,) bool: the grid samples that are channel k of `family`'s own."""
+        return np.ones(self.experiment.t.size, dtype=bool) if self.observed is None else self.observed[family][:, k]
+
+    def _correction(self, name: str, start: float) -> SensorCorrection:
+        """The correction behind the unknown ``sensor:<channel>:<param>`` (its context from this run's data)."""
+        channel, param = split_sensor(name)
+        where = {n: (f, k) for f in self.families for k, n in enumerate(self.experiment.layout.names(f))}
+        if channel not in where or self.measured is None:
+            raise InputError(f"'{name}' names no measured channel of the objective", key="identify.unknowns")
+        family, k = where[channel]
+        fault = fault_of(param)
+        partner = where[param.partition(":")[2]][1] if fault.pair else None
+        view = next(v for v in self.channel_views() if v.name == channel)
+        finding = Finding(channel, fault.name, "warning", 0.0, "", fault=param, start={param: start})
+        spec = fault.correction(view, finding)
+        own = self._own(family, k)
+        mask = None
+        if spec.mask is not None:
+            mask = np.zeros(own.size)
+            mask[np.flatnonzero(own)[spec.mask]] = 1.0
+        ctx = Context(self.experiment.t, self.measured[family][:, k], mask)
+        return SensorCorrection((name,), fault, family, k, partner, ctx)
 
     def reference(self, run: int) -> dict[str, NDArray]:
         """The responses run `run` identifies from: measured ones, or clean plus the run's own noise."""
@@ -129,8 +184,7 @@ class Task:
         names = self.names
 
         def simulate(X: NDArray) -> dict[str, NDArray]:
-            with np.errstate(all="ignore"):
-                return self.experiment.outputs({n: X[:, j] for j, n in enumerate(names)})
+            return self.outputs({n: X[:, j] for j, n in enumerate(names)})
 
         def cost(X: NDArray) -> NDArray:
             return objective.costs(simulate(X))
@@ -139,6 +193,14 @@ class Task:
             return objective.costs_and_residuals(simulate(X))
 
         return Problem(self.lower, self.upper, cost, cost_and_residuals, names=names)
+
+    def outputs(self, values: Mapping[str, NDArray]) -> dict[str, NDArray]:
+        """The model's channels (family -> (P, n, k)) for a batch of the unknowns' values, as the measurement chain
+        records them (the corrections among the unknowns applied)."""
+        car = {n: v for n, v in values.items() if not is_sensor_unknown(n)}
+        with np.errstate(all="ignore"):
+            out = self.experiment.outputs(car)
+            return corrected(self.corrections, out, values) if self.corrections else out
 
     @property
     def channel_names(self) -> tuple[str, ...]:

@@ -27,6 +27,7 @@ from ...diagnose.attribution import (
     fit_intervals,
     lsq_fit,
 )
+from ...diagnose.checks import check_runs, sensor_candidates
 from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks, masked
 from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Diagnosis, ModelReport, Subject, chi2_limit, close
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
@@ -222,7 +223,11 @@ def diagnose(
     R_total = task.residual_samples
     split = validation_split(config, task, ref, files, validate_file)
     R_train = int(R_total if split.keep is None else split.keep.sum())
-    specs = candidate_specs(config)
+    runs = task.tasks if isinstance(task, JointTask) else (task,)
+    found = check_runs(runs)  # the measurement chain first: its faults are candidates beside the physics
+    for f in found.problems:
+        say(f"check {f.status}: {f.channel} {f.check}: {f.message}")
+    specs = {**candidate_specs(config), **sensor_candidates(found, runs[0].channel_views())}
     limits, starts = candidate_ranges(specs)
     car = CarLoop(task, ref, split, {"limits": limits, "start": starts}, files, analyse_residuals)
     # 0. can the data tell at all? (before any fit: length, noise, excitation)
@@ -244,7 +249,7 @@ def diagnose(
         candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start, order=order,
         unexplained=missing, chi2_residuals=R_total, validation_source=split.source, sigma_source=task.sigma_source,
         validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if car.joint else (),
-        extra_notes=notes,
+        extra_notes=notes, checks=tuple(found.to_json()),
     )  # fmt: skip
 
 

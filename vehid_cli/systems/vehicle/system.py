@@ -17,7 +17,7 @@ from ...core.errors import InputError
 from ...core.provenance import provenance
 from ...core.store import h5_file
 from ...core.streams import run_streams
-from ...diagnose.checks import Checks, check_task
+from ...diagnose.checks import Checks, check_runs
 from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao
 from ...identify.experiment import SimulatedRun, build_experiment, simulate_measurement
@@ -67,12 +67,7 @@ class VehicleSystem(System):
         if self.source.simulated:
             return None
         if self._checks is None:
-            tasks = self.task.tasks if isinstance(self.task, JointTask) else (self.task,)
-            found = [check_task(t) for t in tasks]
-            merged = found[0]
-            for t, more in zip(tasks[1:], found[1:], strict=True):
-                merged = merged.merged(more, tasks[0].data_file, t.data_file)
-            self._checks = merged
+            self._checks = check_runs(self.task.tasks if isinstance(self.task, JointTask) else (self.task,))
         return self._checks
 
     @classmethod

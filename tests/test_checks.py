@@ -1,0 +1,130 @@
+"""Issue 21: the measurement chain is checked against the configured model before any fit, on runs vehid did not
+make (tests/faulty_runs.py: the independent simulator's car 3-8 % off the config, each fault injected as a real chain
+makes it, MDF4 and a logger's multi-rate CSV export): each fault is named on its channel, a clean run raises nothing,
+identify stops on a fault that makes the fit meaningless and says what else it sees."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from tests import faulty_runs as fr
+from tests.conftest import ROOT
+from vehid_cli.cli.app import app
+from vehid_cli.config import load_config
+from vehid_cli.diagnose.checks import check_task
+from vehid_cli.systems import build_system
+
+RIG = ROOT / "configs" / "examples" / "four_post_rig.yaml"
+STOPS = {"sign", "gain", "swap"}  # a fit on these is meaningless: identify stops
+
+
+def sets_args(sets: list[str]) -> list[str]:
+    return [a for s in sets for a in ("--set", s)]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    out = tmp_path_factory.mktemp("faulty")
+    return {
+        (fault, suffix): fr.write(out / f"{fault}{suffix}", fault)
+        for fault in fr.FAULTS
+        for suffix in (".mf4", ".csv")
+    }
+
+
+def checks_of(path, sets=()):
+    system = build_system(load_config(RIG, [*fr.config_sets(), *sets]), path)
+    return check_task(system.task)
+
+
+@pytest.mark.parametrize("suffix", [".mf4", ".csv"])
+@pytest.mark.parametrize("fault", [f for f in fr.FAULTS if f != "clean"])
+def test_each_fault_is_named_on_its_channel(runs, fault, suffix):
+    path, channel, name = runs[fault, suffix]
+    found = checks_of(path)
+    hits = [f for f in found.problems if f.channel == channel and f.fault == name]
+    assert hits, [(f.channel, f.check, f.fault) for f in found.problems]
+    assert hits[0].status == ("fail" if fault in STOPS else "warning")
+    assert (fault in STOPS) == any(f.channel == channel for f in found.stopping)
+    assert hits[0].fix  # it says what to change
+    others = {f.channel for f in found.problems if f.check != "noise"} - {channel, name.partition(":")[2]}
+    assert not others, [(f.channel, f.check, f.message) for f in found.problems]  # no other channel accused
+
+
+@pytest.mark.parametrize("suffix", [".mf4", ".csv"])
+def test_a_clean_run_passes_every_check(runs, suffix):
+    found = checks_of(runs["clean", suffix][0])
+    assert not found.stopping
+    assert not [f for f in found.problems if f.check != "noise"], [(f.channel, f.check) for f in found.problems]
+    assert {f.check for f in found.findings} >= {"sign", "scale", "swap", "delay", "clip", "dropout", "drift", "noise"}
+
+
+def test_the_unit_slip_names_the_unit_the_file_holds(runs):
+    found = checks_of(runs["gain", ".mf4"][0])
+    (slip,) = [f for f in found.stopping if f.channel == "d1"]
+    assert "unit factor of 0.1" in slip.message and "cm" in slip.message and slip.fix == "data.units.d1: cm"
+
+
+def test_the_declared_fixes_undo_the_faults(runs):
+    """data.invert, data.swap and data.units, as the checks' fixes say, make the faulty runs pass."""
+    assert not checks_of(runs["sign", ".mf4"][0], ["data.invert=[a]"]).stopping
+    assert not checks_of(runs["swap", ".mf4"][0], ["data.swap=[[a, b]]"]).stopping
+    units = dict(fr.UNITS, d1="cm")
+    assert not checks_of(runs["gain", ".mf4"][0], ["data.units=" + json.dumps(units)]).stopping
+
+
+def test_identify_stops_on_a_flipped_sensor_naming_it_and_fits_with_no_checks(runs, tmp_path):
+    path = runs["sign", ".mf4"][0]
+    args = ["identify", str(RIG), "--data", str(path), "-o", str(tmp_path / "s.h5"), *sets_args(fr.config_sets())]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2
+    for fragment in (str(path), "a runs against the configured model", "-1.00 g", "data.invert: [a]", "--no-checks"):
+        assert fragment in res.output, (fragment, res.output)
+    out = tmp_path / "s.json"
+    res = CliRunner().invoke(app, [*args, "--no-checks", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert any(c["channel"] == "a" and c["check"] == "sign" and c["status"] == "fail" for c in doc["checks"])
+    assert any("--no-checks" in w for w in doc["warnings"])
+    assert doc["per_channel"]["a"]["chi2_per_sample"] > 100 * doc["per_channel"]["b"]["chi2_per_sample"]
+
+
+def test_identify_on_a_clean_run_reports_checks_and_per_channel_chi2(runs, tmp_path):
+    out = tmp_path / "c.json"
+    args = ["identify", str(RIG), "--data", str(runs["clean", ".csv"][0]), "-o", str(tmp_path / "c.h5"),
+            "--json", str(out), *sets_args(fr.config_sets())]  # fmt: skip
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["checks"] and not [c for c in doc["checks"] if c["status"] == "fail"]
+    assert set(doc["per_channel"]) == {"a", "b", "c", "e", "h1", "h3", "d1", "d3"}
+    assert all(0.7 < v["chi2_per_sample"] < 1.4 for v in doc["per_channel"].values()), doc["per_channel"]
+    assert doc["at_bound"] == []
+
+
+def test_a_delayed_channel_is_a_warning_naming_it_and_the_worst_channels(runs, tmp_path):
+    out = tmp_path / "d.json"
+    args = ["identify", str(RIG), "--data", str(runs["delay", ".mf4"][0]), "-o", str(tmp_path / "d.h5"),
+            "--json", str(out), *sets_args(fr.config_sets())]  # fmt: skip
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    text = " ".join(doc["warnings"])
+    assert "delay h1" in text and "worst channels (chi2 per sample): h1" in text
+
+
+def test_vehid_check_prints_a_table_per_channel_and_exits_2_on_a_swap(runs, tmp_path):
+    out = tmp_path / "k.json"
+    args = ["check", str(RIG), "--data", str(runs["swap", ".mf4"][0]), "--json", str(out), *sets_args(fr.config_sets())]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2 and "connectors are swapped" in res.output and "data.swap: [[a, b]]" in res.output
+    doc = json.loads(out.read_text())
+    assert {"channel", "check", "status", "value", "message"} <= set(doc["checks"][0])
+    res = CliRunner().invoke(app, ["check", str(RIG), "--data", str(runs["clean", ".mf4"][0]),
+                                   *sets_args(fr.config_sets())])  # fmt: skip
+    assert res.exit_code == 0 and "every check passed" in res.output
+    for name in ("a", "b", "c", "h1", "d3"):
+        assert f"\n│ {name} " in res.output or f"\n┃ {name} " in res.output or name in res.output
