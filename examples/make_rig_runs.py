@@ -30,10 +30,16 @@ BIAS = {"acc": 0.02 * G, "disp": 0.005}  # standard deviation of a sensor's offs
 
 
 def write_rig_run(
-    config: str | Path, path: str | Path, seed: int, overrides: Sequence[str] = (), noise_seed: int | None = None
+    config: str | Path,
+    path: str | Path,
+    seed: int,
+    overrides: Sequence[str] = (),
+    noise_seed: int | None = None,
+    flip: Sequence[str] = (),
 ) -> Path:
     """One run of the config (with `--set`-style `overrides`) on the road of `seed`, with the noise (and sensor
-    offsets) of `noise_seed` (default `seed`), written to `path` (.mf4, .mat, .h5, .csv)."""
+    offsets) of `noise_seed` (default `seed`), written to `path` (.mf4, .mat, .h5, .csv); the sensors named in
+    `flip` are mounted upside down (their channels, gravity included, recorded negated)."""
     cfg = load_config(config, [*overrides, f"identify.seed={seed}"])
     noise_seed = seed if noise_seed is None else noise_seed
     experiment = build_experiment(cfg)
@@ -45,6 +51,7 @@ def write_rig_run(
         family = FAMILY[sensor.kind]
         y = run.channels[family][:, experiment.layout.names(family).index(sensor.name)]
         y = y + BIAS[family] * rng.standard_normal() + (G if family == "acc" else 0.0)
+        y = -y if sensor.name in flip else y
         step = int(round(1.0 / (SLOW.get(sensor.kind, 1.0 / dt) * dt)))
         channels[sensor.name] = (t[::step], y[::step])
     names = {ours: cfg.data.channels.get(ours, ours) for ours in channels}
@@ -61,11 +68,14 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1, help="run k uses seed + k - 1 (its road and its noise)")
     parser.add_argument("--format", choices=("mf4", "mat", "h5", "csv"), default=None)
     parser.add_argument("--set", dest="overrides", action="append", default=[], help="dotted.key=value (repeatable)")
+    parser.add_argument("--flip", action="append", default=[], help="a sensor mounted upside down (repeatable)")
     args = parser.parse_args()
     args.output.mkdir(parents=True, exist_ok=True)
     for k in range(args.runs):
         fmt = args.format or ("mf4", "mat")[k % 2]
-        path = write_rig_run(args.config, args.output / f"rig_run{k + 1}.{fmt}", args.seed + k, args.overrides)
+        path = write_rig_run(
+            args.config, args.output / f"rig_run{k + 1}.{fmt}", args.seed + k, args.overrides, flip=args.flip
+        )
         print(f"wrote {path}")
 
 

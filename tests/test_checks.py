@@ -116,11 +116,12 @@ def test_a_delayed_channel_is_a_warning_naming_it_and_the_worst_channels(runs, t
     assert "delay h1" in text and "worst channels (chi2 per sample): h1" in text
 
 
-def test_vehid_check_prints_a_table_per_channel_and_exits_2_on_a_swap(runs, tmp_path):
+def test_vehid_check_prints_a_table_per_channel_and_says_identify_would_stop_on_a_swap(runs, tmp_path):
     out = tmp_path / "k.json"
     args = ["check", str(RIG), "--data", str(runs["swap", ".mf4"][0]), "--json", str(out), *sets_args(fr.config_sets())]
     res = CliRunner().invoke(app, args)
-    assert res.exit_code == 2 and "connectors are swapped" in res.output and "data.swap: [[a, b]]" in res.output
+    assert res.exit_code == 0 and "connectors are swapped" in res.output and "data.swap: [[a, b]]" in res.output
+    assert "identify would stop" in res.output and "FAIL" in res.output
     doc = json.loads(out.read_text())
     assert {"channel", "check", "status", "value", "message"} <= set(doc["checks"][0])
     res = CliRunner().invoke(app, ["check", str(RIG), "--data", str(runs["clean", ".mf4"][0]),
@@ -128,3 +129,42 @@ def test_vehid_check_prints_a_table_per_channel_and_exits_2_on_a_swap(runs, tmp_
     assert res.exit_code == 0 and "every check passed" in res.output
     for name in ("a", "b", "c", "h1", "d3"):
         assert f"\n│ {name} " in res.output or f"\n┃ {name} " in res.output or name in res.output
+
+
+def diagnose_fault(path):
+    from vehid_cli.systems.vehicle.diagnosis import diagnose
+
+    cfg = load_config(RIG, [*fr.config_sets(), "identify.objective=wls", "noise.level=0", "identify.truth=config",
+                            "identify.algorithm.name=lsq"])  # fmt: skip
+    return diagnose(cfg, path, analyse_residuals=False)
+
+
+def assert_named_and_estimates_within_4_sd(d, expected: str | None):
+    import numpy as np
+
+    sensors = [s for s in d.selected if s.startswith("sensor:")]
+    if expected is None:
+        assert not sensors, d.selected
+    else:
+        first = [(r.effect, r.statistic) for r in d.rounds[0]][:3]
+        assert d.selected and d.selected[0] == expected, (d.selected, first)
+    idx = [d.after.names.index(n) for n in fr.UNKNOWNS]
+    truth = np.array([fr.TRUTH[n] for n in fr.UNKNOWNS])
+    z = (d.after.x[idx] - truth) / (d.after.ci[idx] / 1.959963984540054)
+    assert np.all(np.abs(z) < 4), dict(zip(fr.UNKNOWNS, z.round(2), strict=True))
+
+
+@pytest.mark.parametrize(("fault", "suffix"), [("swap", ".csv"), ("clean", ".mf4")])
+def test_diagnose_names_the_fault_first_and_lands_on_the_car(runs, fault, suffix):
+    path, channel, name = runs[fault, suffix]
+    assert_named_and_estimates_within_4_sd(diagnose_fault(path), f"sensor:{channel}:{name}" if channel else None)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("suffix", [".mf4", ".csv"])
+@pytest.mark.parametrize("fault", fr.FAULTS)
+def test_diagnose_names_every_fault_first_and_lands_on_the_car(runs, fault, suffix):
+    """Issue 21, acceptance 1: each fault, each format: sensor:<channel>:<fault> selected first, the car within 4
+    standard deviations after; a clean run selects no sensor: candidate."""
+    path, channel, name = runs[fault, suffix]
+    assert_named_and_estimates_within_4_sd(diagnose_fault(path), f"sensor:{channel}:{name}" if channel else None)

@@ -3,23 +3,17 @@ hydraulic orifice gives). `tests/test_effects.py` registers it and checks that t
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from vehid_cli.models.effects import Effect, Param, Shape
-from vehid_cli.models.effects.base import constant, per_axle_candidate
+from vehid_cli.models.effects.base import SLOT, constant, per_axle_candidate
 
 
-def law(slots):
-    ON, CQ = slots["on"], slots["cq"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            f += p[CQ + i] * v * abs(v)
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """f += cq v |v| on strut i (models/effects/base.py: the contract)."""
+    if p[SLOT.on] != 0.0:
+        f += p[SLOT.cq + i] * v * abs(v)
+    return f, damper
 
 
 EFFECT = Effect(
@@ -27,7 +21,7 @@ EFFECT = Effect(
     "a quadratic damper beside the strut, f = cq v |v|",
     (Param("cq", 0.0, 0.0, 1e6, "N s^2/m^2", "quadratic damping coefficient"),),
     strength="cq",
-    law=law,
+    force=force,
     order=35,
     car_candidate=lambda cf, cr: per_axle_candidate(
         "toy_quadratic_damper", "cq", constant(0.0), constant(5e4), cf, cr

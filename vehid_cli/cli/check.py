@@ -20,9 +20,9 @@ def _table(system, checks):
 
     names = list(dict.fromkeys(f.check for f in checks.findings))
     table = Table(title=f"checks of {system.data_file} against the configured model", title_justify="left")
-    table.add_column("channel")
+    table.add_column("channel", no_wrap=True)
     for name in names:
-        table.add_column(name, justify="center")
+        table.add_column(name, justify="center", no_wrap=True)
     for channel in dict.fromkeys(f.channel for f in checks.findings):
         status = {f.check: f.status for f in checks.findings if f.channel == channel}
         table.add_row(channel, *(SYMBOL.get(status.get(n, ""), "–") for n in names))
@@ -47,9 +47,8 @@ def check(
     The configured car predicts each channel's sign, scale, timing and range on the run's own road: a sensor upside
     down, a channel in another unit than declared, two connectors swapped, a delayed clock, a saturating sensor,
     held samples, a drifting bias, an unexpected offset and noise far from the assumed one are named with their
-    evidence and fix. Exit 2 when a finding makes any fit meaningless (what identify would stop on).
+    evidence and fix. The last line says whether identify would stop (a finding that makes any fit meaningless).
     """
-    from ..core.errors import InputError
     from ..core.jsonio import write_json
     from ..systems import check_config
 
@@ -64,5 +63,6 @@ def check(
         write_json(json_out, {"checks": checks.to_json()})
         out.print(f"wrote {json_out}")
     if checks.stopping:
-        raise InputError(checks.stop_message(), source=system.data_file)
-    out.print(f"{len(checks.problems)} warning(s), no failure" if checks.problems else "every check passed")
+        out.print(f"identify would stop: {len(checks.stopping)} failure(s) make any fit meaningless", markup=False)
+    else:
+        out.print(f"{len(checks.problems)} warning(s), no failure" if checks.problems else "every check passed")

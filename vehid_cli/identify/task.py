@@ -132,7 +132,7 @@ class Task:
                 out.append(Channel(
                     name=name, family=family, column=k, kind=kinds.get(name, family), t=exp.t[own], y=y - y.mean(),
                     pred=p - p.mean(), sigma=float(self.sigma[family][k]),
-                    raw=None if family not in raw else raw[family][own, k], pred_mean=float(p.mean()),
+                    raw=(raw[family] if family in raw else reference[family])[own, k], pred_mean=float(p.mean()),
                     unit=units.get(name, ""), offsets_free=free,
                 ))  # fmt: skip
         return tuple(out)
@@ -158,7 +158,10 @@ class Task:
         if spec.mask is not None:
             mask = np.zeros(own.size)
             mask[np.flatnonzero(own)[spec.mask]] = 1.0
-        ctx = Context(self.experiment.t, self.measured[family][:, k], mask)
+        measured = self.measured[family][:, k]
+        if self.offsets:  # the data's offset, which the fit profiles out, taken off what the model is given
+            measured = measured - float(np.mean(measured[own])) + view.pred_mean
+        ctx = Context(self.experiment.t, measured, mask)
         return SensorCorrection((name,), fault, family, k, partner, ctx)
 
     def reference(self, run: int) -> dict[str, NDArray]:

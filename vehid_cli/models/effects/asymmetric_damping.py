@@ -6,24 +6,18 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
-from .base import BenchScale, CandidateForm, Effect, Param, Shape, per_axle_candidate, velocity_starts
+from .base import SLOT, BenchScale, CandidateForm, Effect, Param, Shape, per_axle_candidate, velocity_starts
 
 ASYM_EPS = 0.02  # [m/s] the library's switch width: the shape the non-parametric estimate compares with
 
 
-def law(slots):
-    ON, DC, VE = slots["on"], slots["dc"], slots["v_eps"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            f += 0.5 * p[DC + i] * math.tanh(v / p[VE]) * v
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        f += 0.5 * p[SLOT.dc + i] * math.tanh(v / p[SLOT.v_eps]) * v
+    return f, damper
 
 
 def car(cf: float, cr: float) -> CandidateForm:
@@ -52,7 +46,7 @@ EFFECT = Effect(
         Param("v_eps", 0.02, 0.0, 10.0, "m/s", "width of the smooth switch", per_axle=False, open_lower=True),
     ),
     strength="dc",
-    law=law,
+    force=force,
     order=10,
     bench=True,
     car_candidate=car,

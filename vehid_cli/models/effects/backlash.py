@@ -5,30 +5,24 @@ gap = 0 is the rigid mount. On a bench the damper's own play `gap` plays this pa
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-from .base import BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
+from .base import SLOT, BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
 
 
-def law(slots):
-    ON, Z, GAP, KC = slots["on"], slots["z"], slots["gap"], slots["k_contact"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            j = int(p[Z]) + i
-            half = 0.5 * p[GAP + i]
-            if half > 0.0:
-                r = x - z[j]
-                pen = r - half if r > half else (r + half if r < -half else 0.0)
-                damper = p[KC] * pen
-                zd[j] = damper / c
-            else:
-                zd[j] = 0.0
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        j = int(p[SLOT.z]) + i
+        half = 0.5 * p[SLOT.gap + i]
+        if half > 0.0:
+            r = x - z[j]
+            pen = r - half if r > half else (r + half if r < -half else 0.0)
+            damper = p[SLOT.k_contact] * pen
+            zd[j] = damper / c
+        else:
+            zd[j] = 0.0
+    return f, damper
 
 
 def car(cf: float, cr: float) -> CandidateForm:
@@ -63,7 +57,7 @@ EFFECT = Effect(
         Param("k_contact", 2e6, 0.0, 1e10, "N/m", "contact stiffness", per_axle=False, open_lower=True),
     ),
     strength="gap",
-    law=law,
+    force=force,
     order=70,
     states=1,
     car_candidate=car,

@@ -2,19 +2,20 @@
 tries it (its candidate forms on the car and on a bench, and the shapes its force leaves in a residual).
 
 An effect module defines one `Effect` and registers it (`models.effects.register`); the compiled laws of the car's
-struts and of the bench are composed from the registered effects (`models.effects.law`). The contract of the
-force, `law(slots)`: given the slots of the effect's entries in a params row (`slots["on"]`, `slots["z"]` for a
-stateful effect, `slots[<param>]`; a per-axle parameter has four corner slots from there), return a numba
-function compiled with ``inline="always", error_model="numpy"``
+struts and of the bench are composed from the registered effects (`models.effects.law`: one generated function, the
+effects' bodies in order, compiled once). The contract of the force, a plain function
 
     force(x, v, c, i, p, z, zd, f, damper) -> (f, damper)
 
 for strut i (a corner 0..3, or 0 on a bench): deflection x [m] and its rate v [m/s], the configured linear damping
 c [N s/m], the params row p, the states z and their rates zd (written), the parallel force f [N] summed so far and
-the damper's force `damper` [N] so far (c v, or what a series effect made of it). A parallel effect adds to f, a
-series effect (play, lag) replaces `damper`; both start with ``if p[slots["on"]] != 0.0``, so an absent effect
-costs one branch and one whose strength is zero adds exactly nothing. A tyre effect's force acts on strut i of the
-tyres (x the tyre deflection, v its rate): it adds to f, and `damper` is unused.
+the damper's force `damper` [N] so far (c v, or what a series effect made of it). `SLOT.<entry>` stands for the slot
+of an entry of its params row: `SLOT.on`, `SLOT.z` (a stateful effect's first state), `SLOT.<param>` (a per-axle
+parameter has four corner slots from there: `p[SLOT.dc + i]`). A parallel effect adds to f, a series effect (play,
+lag) replaces `damper`; both start with ``if p[SLOT.on] != 0.0``, so an absent effect costs one branch and one whose
+strength is zero adds exactly nothing; the body ends with ``return f, damper`` and uses numba-compilable Python
+(math, numpy, builtins). A tyre effect's force acts on strut i of the tyres (x the tyre deflection, v its rate): it
+adds to f, and `damper` is unused.
 """
 
 from __future__ import annotations
@@ -23,6 +24,16 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from numpy.typing import NDArray
+
+
+class _Slots:
+    """`SLOT.<entry>` in an effect's force: replaced by the entry's slot when the composed law is generated."""
+
+    def __getattr__(self, name: str) -> int:
+        raise RuntimeError(f"SLOT.{name} is filled in by the composed law (models/effects/law.py), not at run time")
+
+
+SLOT = _Slots()
 
 
 @dataclass(frozen=True)
@@ -95,7 +106,7 @@ class Effect:
     doc: str
     params: tuple[Param, ...]
     strength: str  # base name of the parameter that is zero when the effect is inactive
-    law: Callable[[Mapping[str, int]], Callable]  # slots -> the compiled per-strut force
+    force: Callable  # force(x, v, c, i, p, z, zd, f, damper) -> (f, damper), slots as SLOT.<entry> (module doc)
     order: int  # its place in the composed law: forces add (and series elements act) in this order
     states: int = 0  # internal states per strut
     tyre: bool = False  # acts on the tyres (needs the tyre struts)

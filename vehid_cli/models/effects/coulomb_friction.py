@@ -4,24 +4,18 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
-from .base import BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate, velocity_starts
+from .base import SLOT, BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate, velocity_starts
 
 COULOMB_EPS = 0.01  # [m/s] the library's smoothing: the shape the non-parametric estimate compares with
 
 
-def law(slots):
-    ON, FC, VE = slots["on"], slots["Fc"], slots["v_eps"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            f += p[FC + i] * math.tanh(v / p[VE])
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        f += p[SLOT.Fc + i] * math.tanh(v / p[SLOT.v_eps])
+    return f, damper
 
 
 def car(cf: float, cr: float) -> CandidateForm:
@@ -50,7 +44,7 @@ EFFECT = Effect(
         Param("v_eps", 0.01, 0.0, 10.0, "m/s", "tanh smoothing velocity", per_axle=False, open_lower=True),
     ),
     strength="Fc",
-    law=law,
+    force=force,
     order=20,
     bench=True,
     car_candidate=car,

@@ -3,27 +3,20 @@ constant T (one state per strut): dF_d/dt = (c v - F_d) / T; adds F_d - c v [N].
 
 from __future__ import annotations
 
-import numba
-
-from .base import BenchScale, CandidateForm, Effect, Param, constant, per_axle_candidate
+from .base import SLOT, BenchScale, CandidateForm, Effect, Param, constant, per_axle_candidate
 
 
-def law(slots):
-    ON, Z, T_ = slots["on"], slots["z"], slots["T"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            j = int(p[Z]) + i
-            T = p[T_ + i]
-            if T > 0.0:
-                zd[j] = (damper - z[j]) / T
-                damper = z[j]
-            else:
-                zd[j] = 0.0
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        j = int(p[SLOT.z]) + i
+        T = p[SLOT.T + i]
+        if T > 0.0:
+            zd[j] = (damper - z[j]) / T
+            damper = z[j]
+        else:
+            zd[j] = 0.0
+    return f, damper
 
 
 def car(cf: float, cr: float) -> CandidateForm:
@@ -48,7 +41,7 @@ EFFECT = Effect(
     "the damper force follows c v through a first-order lag",
     (Param("T", 0.0, 0.0, 1.0, "s", "lag time constant"),),
     strength="T",
-    law=law,
+    force=force,
     order=80,
     states=1,
     bench=True,

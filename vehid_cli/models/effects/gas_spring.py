@@ -5,26 +5,20 @@ k1 (x - x0) plays this part (its candidate frees k1 and x0)."""
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-from .base import BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
+from .base import SLOT, BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
 
 GAS_L, GAS_KAPPA = 0.1, 1.4  # the library's defaults [m], [-]: the shape the non-parametric estimate compares with
 
 
-def law(slots):
-    ON, F0_, L_, KA = slots["on"], slots["F0"], slots["L"], slots["kappa"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            F0, L, kap = p[F0_ + i], p[L_], p[KA]
-            if F0 != 0.0:
-                f += F0 * (1.0 - (1.0 + x / L) ** (-kap)) - F0 * kap * x / L
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        F0, L, kap = p[SLOT.F0 + i], p[SLOT.L], p[SLOT.kappa]
+        if F0 != 0.0:
+            f += F0 * (1.0 - (1.0 + x / L) ** (-kap)) - F0 * kap * x / L
+    return f, damper
 
 
 def car(cf: float, cr: float) -> CandidateForm:
@@ -57,7 +51,7 @@ EFFECT = Effect(
         Param("kappa", 1.4, 1.0, 2.0, "-", "polytropic exponent", per_axle=False),
     ),
     strength="F0",
-    law=law,
+    force=force,
     order=50,
     car_candidate=car,
     bench_candidate=bench,

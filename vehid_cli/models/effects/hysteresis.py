@@ -5,24 +5,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import numba
-
-from .base import BenchScale, CandidateForm, Effect, Param, constant, per_axle_candidate
+from .base import SLOT, BenchScale, CandidateForm, Effect, Param, constant, per_axle_candidate
 
 
-def law(slots):
-    ON, Z, AL, BE, GA, A = slots["on"], slots["z"], slots["alpha"], slots["beta"], slots["gamma"], slots["A"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            j = int(p[Z]) + i
-            zz = z[j]
-            f += p[AL + i] * zz
-            zd[j] = p[A] * v - p[BE] * v * zz * zz - p[GA] * abs(v) * zz * abs(zz)
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        j = int(p[SLOT.z]) + i
+        zz = z[j]
+        f += p[SLOT.alpha + i] * zz
+        zd[j] = p[SLOT.A] * v - p[SLOT.beta] * v * zz * zz - p[SLOT.gamma] * abs(v) * zz * abs(zz)
+    return f, damper
 
 
 def yield_starts(yields_m: Sequence[float], A: float = 1.0) -> tuple[dict[str, float], ...]:
@@ -64,7 +57,7 @@ EFFECT = Effect(
         Param("A", 1.0, 0.0, 100.0, "-", "Bouc-Wen initial slope dz/dd", per_axle=False),
     ),
     strength="alpha",
-    law=law,
+    force=force,
     order=60,
     states=1,
     bench=True,

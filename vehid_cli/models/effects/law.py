@@ -14,14 +14,20 @@ not an exception.
 
 from __future__ import annotations
 
+import ast
+import builtins
 import hashlib
+import importlib.util
 import inspect
+import os
+import sys
+import tempfile
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -62,64 +68,123 @@ def own_slots(effect: Effect, slots: Mapping[str, int]) -> dict[str, int]:
     return out
 
 
-@numba.njit(inline="always")
-def _nothing(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-    """The end of a chain: no effect."""
-    return f, damper
+SLOT = "SLOT"  # in an effect's force, SLOT.<entry> stands for the slot of that entry of its params row
+LAW_DIR_ENV = "VEHID_LAW_DIR"  # where the composed laws' sources are written (default: the user's cache)
 
 
-def _then(first, second):
-    """The compiled chain `first`, then `second`."""
+class _Specialised(ast.NodeTransformer):
+    """An effect's force body for one composed law: SLOT.<entry> -> the slot (an integer), its own local variables
+    prefixed (two effects' locals never meet), the final `return f, damper` dropped."""
 
-    @numba.njit(inline="always", error_model="numpy")
-    def both(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        f, damper = first(x, v, c, i, p, z, zd, f, damper)
-        return second(x, v, c, i, p, z, zd, f, damper)
+    def __init__(self, slots: Mapping[str, int], prefix: str, keep: set[str]):
+        self.slots, self.prefix, self.keep = slots, prefix, keep
 
-    return both
+    def visit_Attribute(self, node: ast.Attribute):
+        if isinstance(node.value, ast.Name) and node.value.id == SLOT:
+            return ast.copy_location(ast.Constant(self.slots[node.attr]), node)
+        return self.generic_visit(node)
 
-
-def _chain(effects: Sequence[Effect], slots: Mapping[str, int]):
-    """Every effect's force in `order`, one compiled function (the effects inlined)."""
-    out = _nothing
-    for e in sorted(effects, key=lambda e: e.order):
-        out = _then(out, e.law(own_slots(e, slots)))
-    return out
+    def visit_Name(self, node: ast.Name):
+        if node.id not in self.keep and not hasattr(builtins, node.id) and node.id not in ("math", "np"):
+            node.id = f"{self.prefix}{node.id}"
+        return node
 
 
-def _salt(effects: Sequence[Effect], slots: Mapping[str, int]) -> str:
-    """What a composed law's compiled code depends on besides this file: each effect's module source and the slots
-    (the kernel keys its on-disk cache of a law's time loop with it)."""
-    h = hashlib.sha256(Path(__file__).read_bytes())
-    for e in effects:
-        module = inspect.getmodule(e.law)
-        source = inspect.getsource(module) if module is not None else repr(e)
-        h.update(f"{e.name} {e.order}\0".encode() + source.encode())
-    h.update(repr(sorted(slots.items())).encode())
-    return h.hexdigest()
+def _body(effect: Effect, slots: Mapping[str, int]) -> list[str]:
+    """The lines of `effect.force`'s body specialised to `slots` (module doc of base.py: the contract)."""
+    fn = ast.parse(textwrap.dedent(inspect.getsource(effect.force))).body[0]
+    args = {a.arg for a in fn.args.args}
+    body = fn.body
+    if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+        body = body[1:]  # its docstring
+    if body and isinstance(body[-1], ast.Return):
+        body = body[:-1]
+    own = own_slots(effect, slots)
+    prefix = "_" + "".join(w[0] for w in effect.name.split("_")) + f"{effect.order}_"
+    tree = ast.Module([_Specialised(own, prefix, args).visit(node) for node in body], type_ignores=[])
+    return [f"# {effect.name}", *ast.unparse(tree).splitlines()]
+
+
+def _indent(lines: Sequence[str], level: int) -> str:
+    return "\n".join(" " * (4 * level) + line for line in lines)
+
+
+def _source(effects: Sequence[Effect], slots: Mapping[str, int], kind: str) -> str:
+    """The Python source of a composed law: every effect's force body in `order`, in one function, as the car's
+    struts (`kind` "strut") or the bench (`kind` "bench") use it."""
+    ordered = sorted(effects, key=lambda e: e.order)
+    head = ["import math", "", "import numba", "import numpy as np", "", "",
+            '@numba.njit(cache=True, error_model="numpy")']  # fmt: skip
+    if kind == "bench":
+        bodies = [line for e in ordered if e.bench for line in _body(e, slots)]
+        lines = [
+            "def bench_effects(d, dd, z, p, f_out, zd):",
+            '    """The bench effects around the damper\'s force: d = [x, v, F_damper, F_gas]."""',
+            "    x, v, c, i = d[0], d[1], 0.0, 0",
+            "    f = d[3]",
+            "    damper = d[2]",
+            _indent(bodies, 1),
+            "    f_out[0] = f + damper",
+            "    for k in range(1, f_out.shape[0]):",
+            "        f_out[k] = 0.0",
+        ]
+        return "\n".join(head + lines) + "\n"
+    suspension = [line for e in ordered if not e.tyre for line in _body(e, slots)]
+    tyres = [line for e in ordered if e.tyre for line in _body(e, slots)]
+    lines = [
+        "def strut_effects(d, dd, z, p, f_out, zd):",
+        '    """Every effect present in the row p: struts 0..3 suspension, 4..7 tyres (if any)."""',
+        f"    for i in range({N_CORNERS}):",
+        f"        x, v, c = d[i], dd[i], p[{slots['c']} + i]",
+        "        f = 0.0",
+        "        damper = c * v",
+        _indent(suspension, 2),
+        "        f_out[i] = f + damper - c * v",
+        f"    for k in range({N_CORNERS}, f_out.shape[0]):",
+        f"        x, v, c, i = d[k], dd[k], 0.0, k - {N_CORNERS}",
+        "        f = 0.0",
+        "        damper = 0.0",
+        _indent(tyres, 2),
+        "        f_out[k] = f",
+    ]
+    return "\n".join(head + lines) + "\n"
+
+
+def _law_dir() -> Path:
+    """Where composed laws are written: $VEHID_LAW_DIR, else the user's cache (a temporary directory when that
+    cannot be written)."""
+    given = os.environ.get(LAW_DIR_ENV)
+    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    base = Path(given) if given else cache / "vehid" / "laws"
+    try:
+        base.mkdir(parents=True, exist_ok=True)
+        return base
+    except OSError:
+        fallback = Path(tempfile.gettempdir()) / f"vehid-laws-{os.getuid()}"
+        fallback.mkdir(parents=True, exist_ok=True)
+        return fallback
+
+
+def _compiled(source: str, name: str):
+    """The law `name` of `source`, from a module written under its digest (numba caches it on disk by that file,
+    and the kernel keys its time loops with it)."""
+    digest = hashlib.sha256(source.encode()).hexdigest()[:20]
+    path = _law_dir() / f"law_{digest}.py"
+    if not path.exists() or path.read_text() != source:
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(source)
+        os.replace(tmp, path)
+    spec = importlib.util.spec_from_file_location(f"vehid_law_{digest}", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return getattr(module, name)
 
 
 @cache
 def strut_law(effects: tuple[Effect, ...]):
     """The car's composed law over `effects` (struts 0..3 suspension, 4..7 tyres if any)."""
-    slots = layout(effects)
-    C = slots["c"]
-    suspension = _chain([e for e in effects if not e.tyre], slots)
-    tyres = _chain([e for e in effects if e.tyre], slots)
-
-    @numba.njit(error_model="numpy")
-    def strut_effects(d, dd, z, p, f_out, zd_out):  # pragma: no cover - compiled
-        """Every effect present in the row p: struts 0..3 suspension, 4..7 tyres (if any)."""
-        for i in range(N_CORNERS):
-            x, v, c = d[i], dd[i], p[C + i]
-            f, damper = suspension(x, v, c, i, p, z, zd_out, 0.0, c * v)
-            f_out[i] = f + damper - c * v
-        for i in range(N_CORNERS, f_out.shape[0]):
-            f, _ = tyres(d[i], dd[i], 0.0, i - N_CORNERS, p, z, zd_out, 0.0, 0.0)
-            f_out[i] = f
-
-    strut_effects.cache_salt = _salt(effects, slots)
-    return strut_effects
+    return _compiled(_source(effects, layout(effects), "strut"), "strut_effects")
 
 
 @cache
@@ -128,19 +193,7 @@ def bench_law(effects: tuple[Effect, ...]):
     d = [x, v, F_damper, F_gas] (the stroke [m], its velocity [m/s], the declared damper model's force without its
     gas part [N], its gas force [N]); f_out[0] = F_gas + the effects on the damper's force + the parallel effects,
     with the formulas of the car's struts at corner 1's slots."""
-    slots = layout(effects)
-    chain = _chain([e for e in effects if e.bench], slots)
-
-    @numba.njit(error_model="numpy")
-    def bench_effects(d, dd, z, p, f_out, zd_out):  # pragma: no cover - compiled
-        """The bench effects present in the row p around the damper's force."""
-        f, damper = chain(d[0], d[1], 0.0, 0, p, z, zd_out, d[3], d[2])
-        f_out[0] = f + damper
-        for i in range(1, f_out.shape[0]):
-            f_out[i] = 0.0
-
-    bench_effects.cache_salt = _salt(effects, slots)
-    return bench_effects
+    return _compiled(_source(effects, layout(effects), "bench"), "bench_effects")
 
 
 @dataclass(frozen=True)

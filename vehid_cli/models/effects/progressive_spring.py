@@ -2,21 +2,14 @@
 
 from __future__ import annotations
 
-import numba
-
-from .base import CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
+from .base import SLOT, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
 
 
-def law(slots):
-    ON, K3 = slots["on"], slots["k3"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            f += p[K3 + i] * x * x * x
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        f += p[SLOT.k3 + i] * x * x * x
+    return f, damper
 
 
 def car(cf: float, cr: float) -> CandidateForm:
@@ -29,7 +22,7 @@ EFFECT = Effect(
     "cubic stiffening k3 d^3 beside the linear spring",
     (Param("k3", 0.0, 0.0, 1e12, "N/m^3", "cubic stiffness"),),
     strength="k3",
-    law=law,
+    force=force,
     order=30,
     bench=True,
     car_candidate=car,

@@ -3,21 +3,14 @@ road's."""
 
 from __future__ import annotations
 
-import numba
-
-from .base import CandidateForm, Effect, Param, constant, per_axle_candidate
+from .base import SLOT, CandidateForm, Effect, Param, constant, per_axle_candidate
 
 
-def law(slots):
-    ON, CT = slots["on"], slots["ct"]
-
-    @numba.njit(inline="always", error_model="numpy")
-    def force(x, v, c, i, p, z, zd, f, damper):  # pragma: no cover - compiled
-        if p[ON] != 0.0:
-            f += p[CT + i] * v
-        return f, damper
-
-    return force
+def force(x, v, c, i, p, z, zd, f, damper):
+    """Its force on strut i (the contract: models/effects/base.py)."""
+    if p[SLOT.on] != 0.0:
+        f += p[SLOT.ct + i] * v
+    return f, damper
 
 
 def car(cf: float, cr: float) -> CandidateForm:
@@ -30,7 +23,7 @@ EFFECT = Effect(
     "a damper beside each tyre spring, on wheel minus road velocity",
     (Param("ct", 0.0, 0.0, 1e5, "N s/m", "tyre damping"),),
     strength="ct",
-    law=law,
+    force=force,
     order=40,
     tyre=True,
     car_candidate=car,

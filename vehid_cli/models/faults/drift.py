@@ -10,27 +10,31 @@ from .clip import clipped
 from .dropout import held
 
 SIGNIFICANT = 0.2  # a drift over the record this large against the channel's spread is worth a warning
+LINEAR = 0.5  # ... when the straight line explains at least this share of the departure from the prediction
 
 
-def trend(ch: Channel) -> tuple[float, float]:
-    """The slope [SI/s] of the measured channel's departure from (a multiple of) the prediction, and the drift over
-    the record relative to the channel's spread."""
+def trend(ch: Channel) -> tuple[float, float, float]:
+    """The slope [SI/s] of the measured channel's departure from (a multiple of) the prediction, the drift over the
+    record relative to the channel's spread, and the share of the departure's variance the straight line explains
+    (a drifting bias is a clean ramp; a model's error oscillates with the motion)."""
     keep = ~(clipped(ch.recorded) | held(ch.recorded))  # a saturated or held stretch is not a trend
     p, y, t = ch.pred[keep], ch.y[keep], ch.t[keep]
     if t.size < 3:
-        return 0.0, 0.0
+        return 0.0, 0.0, 0.0
     b = float(np.dot(y, p) / np.dot(p, p)) if np.dot(p, p) > 0 else 0.0
     e = y - b * p
     tc = t - t.mean()
     slope = float(np.dot(e, tc) / np.dot(tc, tc)) if np.dot(tc, tc) > 0 else 0.0
     span = float(ch.t[-1] - ch.t[0]) if ch.t.size else 0.0
     spread = float(np.std(ch.y)) or 1.0
-    return slope, abs(slope) * span / spread
+    var = float(np.var(e))
+    share = slope**2 * float(np.var(tc)) / var if var > 0 else 0.0
+    return slope, abs(slope) * span / spread, share
 
 
 def check(ch: Channel, channels: tuple[Channel, ...]) -> Finding | None:
-    slope, relative = trend(ch)
-    if relative > SIGNIFICANT:
+    slope, relative, share = trend(ch)
+    if relative > SIGNIFICANT and share > LINEAR:
         return Finding(
             ch.name, "drift", WARNING, slope,
             f"{ch.name} drifts by {relative:.2g} x its spread over the record ({slope:.3g} SI/s) against the "

@@ -239,6 +239,13 @@ def diagnose(
     missing, order, notes = None, (), ()
     if quality.ok:  # the strut force the declared model misses, non-parametrically: which candidates to fit first
         missing, order, notes = unexplained_force(task, ref, split.keep, fit, specs, files)
+    if split.keep is not None:  # the same model and data as identify's one fit, but fewer samples: say so
+        ratio = np.sqrt(R_total / R_train)
+        notes += (
+            f"the 95 % intervals come from the {R_train} training residuals ({R_total - R_train} held out for the "
+            f"validation J) with the residual's own variance: about {ratio:.2f} x wider than vehid identify's on the "
+            "whole run, which are the bound widened by sqrt(chi2) when the residual is not noise",
+        )
     subject = Subject(
         specs=specs, declared=frozenset(config.vehicle.effect_values()), problem_for=car.problem_for,
         validation_J=car.validation_J, residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
