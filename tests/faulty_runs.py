@@ -30,6 +30,7 @@ NAMES.update({f"road{i}": f"ACT{i}" for i in range(1, 5)})
 UNITS = {k: ("g" if k[0] in "abceh" else "mm") for k in NAMES}
 SIGMA = {"acc": 0.05, "disp": 1e-4}
 FAULTS = ("clean", "sign", "gain", "swap", "delay", "clip", "dropout", "drift")
+TRIGGER = 0.03  # [s] the road's clock ahead of the responses' in the "trigger" run
 
 
 def config_sets(offsets: str = "identify") -> list[str]:
@@ -114,6 +115,12 @@ def inject(chans: dict, fault: str) -> tuple[dict, str, str]:
         td, yd = out["POT1"]
         out["POT1"] = (td, yd + 4.0 * td / td[-1])
         return out, "d1", "drift"
+    if fault == "trigger":  # the rig's actuators logged on a clock 30 ms ahead: every response lags the road
+        k = int(round(TRIGGER / 1e-3))
+        for i in range(1, 5):
+            ta, ya = out[f"ACT{i}"]
+            out[f"ACT{i}"] = (ta, np.r_[ya[k:], np.full(k, ya[-1])])
+        return out, "road", "trigger"
     raise ValueError(fault)
 
 

@@ -168,3 +168,28 @@ def test_diagnose_names_every_fault_first_and_lands_on_the_car(runs, fault, suff
     standard deviations after; a clean run selects no sensor: candidate."""
     path, channel, name = runs[fault, suffix]
     assert_named_and_estimates_within_4_sd(diagnose_fault(path), f"sensor:{channel}:{name}" if channel else None)
+
+
+@pytest.mark.parametrize("suffix", [".mf4", ".csv"])
+def test_a_trigger_offset_between_road_and_responses_is_estimated(tmp_path, suffix):
+    path, _, _ = fr.write(tmp_path / f"trigger{suffix}", "trigger")
+    found = checks_of(path)
+    (trigger,) = [f for f in found.problems if f.check == "trigger"]
+    assert trigger.status == "warning" and trigger.value == pytest.approx(fr.TRIGGER, abs=2e-3)
+    assert not found.stopping and len(found.problems) == 1  # no channel accused of the road's clock
+
+
+@pytest.mark.parametrize(
+    "sets",
+    [["vehicle.m=1690"], ["vehicle.kf=31500", "vehicle.kr=56000"], ["vehicle.cf=3640", "vehicle.cr=4550"],
+     ["vehicle.m=910", "vehicle.kf=31500", "vehicle.kr=56000", "vehicle.cf=1960", "vehicle.cr=2450"]],
+)  # fmt: skip
+def test_the_checks_hold_with_the_configured_car_30_percent_off(runs, sets):
+    """A car 30 % off the truth: no failure on a clean run or on another channel than the faulty one, and the faults
+    that stop a fit still found."""
+    wide = [*sets, "identify.bounds=[0.6,1.6]"]
+    assert not checks_of(runs["clean", ".mf4"][0], wide).stopping
+    for fault in STOPS:
+        path, channel, name = runs[fault, ".mf4"]
+        stopping = checks_of(path, wide).stopping
+        assert {f.channel for f in stopping} <= {channel, name.partition(":")[2]} and stopping, (fault, stopping)

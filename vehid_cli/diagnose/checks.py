@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from ..core.result import Result
 from ..identify.task import Task
 from ..models.faults import FAIL, FAULTS, OK, WARNING, Channel, Finding, fault_of
+from ..models.faults.delay import lag_limit, lag_of
 from ..models.noise import estimate_noise_sigma
 from .attribution import Candidate
 
@@ -100,6 +101,26 @@ def unit_finding(name: str, unit: str, origin: str) -> Finding:
     return Finding(name, "unit", OK, float("nan"), f"read in {unit} ({origin})")
 
 
+def trigger_finding(channels: Sequence[Channel]) -> Finding | None:
+    """Every channel lagging the model alike: the road and the responses recorded on different clocks (a trigger
+    offset). None when the channels' typical lag is within their typical tolerance."""
+    timed = [c for c in channels if c.dt > 0 and c.y.size > 8]
+    if len(timed) < 2:
+        return None
+    lags = np.array([lag_of(c.y, c.pred, c.dt)[0] for c in timed])
+    typical = float(np.median(lags))
+    limit = float(np.median([lag_limit(c) for c in timed]))
+    spread = float(np.median(np.abs(lags - typical)))
+    if abs(typical) > limit and spread < 0.5 * abs(typical):
+        return Finding(
+            "road", "trigger", WARNING, typical,
+            f"every channel lags the configured model by about {1e3 * typical:.1f} ms (they agree within "
+            f"{1e3 * spread:.1f} ms): the road and the responses were recorded on different clocks (a trigger offset)",
+            fix="align the road's time base with the responses' (shift the road channels, or trim with data.window)",
+        )  # fmt: skip
+    return Finding("road", "trigger", OK, typical, f"the channels' typical lag {1e3 * typical:.1f} ms")
+
+
 def check_channels(
     channels: Sequence[Channel], assumed_from_data: bool = False, units: dict[str, tuple[str, str]] | None = None
 ) -> Checks:
@@ -115,7 +136,8 @@ def check_channels(
             if found is not None:
                 findings.append(found)
         findings.append(noise_finding(ch, assumed_from_data))
-    return Checks(tuple(findings))
+    trigger = trigger_finding(channels)
+    return Checks(tuple(findings) + (() if trigger is None else (trigger,)))
 
 
 def check_runs(tasks: Sequence[Task]) -> Checks:

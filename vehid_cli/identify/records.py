@@ -6,6 +6,7 @@ collects them, `results` writes and reads them, `report` renders them.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,16 @@ from .crlb import CramerRao
 
 BOUND_TOL = 1e-6  # an estimate within this fraction of its box's width of a bound sits on it
 PENALTY = Problem.__dataclass_fields__["penalty"].default  # the cost of a NaN/Inf evaluation (optimizers/base.py)
+
+
+def _digest(arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 of named arrays (names, dtypes, shapes and bytes, in name order)."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name} {a.dtype.str} {a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -55,12 +66,19 @@ class RunRecord:
         return bool(self.cost <= self.truth_cost * (1 + 1e-9))
 
     def save(self, path: Path) -> None:
+        """A checkpoint record: every field, and the SHA-256 of them all (a damaged record is never trusted)."""
+        arrays = {k: np.asarray(v) for k, v in self.__dict__.items()}
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-            np.savez(fh, **{k: np.asarray(v) for k, v in self.__dict__.items()})
+            np.savez(fh, sha256=np.array(_digest(arrays)), **arrays)
 
     @classmethod
     def load(cls, path: Path) -> RunRecord:
+        """A record `save` wrote; ValueError when its fields do not match the digest it was written with."""
         with np.load(path) as z:
+            if "sha256" in z:
+                fields = {k: z[k] for k in z.files if k != "sha256"}
+                if str(z["sha256"]) != _digest(fields):
+                    raise ValueError("its fields do not match the SHA-256 it was written with")
             return cls(
                 index=int(z["index"]),
                 estimate=z["estimate"],

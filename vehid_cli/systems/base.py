@@ -219,9 +219,9 @@ class System(ABC):
         C = len(self.channel_names)
         if which.size != residuals.size:  # a system that does not tell: the whole residual as one channel
             return np.array([float(np.mean(residuals**2))] * C) if C == 1 else np.full(C, np.nan)
-        sums = np.bincount(which, weights=residuals**2, minlength=C)
-        counts = np.bincount(which, minlength=C)
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(all="ignore"):  # an unstable candidate's residuals overflow: its chi2 is inf, said elsewhere
+            sums = np.bincount(which, weights=residuals**2, minlength=C)
+            counts = np.bincount(which, minlength=C)
             return sums / counts
 
     def conclude(self, records: tuple[RunRecord, ...]) -> Any:

@@ -10,6 +10,18 @@ from .base import OK, WARNING, Channel, Context, Correction, Fault, Finding
 
 MAX_LAG = 0.1  # [s] the lags searched
 MIN_LAG = 0.004  # [s] a lag below this (or two samples) is not worth a warning
+PHASE = 0.04  # nor a lag below this fraction of the channel's typical period (a model's phase error grows with it)
+
+
+def period(pred: np.ndarray, dt: float) -> float:
+    """The prediction's typical period [s]: twice the record over its number of zero crossings."""
+    crossings = int(np.count_nonzero(np.diff(np.signbit(pred))))
+    return 2.0 * pred.size * dt / max(crossings, 1)
+
+
+def lag_limit(ch: Channel) -> float:
+    """The smallest lag [s] of this channel worth a warning."""
+    return max(MIN_LAG, 2 * ch.dt, PHASE * period(ch.pred, ch.dt))
 
 
 def lag_of(y: np.ndarray, pred: np.ndarray, dt: float) -> tuple[float, float]:
@@ -38,8 +50,7 @@ def check(ch: Channel, channels: tuple[Channel, ...]) -> Finding | None:
     others = [lag_of(c.y, c.pred, c.dt)[0] for c in channels if c.name != ch.name and c.dt > 0]
     typical = float(np.median(others)) if others else 0.0
     relative = lag - typical
-    limit = max(MIN_LAG, 2 * dt)
-    if abs(relative) > limit and peak > 0.3:
+    if abs(relative) > lag_limit(ch) and peak > 0.3:
         return Finding(
             ch.name, "delay", WARNING, lag,
             f"{ch.name} lags the configured model's prediction by {1e3 * lag:.1f} ms where the other channels lag "

@@ -6,6 +6,7 @@ from __future__ import annotations
 from .base import FAIL, Channel, Context, Correction, Fault, Finding, correlation
 
 MARGIN = 0.15  # how much better the other's prediction must fit, both ways
+RESEMBLES = 0.5  # and how well at least (a channel that fits nothing, e.g. delayed, is no swap)
 
 
 def check(ch: Channel, channels: tuple[Channel, ...]) -> Finding | None:
@@ -16,7 +17,8 @@ def check(ch: Channel, channels: tuple[Channel, ...]) -> Finding | None:
             continue
         mine, theirs = correlation(ch.y, other.pred), correlation(other.y, ch.pred)
         back = correlation(other.y, other.pred)
-        if mine > own + MARGIN and theirs > back + MARGIN and (best is None or mine > best[1]):
+        better = mine > max(own, 0.0) + MARGIN and theirs > max(back, 0.0) + MARGIN
+        if better and min(mine, theirs) > RESEMBLES and (best is None or mine > best[1]):
             best = (other, mine, theirs)
     if best is None:
         return Finding(ch.name, "swap", "ok", own, "its own prediction fits it best")
