@@ -193,3 +193,68 @@ def test_the_checks_hold_with_the_configured_car_30_percent_off(runs, sets):
         path, channel, name = runs[fault, ".mf4"]
         stopping = checks_of(path, wide).stopping
         assert {f.channel for f in stopping} <= {channel, name.partition(":")[2]} and stopping, (fault, stopping)
+
+
+# ------------------------------------------------------------------------------------------ strict inputs
+
+
+def identify(path, sets, tmp_path, *extra):
+    out = tmp_path / "i.json"
+    args = ["identify", str(RIG), "--data", str(path), "-o", str(tmp_path / "i.h5"), "--json", str(out), "--force",
+            *extra, *sets_args(sets)]  # fmt: skip
+    res = CliRunner().invoke(app, args)
+    return res, (json.loads(out.read_text()) if res.exit_code == 0 else None)
+
+
+def without(sets: list[str], key: str) -> list[str]:
+    return [s for s in sets if not s.startswith(key + "=")]
+
+
+def test_a_typo_in_data_units_or_channels_is_exit_2_with_a_did_you_mean(runs, tmp_path):
+    path = runs["clean", ".mf4"][0]
+    units = json.dumps(dict(fr.UNITS, d_1="mm"))
+    res, _ = identify(path, [*without(fr.config_sets(), "data.units"), "data.units=" + units], tmp_path)
+    assert res.exit_code == 2 and "data.units.d_1" in res.output and "did you mean 'd1'" in res.output
+    names = json.dumps(dict(fr.NAMES, acc_x="ACC_X"))
+    res, _ = identify(path, [*without(fr.config_sets(), "data.channels"), "data.channels=" + names], tmp_path)
+    assert res.exit_code == 2 and "data.channels.acc_x" in res.output and "not a channel of the layout" in res.output
+
+
+def test_units_per_family_and_from_a_csv_header_are_honoured(runs, tmp_path):
+    family = ["data.units=" + json.dumps({"acc": "g", "disp": "mm"})]
+    res, doc = identify(runs["clean", ".mf4"][0], [*without(fr.config_sets(), "data.units"), *family], tmp_path)
+    assert res.exit_code == 0, res.output
+    assert all(0.7 < v["chi2_per_sample"] < 1.4 for v in doc["per_channel"].values())
+    headers = [*without(fr.config_sets(), "data.units"), "data.units={}"]  # the units in the CSV's header
+    res, doc = identify(runs["clean", ".csv"][0], headers, tmp_path)
+    assert res.exit_code == 0, res.output
+    units = {c["channel"]: c["message"] for c in doc["checks"] if c["check"] == "unit"}
+    assert units["a"] == "read in g (the file)" and units["d1"] == "read in mm (the file)"
+
+
+def test_a_config_unit_the_file_contradicts_is_refused(tmp_path):
+    chans, _, _ = fr.inject(fr.channels(), "clean")
+    path = tmp_path / "run.csv"
+    fr.write_multirate_csv(path, chans)
+    path.write_text(path.read_text().replace("POT1 [mm]", "POT1 [cm]", 1))
+    res, _ = identify(path, fr.config_sets(), tmp_path)
+    assert res.exit_code == 2 and "data.units.d1" in res.output and "declares cm" in res.output
+
+
+def test_a_time_column_in_milliseconds_is_named(tmp_path):
+    from vehid_cli.io.write import write_record
+
+    chans, _, _ = fr.inject(fr.channels(), "clean")
+    path = tmp_path / "ms.mf4"
+    write_record(path, {k: (1e3 * t, y) for k, (t, y) in chans.items()})
+    res, _ = identify(path, fr.config_sets(), tmp_path)
+    assert res.exit_code == 2 and "data.time_unit: ms" in res.output, res.output
+
+
+def test_an_overstated_noise_is_said_naming_the_channels(runs, tmp_path):
+    sets = [*without(without(fr.config_sets(), "noise.sigma.acc"), "noise.sigma.disp"), "noise.sigma.acc=0.1",
+            "noise.sigma.disp=0.0002"]  # fmt: skip
+    res, doc = identify(runs["clean", ".mf4"][0], sets, tmp_path)
+    assert res.exit_code == 0, res.output
+    text = " ".join(doc["warnings"])
+    assert "noise is overstated" in text and "lowest channels (chi2 per sample)" in text
