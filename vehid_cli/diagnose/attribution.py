@@ -46,6 +46,7 @@ from scipy import stats
 
 from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm
+from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import polish
 from ..sim.kernel import available_cores
@@ -449,3 +450,25 @@ def parsimonious(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ra
         and (best.statistic - r.statistic < margin or r.statistic >= PARSIMONY_SHARE * best.statistic)
     ]  # fmt: skip
     return max(rivals, key=lambda r: r.statistic, default=None)
+
+
+def sensor_candidates(checks, channels: Sequence[Channel]) -> dict[str, Candidate]:
+    """A `sensor:<channel>:<fault>` candidate for each finding that points to a fault (a swap once per pair): its
+    unknowns ``sensor:<channel>:<param>`` with the ranges, start and null value of the fault's correction."""
+    views = {c.name: c for c in channels}
+    out: dict[str, Candidate] = {}
+    for f in checks.problems:
+        if not f.fault or f.channel not in views:
+            continue
+        name = f"sensor:{f.channel}:{f.fault}"
+        fault = fault_of(f.fault)
+        if fault.pair and f"sensor:{f.fault.partition(':')[2]}:{fault.name}:{f.channel}" in out:
+            continue  # the pair's other half names the same swap
+        spec = fault.correction(views[f.channel], f)
+        unknowns = tuple(f"sensor:{f.channel}:{p}" for p in spec.params)
+        out[name] = Candidate(
+            name, unknowns, dict(zip(unknowns, spec.limits, strict=True)), dict(zip(unknowns, spec.start, strict=True)),
+            kind="sensor", strength=unknowns, null=dict(zip(unknowns, spec.null, strict=True)), linear=False,
+            df=spec.df,
+        )  # fmt: skip
+    return out

@@ -17,10 +17,9 @@ from numpy.typing import NDArray
 
 from ..core.result import Result
 from ..identify.task import Task
-from ..models.faults import FAIL, FAULTS, OK, WARNING, Channel, Finding, fault_of
+from ..models.faults import FAIL, FAULTS, OK, WARNING, Channel, Finding
 from ..models.faults.delay import lag_limit, lag_of
 from ..models.noise import estimate_noise_sigma
-from .attribution import Candidate
 
 NOISE_RATIO = 3.0  # the noise this many times above or below the assumed one is worth a warning
 STATUS_ORDER = {OK: 0, WARNING: 1, FAIL: 2}
@@ -153,25 +152,3 @@ def check_task(task: Task, reference: dict[str, NDArray] | None = None) -> Check
     """The checks of a task's measured run (`reference`: its data, default the measured channels)."""
     from_data = task.sigma_source.startswith("estimated")
     return check_channels(task.channel_views(reference), from_data, task.units)
-
-
-def sensor_candidates(checks: Checks, channels: Sequence[Channel]) -> dict[str, Candidate]:
-    """A `sensor:<channel>:<fault>` candidate for each finding that points to a fault (a swap once per pair): its
-    unknowns ``sensor:<channel>:<param>`` with the ranges, start and null value of the fault's correction."""
-    views = {c.name: c for c in channels}
-    out: dict[str, Candidate] = {}
-    for f in checks.problems:
-        if not f.fault or f.channel not in views:
-            continue
-        name = f"sensor:{f.channel}:{f.fault}"
-        fault = fault_of(f.fault)
-        if fault.pair and f"sensor:{f.fault.partition(':')[2]}:{fault.name}:{f.channel}" in out:
-            continue  # the pair's other half names the same swap
-        spec = fault.correction(views[f.channel], f)
-        unknowns = tuple(f"sensor:{f.channel}:{p}" for p in spec.params)
-        out[name] = Candidate(
-            name, unknowns, dict(zip(unknowns, spec.limits, strict=True)), dict(zip(unknowns, spec.start, strict=True)),
-            kind="sensor", strength=unknowns, null=dict(zip(unknowns, spec.null, strict=True)), linear=False,
-            df=spec.df,
-        )  # fmt: skip
-    return out

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,7 +22,6 @@ from ... import __version__
 from ...config import DamperConfig
 from ...core.errors import InputError
 from ...core.streams import run_streams
-from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao, cramer_rao_outputs
 from ...identify.records import Campaign, RunRecord
 from ...identify.source import DataFiles, DataSource
@@ -30,7 +29,6 @@ from ...models.bench import BenchHistory
 from ...optimizers.base import Problem
 from ..base import Box, Log, Simulated, System
 from .bench import MEASURED, configured_spec, load_measured, simulate_bench, write_bench_csv, write_bench_h5
-from .diagnosis import diagnose_damper
 from .findings import Findings, Trace
 from .fit import DamperSpec, cost_J, fit, j_problem, realtime_check
 
@@ -106,6 +104,10 @@ def _trace(name: str, history: BenchHistory, spec: DamperSpec, substeps: int) ->
     return Trace(name, history.t, history.x, history.v, history.force, model, float(cost_J(history.force, model)))
 
 
+if TYPE_CHECKING:  # the loop is imported by `diagnose` alone: a campaign does not load it
+    from ...diagnose.loop import Diagnosis
+
+
 class DamperSystem(System):
     """A damper on a test bench: the configured model fitted by J (Eq. 7) to bench runs."""
 
@@ -176,6 +178,8 @@ class DamperSystem(System):
         if len(data) > 1:
             raise InputError("a damper is diagnosed on one --data run (its validation runs: --validate)",
                              source=config.source)  # fmt: skip
+        from .diagnosis import diagnose_damper  # the loop's machinery only for `vehid diagnose`
+
         return diagnose_damper(config, data[0] if data else None, validate or None, log=log)
 
     @classmethod

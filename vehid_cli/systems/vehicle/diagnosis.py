@@ -26,8 +26,9 @@ from ...diagnose.attribution import (
     chi2_statistic,
     fit_intervals,
     lsq_fit,
+    sensor_candidates,
 )
-from ...diagnose.checks import check_runs, sensor_candidates
+from ...diagnose.checks import check_runs
 from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks, masked
 from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Diagnosis, ModelReport, Subject, chi2_limit, close
 from ...diagnose.quality import assess_vehicle, precheck_vehicle

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import h5py
 import numpy as np
@@ -18,7 +18,6 @@ from ...core.provenance import provenance
 from ...core.store import h5_file
 from ...core.streams import run_streams
 from ...diagnose.checks import Checks, check_runs
-from ...diagnose.loop import Diagnosis
 from ...identify.crlb import CramerRao
 from ...identify.experiment import SimulatedRun, build_experiment, simulate_measurement
 from ...identify.records import Campaign
@@ -31,7 +30,9 @@ from ...models.fullcar import DOF_NAMES
 from ...models.sensors import UNIT
 from ...optimizers.base import Problem
 from ..base import Box, Log, Simulated, System
-from .diagnosis import diagnose
+
+if TYPE_CHECKING:  # the loop is imported by `diagnose` alone: a campaign does not load it
+    from ...diagnose.loop import Diagnosis
 
 
 class VehicleSystem(System):
@@ -86,7 +87,11 @@ class VehicleSystem(System):
             raise InputError("diagnose needs --data FILE (the measured run to fit) or data.files", source=config.source)
         if len(validate) > 1:
             raise InputError("the full car takes one --validate run", source=config.source)
-        return diagnose(config, files[0] if len(files) == 1 else files, validate[0] if validate else None, log=log)
+        from . import diagnosis  # the loop's machinery (scipy.stats, splines) only for `vehid diagnose`
+
+        return diagnosis.diagnose(
+            config, files[0] if len(files) == 1 else files, validate[0] if validate else None, log=log
+        )
 
     @classmethod
     def tables(cls, campaigns: Sequence[Campaign], files: Sequence[str]) -> list:
