@@ -29,9 +29,7 @@ def sets_args(sets: list[str]) -> list[str]:
 def runs(tmp_path_factory):
     out = tmp_path_factory.mktemp("faulty")
     return {
-        (fault, suffix): fr.write(out / f"{fault}{suffix}", fault)
-        for fault in fr.FAULTS
-        for suffix in (".mf4", ".csv")
+        (fault, suffix): fr.write(out / f"{fault}{suffix}", fault) for fault in fr.FAULTS for suffix in (".mf4", ".csv")
     }
 
 

@@ -291,7 +291,13 @@ def run_campaign_to_file(
                     log(f"note: {output} is complete for this config; removed the stale checkpoint {partial}")
                 return finished
         campaign = run_campaign(
-            config, data_file, jobs=jobs, executor=executor, checkpoint_dir=partial, on_run=on_run, log=log,
+            config,
+            data_file,
+            jobs=jobs,
+            executor=executor,
+            checkpoint_dir=partial,
+            on_run=on_run,
+            log=log,
             checks=checks,
         )
         write_campaign_h5(output, campaign, attrs=attrs)

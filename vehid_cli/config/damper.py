@@ -284,7 +284,6 @@ class DamperConfig(SystemConfig):
         scaled = scaled_bounds(self.values(), ident.unknowns, *ident.bounds)
         return {n: tuple(ident.limits.get(n, scaled[n])) for n in ident.unknowns}
 
-
     def resolved(self, path: Path) -> DamperConfig:
         """Data files (the run, the held-out runs, the stages' runs) named relative to the config file are resolved
         against its directory."""

@@ -105,7 +105,12 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
     origin |= {n: (record.declared[n], "the file") for n in sensors if n not in units and record.declared.get(n)}
     origin |= {n: ("SI", "default: no unit in data.units, its family or the file") for n in sensors if n not in origin}
     return MeasuredRun(
-        t=record.t, road=road, outputs=outputs, observed=None if every else observed, source=source, raw=raw,
+        t=record.t,
+        road=road,
+        outputs=outputs,
+        observed=None if every else observed,
+        source=source,
+        raw=raw,
         units=origin,
     )
 

@@ -260,8 +260,7 @@ class Campaign(Result):
                 f"at the estimates the residual power is {s.chi2_median:.3g} times the noise power the data implies "
                 f"(an adequate model gives at most {s.chi2_limit:.3g}, noise from {self.sigma_source}): the model "
                 "lacks something, the measurement chain is wrong or the noise is understated; the estimates are then "
-                "biased"
-                + (f"; worst channels (chi2 per sample): {worst}" if worst else "")
+                "biased" + (f"; worst channels (chi2 per sample): {worst}" if worst else "")
             )
         elif np.isfinite(s.chi2_median) and s.chi2_median < low_limit:
             lowest = ", ".join(f"{n} {v:.3g}" for n, v in self.worst_channels(low=True))

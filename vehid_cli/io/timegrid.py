@@ -153,13 +153,14 @@ def onto(raw: Raw, dt: float, grid: NDArray, rate: float) -> NDArray:
     """A channel on the grid: its own samples when they lie on the grid (`_grid_slice`); else an anti-alias
     low-pass first when its rate is above the grid's, then a cubic spline."""
     from scipy.interpolate import CubicSpline
-    from scipy.signal import butter, sosfiltfilt
 
     t, y = raw.t, raw.y
     own = 1.0 / dt
     if own <= rate * (1 + RATE_MATCH) and (keep := _grid_slice(raw, dt, grid)) is not None:
         return y[keep].copy()
     if own > rate * (1 + RATE_MATCH):
+        from scipy.signal import butter, sosfiltfilt  # 0.9 s to import (it loads scipy.stats): only when filtering
+
         if not uniform(t, dt):  # filter on a uniform grid: resample the jittered stamps at their median rate first
             tu = t[0] + np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1) * dt
             y, t = CubicSpline(t, y)(tu), tu

@@ -44,6 +44,7 @@ class Road(Protocol):
     @property
     def V(self) -> float: ...
 
+
 REAR_CORNERS = np.array([False, False, True, True])  # corners 3, 4
 SIDE_OF_CORNER = np.array([0, 1, 1, 0])  # wheel track: 0 = side b1 (corners 1, 4), 1 = side b2 (2, 3)
 ISO_8608_GD_N0 = {c: 16e-6 * 4**i for i, c in enumerate("ABCDEFGH")}  # m³, class geometric mean at n0

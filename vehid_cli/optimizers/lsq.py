@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from .base import BudgetExhausted, Optimizer, Search, register
 
@@ -41,6 +40,8 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         R -= r0[None, :]  # in place: a long record's Jacobian is tens of MB per copy
         R /= step[:, None]
         return R.T
+
+    from scipy.optimize import least_squares  # 0.3 s to import: not when a config naming lsq is only validated
 
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
     result = least_squares(

@@ -155,9 +155,7 @@ def render(campaigns: list[Campaign], files: list[str], fmt: str, published: dic
     campaign with its file and provenance, for every system; the others are the system's own."""
     system = system_of(campaigns, files)
     if fmt == "json":
-        docs = [
-            dict(c.to_json(), file=f, provenance=file_provenance(f)) for c, f in zip(campaigns, files, strict=True)
-        ]
+        docs = [dict(c.to_json(), file=f, provenance=file_provenance(f)) for c, f in zip(campaigns, files, strict=True)]
         return to_json(docs)
     if fmt not in FORMATS or fmt == "table":
         raise InputError(f"unknown format '{fmt}'; expected one of {', '.join(FORMATS)}")

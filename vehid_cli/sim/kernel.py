@@ -243,5 +243,3 @@ def integrate(
     out = batch.outputs(n_z)
     (_run_rk4 if method == "rk4" else _run_newmark)(batch, dt, force, out)
     return out
-
-

@@ -124,9 +124,7 @@ def simulate_effects(
         tyre[:, :, 3:] = np.eye(N_CORNERS)
         D = np.concatenate([D, tyre], axis=1)
         E = np.concatenate([E, -np.eye(N_CORNERS)], axis=0)
-    res = integrate(
-        method, M, C, K, B, upsample(road, substeps), dt / substeps, es.law, es.rows, es.n_z, D=D, E=E
-    )
+    res = integrate(method, M, C, K, B, upsample(road, substeps), dt / substeps, es.law, es.rows, es.n_z, D=D, E=E)
     q, qd, qdd = (X[:, ::substeps] for X in (res.q, res.qd, res.qdd))
     Gt = np.swapaxes(G, -1, -2)
     disp, acc = q[..., :3] @ Gt, qdd[..., :3] @ Gt

@@ -52,8 +52,12 @@ EFFECT = Effect(
     car_candidate=car,
     bench_candidate=bench,
     shapes=(
-        Shape("asymmetric_damping", "velocity",
-              lambda x: [(x * np.tanh(x / ASYM_EPS), 0, f"v tanh(v / {ASYM_EPS}) (the library's)")], rank=2),
+        Shape(
+            "asymmetric_damping",
+            "velocity",
+            lambda x: [(x * np.tanh(x / ASYM_EPS), 0, f"v tanh(v / {ASYM_EPS}) (the library's)")],
+            rank=2,
+        ),
     ),  # fmt: skip
     resembles={"asymmetric_damping": 1.0, "one_sided_damping": 1.0, "quadratic_damping": 0.6},
 )

@@ -50,8 +50,12 @@ EFFECT = Effect(
     car_candidate=car,
     bench_candidate=bench,
     shapes=(
-        Shape("coulomb_friction", "velocity", lambda x: [(np.tanh(x / COULOMB_EPS), 1, f"v_eps = {COULOMB_EPS} m/s")],
-              rank=1),
+        Shape(
+            "coulomb_friction",
+            "velocity",
+            lambda x: [(np.tanh(x / COULOMB_EPS), 1, f"v_eps = {COULOMB_EPS} m/s")],
+            rank=1,
+        ),
     ),  # fmt: skip
     resembles={"coulomb_friction": 1.0, "sqrt_damper": 0.7},
 )

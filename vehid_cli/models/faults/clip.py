@@ -13,19 +13,20 @@ MIN_SAMPLES = 5  # at the extreme, in runs of at least RUN samples
 RUN = 3
 
 
+def long_runs(flags: np.ndarray, length: int) -> np.ndarray:
+    """(n,) bool: the flags that belong to a run of at least `length` consecutive True flags."""
+    edges = np.diff(np.concatenate(([0], flags.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    keep = ends - starts >= length
+    step = np.zeros(flags.size + 1, dtype=np.int64)
+    step[starts[keep]] += 1
+    step[ends[keep]] -= 1
+    return np.cumsum(step[:-1]) > 0
+
+
 def flat_runs(x: np.ndarray, value: float, tol: float) -> np.ndarray:
     """(n,) bool: samples within tol of value that belong to a run of at least RUN such samples."""
-    at = np.abs(x - value) <= tol
-    out = np.zeros_like(at)
-    start = None
-    for i, flag in enumerate(np.append(at, False)):
-        if flag and start is None:
-            start = i
-        elif not flag and start is not None:
-            if i - start >= RUN:
-                out[start:i] = True
-            start = None
-    return out
+    return long_runs(np.abs(x - value) <= tol, RUN)
 
 
 def clipped(x: np.ndarray) -> np.ndarray:

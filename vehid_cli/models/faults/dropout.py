@@ -7,26 +7,15 @@ from __future__ import annotations
 import numpy as np
 
 from .base import OK, WARNING, Channel, Context, Correction, Fault, Finding
-from .clip import RUN, clipped
+from .clip import RUN, clipped, long_runs
 
 MIN_FRACTION = 0.002  # of the samples held before it is worth a warning
 
 
 def held(x: np.ndarray) -> np.ndarray:
     """(n,) bool: samples that repeat the one before them exactly, in runs of at least RUN (clipped ones excluded)."""
-    same = np.r_[False, x[1:] == x[:-1]]
-    out = np.zeros_like(same)
-    i, n = 0, x.size
-    while i < n:
-        if same[i]:
-            j = i
-            while j < n and same[j]:
-                j += 1
-            if j - i + 1 >= RUN:
-                out[i - 1 : j] = True
-            i = j
-        else:
-            i += 1
+    runs = long_runs(np.r_[False, x[1:] == x[:-1]], RUN - 1)  # a repeat run of RUN - 1 is RUN equal samples
+    out = runs | np.r_[runs[1:], False]  # with the sample each run repeats
     return out & ~clipped(x)
 
 
