@@ -2,13 +2,32 @@
 
 from __future__ import annotations
 
+QUOTED = 200  # characters of a user's value an error message quotes at most
+MESSAGE = 2000  # characters of a whole message at most (a message lists choices, never a file's content)
+
+
+def clip(text: object, limit: int = QUOTED) -> str:
+    """`text` as a string of at most about `limit` characters: a long value (a 100 kB string, a huge list) is cut,
+    saying how long it was, so that an error message quoting it stays one readable paragraph."""
+    try:
+        text = str(text)
+    except ValueError:  # an integer of more digits than Python prints
+        return "(a number too long to print)"
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
+
 
 class InputError(Exception):
-    """Bad input. The message names the file, the key or column, and what was expected."""
+    """Bad input. The message names the file, the key or column, and what was expected. The source, the key and
+    the message are clipped (`clip`): whatever a user's input holds, the message stays a paragraph."""
 
     exit_code = 2
 
     def __init__(self, message: str, *, source: str | None = None, key: str | None = None):
+        source = None if source is None else clip(source, 2 * QUOTED)
+        key = None if key is None else clip(key, QUOTED)
+        message = clip(message, MESSAGE)
         self.source = source
         self.key = key
         self.detail = message

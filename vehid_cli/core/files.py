@@ -16,23 +16,70 @@ from pathlib import Path
 from .errors import DiskFull, InputError
 
 
-def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8") -> str:
+def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8", limit: int | None = None) -> str:
     """A user's text file, or an InputError naming it: `what` it is ("config file") when missing or unreadable,
-    `expected` ("a CSV file") when it is a directory."""
+    `expected` ("a CSV file") when it is a directory, too large when it holds more than `limit` bytes."""
     source = str(path)
     try:
-        return Path(path).read_text(encoding=encoding)
+        with open(check_path_name(path, what), "rb") as fh:
+            data = fh.read() if limit is None else fh.read(limit + 1)
+        if limit is not None and len(data) > limit:
+            raise InputError(f"{what} larger than {limit} bytes; expected {expected}", source=source)
+        return data.decode(encoding).replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as open()
     except FileNotFoundError:
         raise InputError(f"{what} not found", source=source) from None
     except IsADirectoryError:
         raise InputError(f"is a directory, expected {expected}", source=source) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read {what} ({exc.__class__.__name__}: {exc})", source=source) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"cannot read {what}: not {encoding} text (byte {exc.start}: {exc.reason}); expected {expected}",
+            source=source,
+        ) from None
+    except OSError as exc:
+        raise InputError(
+            f"cannot read {what} ({exc.__class__.__name__}: {exc.strerror or exc})", source=source
+        ) from None
+
+
+def check_path_name(path: str | Path, what: str = "path") -> Path:
+    """`path`, or an InputError when the file system cannot take it as a name: a NUL byte, a name longer than the
+    file system's limit (NAME_MAX, 255 bytes on most), a path longer than PATH_MAX."""
+    text = os.fspath(path)
+    if "\0" in text:
+        raise InputError(f"the {what}'s name holds a NUL byte, which no file name may hold", source=repr(text))
+    try:
+        raw = os.fsencode(text)
+    except UnicodeError:
+        raise InputError(f"the {what}'s name cannot be encoded for the file system", source=repr(text)) from None
+    parent = os.path.dirname(text) or "."
+    name_max, path_max = _limits(parent)
+    for part in raw.split(b"/"):
+        if len(part) > name_max:
+            raise InputError(
+                f"a name of {len(part)} bytes in the {what}; the file system takes at most {name_max} per name",
+                source=text,
+            )
+    if len(raw) >= path_max:
+        raise InputError(
+            f"a path of {len(raw)} bytes; the file system takes at most {path_max - 1} for the {what}", source=text
+        )
+    return Path(path)
+
+
+def _limits(directory: str) -> tuple[int, int]:
+    """NAME_MAX and PATH_MAX where `directory` (or its nearest existing ancestor) lives; 255 and 4096 if unknown."""
+    probe = directory
+    while probe and not os.path.isdir(probe) and os.path.dirname(probe) != probe:
+        probe = os.path.dirname(probe)
+    try:
+        return os.pathconf(probe or ".", "PC_NAME_MAX"), os.pathconf(probe or ".", "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return 255, 4096
 
 
 def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
     """Check an output path has a known suffix and a writable directory, before any work is done."""
-    path = Path(path)
+    path = check_path_name(path, "output")
     if path.suffix.lower() not in suffixes:
         raise InputError(
             f"unknown output type '{path.suffix}'; expected one of {', '.join(suffixes)}", source=str(path)
@@ -51,7 +98,7 @@ def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
 def check_writable_dir(path: str | Path, option: str | None = None) -> Path:
     """Check an output directory can be made and written (a probe file in it, or in its nearest existing
     ancestor: nothing is left behind), before any work. InputError names the option and the path."""
-    path = Path(path)
+    path = check_path_name(path, "output directory")
     source = f"{option} {path}" if option else str(path)
     if path.exists() and not path.is_dir():
         raise InputError("is a file, expected a directory", source=source)
