@@ -8,16 +8,14 @@ One module per system around a shared `identify` vocabulary (`common.py`): `vehi
 
 from __future__ import annotations
 
-import json
 import types
 import typing
 from pathlib import Path
 from typing import Any, Union
 
-import yaml
 from pydantic import BaseModel, ValidationError
 
-from ..core.errors import InputError
+from ..core.errors import InputError, clip
 from ..core.files import read_text
 from .common import Algorithm, IdentifyCommon, Start, SystemConfig, _did_you_mean, _KeyedError, flatten, scaled_bounds
 from .damper import (
@@ -32,6 +30,7 @@ from .damper import (
     DataColumns,
     DataUnits,
 )
+from .safe_yaml import MAX_BYTES, MAX_DEPTH, load_yaml
 from .vehicle import Bump, Config, Identify, Noise, RandomRoad, Road, Simulation, Vehicle
 
 AnyConfig = Union[Config, DamperConfig]  # noqa: UP007
@@ -53,14 +52,8 @@ def load_config(path: str | Path, overrides: typing.Sequence[str] = ()) -> Confi
     """Read a YAML config, apply `--set dotted.key=value` overrides, validate. Raises InputError."""
     path = Path(path)
     source = str(path)
-    text = read_text(path, "config file", "a YAML config file")
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise InputError(f"not valid YAML{where}: {problem}", source=source) from None
+    text = read_text(path, "config file", "a YAML config file", limit=MAX_BYTES)
+    raw = load_yaml(text, source)
     if raw is None:
         raw = {}
     if not isinstance(raw, dict):
@@ -115,19 +108,18 @@ def _blame_override(raw: dict[str, Any], overrides: typing.Sequence[str], error:
 
 def apply_overrides(raw: dict[str, Any], overrides: typing.Sequence[str], source: str = "<config>") -> dict[str, Any]:
     """Return a copy of `raw` with each `dotted.key=value` applied; values are parsed as YAML scalars/lists."""
-    out = json.loads(json.dumps(raw, default=str))  # deep copy of plain data
+    out = _plain(raw)  # a deep copy of plain data, every key a string
     for item in overrides:
+        option = getattr(item, "option", None) or "--set"
         if "=" not in item:
-            raise InputError(f"--set expects dotted.key=value, got '{item}'", source=source)
+            raise InputError(f"{option} expects dotted.key=value, got {clip(repr(str(item)))}", source=source)
         key, _, text = item.partition("=")
         key = key.strip()
         parts = key.split(".")
-        if not key or any(not p for p in parts):
-            raise InputError(f"--set expects dotted.key=value, got '{item}'", source=source)
-        try:
-            value = yaml.safe_load(text) if text.strip() else None
-        except yaml.YAMLError:
-            raise InputError(f"--set {key}: cannot parse value '{text}'", source=source) from None
+        if not key or any(not p for p in parts) or len(parts) > MAX_DEPTH:
+            raise InputError(f"{option} expects dotted.key=value, got {clip(repr(str(item)))}", source=source)
+        what = f"{option} {clip(key)}: cannot parse the value as YAML"
+        value = _plain(load_yaml(text, f"{option} {clip(key)}", what)) if text.strip() else None
         node = out
         for depth, part in enumerate(parts[:-1]):
             child = node.get(part)
@@ -139,6 +131,16 @@ def apply_overrides(raw: dict[str, Any], overrides: typing.Sequence[str], source
             node = child
         node[parts[-1]] = value
     return out
+
+
+def _plain(node: Any) -> Any:
+    """A deep copy of parsed YAML as plain data: mappings with string keys (YAML's `1:`, `2001-01-01:` or `~:`
+    become '1', '2001-01-01', 'None'), lists, and JSON's scalars; other scalars (a date, !!binary) as text."""
+    if isinstance(node, dict):
+        return {k if isinstance(k, str) else str(k): _plain(v) for k, v in node.items()}
+    if isinstance(node, (list, tuple)):
+        return [_plain(v) for v in node]
+    return node if node is None or isinstance(node, (str, int, float, bool)) else str(node)
 
 
 # ------------------------------------------------------------------------------------------ errors
@@ -177,35 +179,66 @@ def _unwrap_model(annotation: Any) -> Any:
 BOUND_WORDS = {"ge": "at least", "gt": "greater than", "le": "at most", "lt": "less than"}
 
 
+def _range_of(loc: tuple, root: type[BaseModel] | None) -> str:
+    """The whole range a numeric key takes, from its field's constraints ("in (0, 1e+06]"), '' when unknown."""
+    while loc and isinstance(loc[-1], int):  # an item of a tuple: its field's items share one range
+        loc = loc[:-1]
+    parent = _model_at(loc[:-1], root)
+    field = parent.model_fields.get(str(loc[-1])) if parent is not None else None
+    if field is None:
+        return ""
+    found: dict[str, float] = {}
+    for meta in field.metadata + [m for a in typing.get_args(field.annotation) for m in getattr(a, "__metadata__", ())]:
+        for name in BOUND_WORDS:
+            if getattr(meta, name, None) is not None:
+                found[name] = getattr(meta, name)
+        for inner in getattr(meta, "metadata", ()):
+            for name in BOUND_WORDS:
+                if getattr(inner, name, None) is not None:
+                    found[name] = getattr(inner, name)
+    low = ("[", found["ge"]) if "ge" in found else ("(", found["gt"]) if "gt" in found else None
+    high = (found["le"], "]") if "le" in found else (found["lt"], ")") if "lt" in found else None
+    if low is None or high is None:
+        return ""
+    return f"in {low[0]}{_number(low[1])}, {_number(high[0])}{high[1]}"
+
+
+def _number(value: float) -> str:
+    return str(value) if isinstance(value, int) else f"{value:g}"
+
+
 def _explain(exc: ValidationError, root: type[BaseModel] | None = None) -> str:
-    """Turn pydantic's errors into one paragraph: each names its dotted key and what was expected."""
+    """Turn pydantic's errors into one paragraph: each names its dotted key and what was expected (a number's
+    whole range), quoting at most a few hundred characters of what was given."""
     lines = []
     for err in exc.errors(include_url=False):
         loc = tuple(p for p in err["loc"])
-        key = ".".join(str(p) for p in loc)
+        key = clip(".".join(str(p) for p in loc))
         kind = err["type"]
         ctx_error = (err.get("ctx") or {}).get("error")
+        got = f", got {clip(repr(err.get('input')))}"
         if isinstance(ctx_error, _KeyedError):
             lines.append(f"'{ctx_error.key}': {ctx_error}")
             continue
         if kind == "extra_forbidden":
             parent = _model_at(loc[:-1], root)
             known = [f.alias or n for n, f in parent.model_fields.items()] if parent else []
-            hint = _did_you_mean(str(loc[-1]), known) or _described_as(str(loc[-1]), parent)
+            word = str(loc[-1])[:100]
+            hint = _did_you_mean(word, known) or _described_as(word, parent)
             listing = f" (known keys: {', '.join(known)})" if known and not hint else ""
             lines.append(f"'{key}': unknown key{hint}{listing}")
         elif kind == "missing":
             lines.append(f"'{key}': required key is missing")
         elif kind == "literal_error":
-            lines.append(f"'{key}': {err['msg'].replace('Input should be', 'expected')}, got {err['input']!r}")
+            lines.append(f"'{key}': {clip(err['msg'].replace('Input should be', 'expected'))}{got}")
         else:
             msg = err["msg"].removeprefix("Value error, ")
-            msg = msg.replace("Input should be", "expected")
+            msg = clip(msg.replace("Input should be", "expected"), 1000)
             bound = {k: v for k, v in (err.get("ctx") or {}).items() if k in BOUND_WORDS}
             if kind in ("greater_than_equal", "greater_than", "less_than_equal", "less_than") and bound:
                 ((name, limit),) = bound.items()
-                msg = f"must be {BOUND_WORDS[name]} {limit}"
-            shown = "" if kind.startswith("value_error") or kind.startswith("assertion") else f", got {err['input']!r}"
+                msg = f"must be {_range_of(loc, root) or f'{BOUND_WORDS[name]} {limit}'}"
+            shown = "" if kind.startswith("value_error") or kind.startswith("assertion") else got
             if key:
                 lines.append(f"'{key}': {msg}{shown}")
             else:

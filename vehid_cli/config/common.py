@@ -20,6 +20,23 @@ from ..optimizers import ALGORITHMS, algorithm_class
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+SEED_MAX = 2**63 - 1  # seeds are stored as signed 64-bit integers
+
+
+def within(low: float, high: float, *, low_open: bool = False) -> Any:
+    """A finite number in [low, high] (`low_open`: in (low, high]): each numeric key's one range, broad enough for
+    any vehicle or bench and narrow enough that the numerics stay finite (pydantic names the range on failure)."""
+    lower = {"gt": low} if low_open else {"ge": low}
+    return Annotated[float, Field(le=high, allow_inf_nan=False, **lower)]
+
+
+def int_in(low: int, high: int) -> Any:
+    """An integer in [low, high] (sizes, budgets and seeds, so that no count can ask for unbounded memory or time)."""
+    return Annotated[int, Field(ge=low, le=high)]
+
+
+Seed = int_in(0, SEED_MAX)
+Factor = within(0, 1000, low_open=True)  # identify.bounds: a factor of a configured value
 BumpShape = Literal["step", "cosine_step", "half_sine", "trapezoid"]  # road.bump.shape, design.shapes
 
 
@@ -47,8 +64,8 @@ class Algorithm(_Section):
     """Identification algorithm and its budget."""
 
     name: str = Field("abc", description="an optimizer of vehid_cli/optimizers (SPEC section 3 names)")
-    population: Annotated[int, Field(ge=2)] = 20
-    iterations: Annotated[int, Field(ge=1)] = 50
+    population: int_in(2, 10_000) = 20
+    iterations: int_in(1, 1_000_000) = 50
 
 
 def _start_alias(value: object) -> object:
@@ -77,14 +94,14 @@ class IdentifyCommon(_Section):
     """The identify keys every system shares, with one meaning each. Systems set their own defaults."""
 
     unknowns: Annotated[tuple[str, ...], Field(min_length=1)]
-    bounds: tuple[Pos, Pos] = Field((0.7, 1.3), description="search range as factors of the configured values")
+    bounds: tuple[Factor, Factor] = Field((0.7, 1.3), description="search range as factors of the configured values")
     limits: dict[str, tuple[Finite, Finite]] = Field(
         default_factory=dict, description="absolute search range per unknown [SI], overriding 'bounds'"
     )
     algorithm: Algorithm = Algorithm()
-    runs: Annotated[int, Field(ge=1)] = 30
-    seed: Annotated[int, Field(ge=0)] = 2015
-    budget: Annotated[int, Field(ge=1)] | None = Field(
+    runs: int_in(1, 100_000) = 30
+    seed: Seed = 2015
+    budget: int_in(1, 10**9) | None = Field(
         None,
         description="model evaluations per run (per stage for a staged damper fit), honoured exactly; default "
         "population x iterations",

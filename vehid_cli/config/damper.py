@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
+import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
 from ..core.units import UNITS
@@ -13,19 +14,25 @@ from ..models.damper import MODELS, default_values
 from ..models.effects import LIBRARY, bench_names, bound_violation
 from .common import (
     Algorithm,
+    Factor,
     Finite,
     IdentifyCommon,
     NonNeg,
     Pos,
+    Seed,
     Start,
     SystemConfig,
     _did_you_mean,
     _KeyedError,
     _Section,
+    int_in,
     scaled_bounds,
+    within,
 )
 
 DAMPER_STRUCTURAL = ("m", "nv", "nu")  # table sizes: set by damper.table, never identified
+DamperValue = within(-1e12, 1e12)  # a damper parameter [SI]; each model's physical limits are checked beside it
+BENCH_SAMPLES = 2_000_000  # samples of a synthetic bench history at most
 
 
 class DamperSection(_Section):
@@ -35,7 +42,7 @@ class DamperSection(_Section):
     table: tuple[Annotated[int, Field(ge=1, le=50)], ...] = Field(
         (), description="table shape: [m] nodes over u (generalized_bouc_wen), [nv, nu] (force_map)"
     )
-    parameters: dict[str, Finite] = Field(
+    parameters: dict[str, DamperValue] = Field(
         default_factory=dict,
         description="values by name: the truth for synthetic data, the start for fits; the rest from defaults",
     )
@@ -51,15 +58,19 @@ class BenchSection(_Section):
     """The virtual test bench (Fleps-Dezasse section 4.2) that synthetic data is simulated on."""
 
     excitation: Literal["sine", "sawtooth", "constant_velocity"] = "sine"
-    amplitude: Pos = Field(0.025, description="displacement amplitude [m] (stroke/2 for constant_velocity)")
-    frequency: Pos = Field(0.8, description="sine frequency [Hz]")
-    velocity: Pos = Field(0.15, description="|velocity| of sawtooth and constant_velocity [m/s]")
-    cycles: Pos = Field(3.0, description="number of periods (sine, sawtooth)")
-    dt: Pos = Field(0.001, description="sampling step of the bench history [s]")
+    amplitude: within(0, 10, low_open=True) = Field(
+        0.025, description="displacement amplitude [m] (stroke/2 for constant_velocity)"
+    )
+    frequency: within(0, 1e4, low_open=True) = Field(0.8, description="sine frequency [Hz]")
+    velocity: within(0, 100, low_open=True) = Field(
+        0.15, description="|velocity| of sawtooth and constant_velocity [m/s]"
+    )
+    cycles: within(0, 1e5, low_open=True) = Field(3.0, description="number of periods (sine, sawtooth)")
+    dt: within(1e-7, 1) = Field(0.001, description="sampling step of the bench history [s]")
     control: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = Field(
         0.0, description="control input u [0..1] (sine, constant_velocity; the base level of the sawtooth)"
     )
-    steps: tuple[tuple[NonNeg, Annotated[float, Field(ge=0, le=1)]], ...] | None = Field(
+    steps: tuple[tuple[within(0, 1e6), within(0, 1)], ...] | None = Field(
         None, description="control steps [(time [s], u), ...] of the sawtooth; default the paper's 15-50-15 %"
     )
     substeps: Annotated[int, Field(ge=1, le=1000)] = Field(
@@ -68,9 +79,18 @@ class BenchSection(_Section):
 
     @model_validator(mode="after")
     def _grid(self) -> BenchSection:
-        samples = self.cycles / self.frequency / self.dt if self.excitation == "sine" else 0
-        if samples > 2_000_000:
-            raise ValueError(f"the sine holds {samples:.3g} samples; keep it below 2 million")
+        if self.excitation == "sine":
+            seconds = self.cycles / self.frequency
+        elif self.excitation == "sawtooth":
+            seconds = self.cycles * 4 * self.amplitude / self.velocity
+        else:  # one slow stroke each way
+            seconds = 4 * self.amplitude / self.velocity
+        samples = seconds / self.dt
+        if samples > BENCH_SAMPLES:
+            raise ValueError(
+                f"the {self.excitation} holds {samples:.3g} samples of dt = {self.dt:g} s; keep it below "
+                f"{BENCH_SAMPLES:,} (a larger dt, fewer cycles, a faster motion)"
+            )
         return self
 
 
@@ -144,7 +164,7 @@ class DamperData(_Section):
 class DamperNoise(_Section):
     """Force noise of synthetic bench data: sigma = level * std(clean force)."""
 
-    level: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = Field(0.0, description="0.02 = 2 %")
+    level: within(0, 10) = Field(0.0, description="0.02 = 2 %")
 
 
 class DamperStage(_Section):
@@ -161,12 +181,12 @@ class DamperIdentify(IdentifyCommon):
     """What to identify and how (common.IdentifyCommon; cost J, Fleps-Dezasse Eq. 7), with the damper's defaults,
     the real-time check's step and the stages of a step-by-step fit."""
 
-    bounds: tuple[Pos, Pos] = Field((0.1, 10.0), description="search range as factors of the configured values")
+    bounds: tuple[Factor, Factor] = Field((0.1, 10.0), description="search range as factors of the configured values")
     algorithm: Algorithm = Algorithm(name="nelder-mead", population=20, iterations=100)
-    runs: Annotated[int, Field(ge=1)] = 10
-    seed: Annotated[int, Field(ge=0)] = 2013
+    runs: int_in(1, 100_000) = 10
+    seed: Seed = 2013
     start: Start = Field("auto", description="as for the car; auto: random for synthetic data, config for files")
-    realtime_dt: Pos = Field(0.001, description="step of the real-time check (fixed-step RK4) [s]")
+    realtime_dt: within(1e-7, 1) = Field(0.001, description="step of the real-time check (fixed-step RK4) [s]")
     stages: tuple[DamperStage, ...] = Field(
         (),
         description="step-by-step identification: stages in order, each starting from what the previous found "
@@ -205,6 +225,12 @@ class DamperConfig(SystemConfig):
             if name not in names:
                 raise _KeyedError(
                     f"damper.parameters.{name}", f"'{name}' is not a parameter of {d.model}{_did_you_mean(name, names)}"
+                )
+        for name, value in d.parameters.items():
+            lo, hi = MODELS[d.model].bounds.get(name, (-np.inf, np.inf))
+            if not lo <= value <= hi:
+                raise _KeyedError(
+                    f"damper.parameters.{name}", f"{value:g} is outside the physical range [{lo:g}, {hi:g}] of {name}"
                 )
         for name in DAMPER_STRUCTURAL:
             if name in d.parameters and d.parameters[name] != self.values()[name]:

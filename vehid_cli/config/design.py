@@ -13,9 +13,12 @@ from typing import Annotated
 
 from pydantic import Field, model_validator
 
-from .common import BumpShape, NonNeg, Pos, _KeyedError, _Section
+from .common import BumpShape, Seed, _KeyedError, _Section, int_in, within
 from .sensors import SensorSpec
 
+Speed = within(0, 1000, low_open=True)  # km/h, as road.speed_kmh
+BumpLength = within(1e-4, 100, low_open=True)  # m, as road.bump.length
+Duration = within(0, 1e5, low_open=True)  # s, as simulation.duration
 CRITERIA = ("nre", "d_optimal", "worst")  # worst: the largest bound; worst:<param>: that parameter's
 CRITERION = re.compile(r"^(nre|d_optimal|worst)(?::(\S+))?$")
 
@@ -29,8 +32,8 @@ class DesignHeights(_Section):
     """Bump heights: the highest corner at `max`, every corner at least `min`; the design variables are the ratio
     of the two sides (b2 over b1) and, with `per_axle`, of the rear axle over the front."""
 
-    max: float = Field(description="highest allowed bump height [m]")
-    min: NonNeg = Field(0.0, description="lowest allowed bump height under any corner [m] (0: that side flat)")
+    max: within(-1, 1) = Field(description="highest allowed bump height [m]")
+    min: within(0, 1) = Field(0.0, description="lowest allowed bump height under any corner [m] (0: that side flat)")
     per_axle: bool = Field(
         False,
         description="also design the rear axle's heights apart from the front's (two bumps, or a rig); false: the "
@@ -50,7 +53,7 @@ class DesignSensors(_Section):
     """Choose `count` sensors among `candidates` (specs as in `layout`): every subset when there are few, else a
     greedy choice improved by exchanges."""
 
-    count: int = Field(description="how many sensors to mount")
+    count: int_in(-1000, 1000) = Field(description="how many sensors to mount")
     candidates: tuple[SensorSpec, ...] = Field(description="the allowed mounting points (sensor specs of `layout`)")
 
     @model_validator(mode="after")
@@ -75,9 +78,9 @@ class DesignSensors(_Section):
 class DesignSearch(_Section):
     """The global optimizer (scipy differential_evolution, deferred updating: bit-identical for any job count)."""
 
-    population: Annotated[int, Field(ge=4)] = Field(15, description="candidates per generation")
-    iterations: Annotated[int, Field(ge=1)] = Field(25, description="generations at most")
-    seed: Annotated[int, Field(ge=0)] = Field(2015, description="seed of the optimizer's stream")
+    population: int_in(4, 10_000) = Field(15, description="candidates per generation")
+    iterations: int_in(1, 100_000) = Field(25, description="generations at most")
+    seed: Seed = Field(2015, description="seed of the optimizer's stream")
     grid: Annotated[int, Field(ge=3, le=201)] = Field(
         21, description="points per variable of the figures' sweeps and of the single-variable changes"
     )
@@ -86,11 +89,11 @@ class DesignSearch(_Section):
 class Design(_Section):
     """Limits of the test `vehid design` plans, and what 'best' means."""
 
-    speed_kmh: tuple[Pos, Pos] | None = Field(None, description="forward speed range [km/h]")
+    speed_kmh: tuple[Speed, Speed] | None = Field(None, description="forward speed range [km/h]")
     heights: DesignHeights | None = None
     shapes: tuple[BumpShape, ...] | None = Field(None, description="bump shapes to choose from")
-    length: tuple[Pos, Pos] | None = Field(None, description="bump (ramp) length range [m]")
-    duration: tuple[Pos, Pos] | None = Field(None, description="record length range [s]")
+    length: tuple[BumpLength, BumpLength] | None = Field(None, description="bump (ramp) length range [m]")
+    duration: tuple[Duration, Duration] | None = Field(None, description="record length range [s]")
     sensors: DesignSensors | None = None
     criterion: str = Field(
         "nre",

@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from ..models.sensors import Sensor
-from .common import Finite, Pos, _Section
+from .common import _Section, within
 
 
 class SensorSpec(_Section):
@@ -19,15 +19,19 @@ class SensorSpec(_Section):
         description="body_acc, body_disp: vertical motion of a body point; wheel_acc, wheel_disp: a wheel's hop; "
         "deflection: suspension deflection at a corner (body point above it minus the wheel, extension +)"
     )
-    x: Finite | None = Field(None, description="body sensors: forward of `origin` [m]")
-    y: Finite | None = Field(None, description="body sensors: toward side 1 (corners 1, 4) from `origin` [m]")
+    x: within(-100, 100) | None = Field(None, description="body sensors: forward of `origin` [m]")
+    y: within(-100, 100) | None = Field(
+        None, description="body sensors: toward side 1 (corners 1, 4) from `origin` [m]"
+    )
     origin: Literal["cg", "corner1", "corner2", "corner3", "corner4", "front_axle", "rear_axle"] | None = Field(
         None,
         description="body sensors: the point x, y are measured from (default cg); a corner or axle centre stays "
         "put when the CG (a1, b1) is identified",
     )
     corner: Annotated[int, Field(ge=1, le=4)] | None = Field(None, description="wheel and deflection sensors: 1..4")
-    sigma: Pos | None = Field(None, description="this channel's noise standard deviation [m/s² or m]")
+    sigma: within(0, 1e4, low_open=True) | None = Field(
+        None, description="this channel's noise standard deviation [m/s² or m]"
+    )
 
     @model_validator(mode="after")
     def _where(self) -> SensorSpec:

@@ -12,32 +12,54 @@ from ..core.units import SI_FACTORS, UNITS
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
 from ..models.sensors import FAMILY, Layout, corner_layout
-from .common import BumpShape, Finite, IdentifyCommon, NonNeg, Pos, SystemConfig, _did_you_mean, _KeyedError, _Section
+from .common import (
+    BumpShape,
+    Finite,
+    IdentifyCommon,
+    NonNeg,
+    Pos,
+    SystemConfig,
+    _did_you_mean,
+    _KeyedError,
+    _Section,
+    within,
+)
 from .design import Design
 from .sensors import SensorSpec
+
+# The car's parameters: positive (kR, cf and cr may be 0) and within broad physical bounds, from a go-kart to a
+# heavy truck, so that every frequency and time constant of the model stays finite on any time grid.
+Mass = within(0.1, 1e6)  # kg
+Unsprung = within(0.01, 1e5)  # kg
+Inertia = within(0.01, 1e8)  # kg m²
+Length = within(1e-3, 100)  # m
+Stiffness = within(1, 1e10)  # N/m
+RollStiffness = within(0, 1e10)  # N m/rad
+Damping = within(0, 1e8)  # N s/m
+Height = within(-1, 1)  # m, a bump under one corner
 
 
 class Vehicle(_Section):
     """The 7-DOF full car (Gökdağ Fig. 1). SI units: kg, kg m², m, N/m, N m/rad (kR), N s/m."""
 
-    m: Pos = Field(description="sprung (body) mass [kg]")
-    mf: Pos = Field(description="front unsprung mass, each [kg]")
-    mr: Pos = Field(description="rear unsprung mass, each [kg]")
-    Ix: Pos = Field(description="roll moment of inertia [kg m²]")
-    Iy: Pos = Field(description="pitch moment of inertia [kg m²]")
-    a1: Pos = Field(description="CG to front axle [m]")
-    a2: Pos | None = Field(None, description="CG to rear axle [m]; or give wheelbase")
-    b1: Pos = Field(description="CG to side-1 wheels (corners 1, 4) [m]")
-    b2: Pos | None = Field(None, description="CG to side-2 wheels (corners 2, 3) [m]; or give track")
-    wheelbase: Pos | None = Field(None, description="a1 + a2 [m], alternative to a2")
-    track: Pos | None = Field(None, description="b1 + b2 [m], alternative to b2")
-    kf: Pos = Field(description="front suspension stiffness [N/m]")
-    kr: Pos = Field(description="rear suspension stiffness [N/m]")
-    ktf: Pos = Field(description="front tyre stiffness [N/m]")
-    ktr: Pos = Field(description="rear tyre stiffness [N/m]")
-    kR: NonNeg = Field(0.0, description="front anti-roll bar stiffness [N m/rad]")
-    cf: NonNeg = Field(description="front suspension damping [N s/m]")
-    cr: NonNeg = Field(description="rear suspension damping [N s/m]")
+    m: Mass = Field(description="sprung (body) mass [kg]")
+    mf: Unsprung = Field(description="front unsprung mass, each [kg]")
+    mr: Unsprung = Field(description="rear unsprung mass, each [kg]")
+    Ix: Inertia = Field(description="roll moment of inertia [kg m²]")
+    Iy: Inertia = Field(description="pitch moment of inertia [kg m²]")
+    a1: Length = Field(description="CG to front axle [m]")
+    a2: Length | None = Field(None, description="CG to rear axle [m]; or give wheelbase")
+    b1: Length = Field(description="CG to side-1 wheels (corners 1, 4) [m]")
+    b2: Length | None = Field(None, description="CG to side-2 wheels (corners 2, 3) [m]; or give track")
+    wheelbase: Length | None = Field(None, description="a1 + a2 [m], alternative to a2")
+    track: Length | None = Field(None, description="b1 + b2 [m], alternative to b2")
+    kf: Stiffness = Field(description="front suspension stiffness [N/m]")
+    kr: Stiffness = Field(description="rear suspension stiffness [N/m]")
+    ktf: Stiffness = Field(description="front tyre stiffness [N/m]")
+    ktr: Stiffness = Field(description="rear tyre stiffness [N/m]")
+    kR: RollStiffness = Field(0.0, description="front anti-roll bar stiffness [N m/rad]")
+    cf: Damping = Field(description="front suspension damping [N s/m]")
+    cr: Damping = Field(description="rear suspension damping [N s/m]")
     effects: dict[str, dict[str, Finite] | None] | None = Field(
         None,
         description="nonlinear effects beside the linear car: effect name -> its parameters "
@@ -129,10 +151,12 @@ class Bump(_Section):
     """A discrete obstacle met at constant speed; the rear tyres meet it (a1 + a2)/V after the front."""
 
     shape: BumpShape = "cosine_step"
-    length: Pos = Field(0.1, description="ramp length (cosine_step, trapezoid) or bump length (half_sine) [m]")
-    plateau: NonNeg = Field(0.0, description="length of the flat top of a trapezoid [m]")
-    heights: tuple[Finite, Finite, Finite, Finite] = Field(description="height under corners 1..4 [m]")
-    start_time: NonNeg = Field(0.1, description="time at which the front tyres meet the bump [s]")
+    length: within(1e-4, 100, low_open=True) = Field(
+        0.1, description="ramp length (cosine_step, trapezoid) or bump length (half_sine) [m]"
+    )
+    plateau: within(0, 1000) = Field(0.0, description="length of the flat top of a trapezoid [m]")
+    heights: tuple[Height, Height, Height, Height] = Field(description="height under corners 1..4 [m]")
+    start_time: within(0, 1e6) = Field(0.1, description="time at which the front tyres meet the bump [s]")
 
 
 IsoClass = Literal["A", "B", "C", "D", "E", "F", "G", "H"]
@@ -142,9 +166,9 @@ class RandomRoad(_Section):
     """A random road of an ISO 8608 class; the two wheel tracks are independent, rear follows front."""
 
     iso_class: IsoClass
-    n_min: Pos = Field(0.01, description="lowest spatial frequency [cycles/m]")
-    n_max: Pos = Field(10.0, description="highest spatial frequency [cycles/m]")
-    fade_in: NonNeg = Field(5.0, description="distance over which the roughness fades in from zero [m]")
+    n_min: within(1e-4, 1000) = Field(0.01, description="lowest spatial frequency [cycles/m]")
+    n_max: within(1e-4, 1000) = Field(10.0, description="highest spatial frequency [cycles/m]")
+    fade_in: within(0, 1e6) = Field(5.0, description="distance over which the roughness fades in from zero [m]")
 
     @model_validator(mode="after")
     def _band(self) -> RandomRoad:
@@ -159,8 +183,10 @@ RoadInput = Literal["actuators", "tracks", "config"]
 class Road(_Section):
     """Road input: bumps and/or a random ISO 8608 road, or a road profile from a measurement file."""
 
-    speed_kmh: Pos | None = Field(None, description="forward speed [km/h]")
-    speed: Pos | None = Field(None, description="forward speed [m/s], alternative to speed_kmh")
+    speed_kmh: within(0, 1000, low_open=True) | None = Field(None, description="forward speed [km/h]")
+    speed: within(0, 300, low_open=True) | None = Field(
+        None, description="forward speed [m/s], alternative to speed_kmh"
+    )
     bump: Bump | None = None
     random: RandomRoad | None = None
     file: str | None = Field(None, description="measurement file whose road1..road4 columns and time grid are used")
@@ -201,8 +227,8 @@ class Road(_Section):
 class Simulation(_Section):
     """Time grid and integrator."""
 
-    duration: Pos = Field(3.0, description="simulated time [s]")
-    dt: Pos = Field(0.001, description="time step [s]")
+    duration: within(0, 1e5, low_open=True) = Field(3.0, description="simulated time [s]")
+    dt: within(1e-7, 1) = Field(0.001, description="time step [s]")
     integrator: Literal["exact", "newmark", "exact-reference", "rk4"] = Field(
         "exact",
         description="exact: first-order-hold exact discretisation (compiled modal recursions); newmark: average "
@@ -225,8 +251,12 @@ class Simulation(_Section):
 class NoiseSigma(_Section):
     """Absolute noise floors per sensor family: a real sensor's noise does not grow with the signal."""
 
-    acc: Pos | None = Field(None, description="standard deviation of every acceleration channel [m/s²]")
-    disp: Pos | None = Field(None, description="standard deviation of every displacement/deflection channel [m]")
+    acc: within(0, 1e4, low_open=True) | None = Field(
+        None, description="standard deviation of every acceleration channel [m/s²]"
+    )
+    disp: within(0, 10, low_open=True) | None = Field(
+        None, description="standard deviation of every displacement/deflection channel [m]"
+    )
 
 
 class Noise(_Section):

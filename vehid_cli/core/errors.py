@@ -1,14 +1,43 @@
-"""Errors the CLI reports in one line: input a user can fix (exit status 2), and a full disk (exit status 1)."""
+"""Errors the CLI reports in one line, exit status 2: input a user can fix, and an output that cannot be written
+(a full disk or quota, a read-only folder: `WriteFailed`, `DiskFull`)."""
 
 from __future__ import annotations
 
+QUOTED = 200  # characters of a user's value an error message quotes at most
+MESSAGE = 2000  # characters of a whole message at most (a message lists choices, never a file's content)
+
+
+def clip(text: object, limit: int = QUOTED) -> str:
+    """`text` as a string of at most about `limit` characters: a long value (a 100 kB string, a huge list) is cut,
+    saying how long it was, so that an error message quoting it stays one readable paragraph."""
+    try:
+        text = str(text)
+    except ValueError:  # an integer of more digits than Python prints
+        return "(a number too long to print)"
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
+
+
+MAX_QUOTE = QUOTED  # characters of a bad value a message quotes
+
+
+def quote(value, limit: int = MAX_QUOTE) -> str:
+    """`repr(value)` cut to `limit` characters (a message never echoes a 100 kB value)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 20]}... ({len(text)} characters)"
+
 
 class InputError(Exception):
-    """Bad input. The message names the file, the key or column, and what was expected."""
+    """Bad input. The message names the file, the key or column, and what was expected. The source, the key and
+    the message are clipped (`clip`): whatever a user's input holds, the message stays a paragraph."""
 
     exit_code = 2
 
     def __init__(self, message: str, *, source: str | None = None, key: str | None = None):
+        source = None if source is None else clip(source, 2 * QUOTED)
+        key = None if key is None else clip(key, QUOTED)
+        message = clip(message, MESSAGE)
         self.source = source
         self.key = key
         self.detail = message
@@ -21,14 +50,25 @@ class InputError(Exception):
         super().__init__(f"{prefix}: {message}" if prefix else message)
 
 
-class DiskFull(OSError):
-    """The file system (or the user's quota) ran out of space writing `path` (ENOSPC, EDQUOT): exit status 1."""
+class WriteFailed(OSError):
+    """The system refused to write `path` (a read-only file system, no permission, a name too long, a directory
+    where a file belongs, ...): exit status 2, nothing partial left behind."""
 
-    exit_code = 1
+    exit_code = 2
+
+    def __init__(self, path, errno_: int, reason: str):
+        super().__init__(errno_, reason, str(path))
+        self.path = str(path)
+
+    def __str__(self) -> str:
+        return f"cannot write {self.path}: {self.strerror}"
+
+
+class DiskFull(WriteFailed):
+    """The file system (or the user's quota) ran out of space writing `path` (ENOSPC, EDQUOT): exit status 2."""
 
     def __init__(self, path, errno_: int):
-        super().__init__(errno_, "no space left on device", str(path))
-        self.path = str(path)
+        super().__init__(path, errno_, "no space left on device")
 
     def __str__(self) -> str:
         return f"no space left on device writing {self.path}"

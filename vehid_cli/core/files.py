@@ -1,5 +1,7 @@
 """Files written so that a failure loses nothing: atomic replacement (temporary, fsync, rename), stale temporaries of
-killed writers removed, a full disk reported as `DiskFull` naming the file; output paths checked before any work."""
+killed writers removed, a full disk reported as `DiskFull` and a refused write (read-only, no permission, a name too
+long) as `WriteFailed`, each naming the file; output paths checked before any work; files of our own read only when
+they are regular files of a sane size (a FIFO, a device or a huge file put in their place never hangs a read)."""
 
 from __future__ import annotations
 
@@ -13,26 +15,73 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
-from .errors import DiskFull, InputError
+from .errors import DiskFull, InputError, WriteFailed
 
 
-def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8") -> str:
+def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8", limit: int | None = None) -> str:
     """A user's text file, or an InputError naming it: `what` it is ("config file") when missing or unreadable,
-    `expected` ("a CSV file") when it is a directory."""
+    `expected` ("a CSV file") when it is a directory, too large when it holds more than `limit` bytes."""
     source = str(path)
     try:
-        return Path(path).read_text(encoding=encoding)
+        with open(check_path_name(path, what), "rb") as fh:
+            data = fh.read() if limit is None else fh.read(limit + 1)
+        if limit is not None and len(data) > limit:
+            raise InputError(f"{what} larger than {limit} bytes; expected {expected}", source=source)
+        return data.decode(encoding).replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as open()
     except FileNotFoundError:
         raise InputError(f"{what} not found", source=source) from None
     except IsADirectoryError:
         raise InputError(f"is a directory, expected {expected}", source=source) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read {what} ({exc.__class__.__name__}: {exc})", source=source) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"cannot read {what}: not {encoding} text (byte {exc.start}: {exc.reason}); expected {expected}",
+            source=source,
+        ) from None
+    except OSError as exc:
+        raise InputError(
+            f"cannot read {what} ({exc.__class__.__name__}: {exc.strerror or exc})", source=source
+        ) from None
+
+
+def check_path_name(path: str | Path, what: str = "path") -> Path:
+    """`path`, or an InputError when the file system cannot take it as a name: a NUL byte, a name longer than the
+    file system's limit (NAME_MAX, 255 bytes on most), a path longer than PATH_MAX."""
+    text = os.fspath(path)
+    if "\0" in text:
+        raise InputError(f"the {what}'s name holds a NUL byte, which no file name may hold", source=repr(text))
+    try:
+        raw = os.fsencode(text)
+    except UnicodeError:
+        raise InputError(f"the {what}'s name cannot be encoded for the file system", source=repr(text)) from None
+    parent = os.path.dirname(text) or "."
+    name_max, path_max = _limits(parent)
+    for part in raw.split(b"/"):
+        if len(part) > name_max:
+            raise InputError(
+                f"a name of {len(part)} bytes in the {what}; the file system takes at most {name_max} per name",
+                source=text,
+            )
+    if len(raw) >= path_max:
+        raise InputError(
+            f"a path of {len(raw)} bytes; the file system takes at most {path_max - 1} for the {what}", source=text
+        )
+    return Path(path)
+
+
+def _limits(directory: str) -> tuple[int, int]:
+    """NAME_MAX and PATH_MAX where `directory` (or its nearest existing ancestor) lives; 255 and 4096 if unknown."""
+    probe = directory
+    while probe and not os.path.isdir(probe) and os.path.dirname(probe) != probe:
+        probe = os.path.dirname(probe)
+    try:
+        return os.pathconf(probe or ".", "PC_NAME_MAX"), os.pathconf(probe or ".", "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return 255, 4096
 
 
 def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
     """Check an output path has a known suffix and a writable directory, before any work is done."""
-    path = Path(path)
+    path = check_path_name(path, "output")
     if path.suffix.lower() not in suffixes:
         raise InputError(
             f"unknown output type '{path.suffix}'; expected one of {', '.join(suffixes)}", source=str(path)
@@ -51,7 +100,7 @@ def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
 def check_writable_dir(path: str | Path, option: str | None = None) -> Path:
     """Check an output directory can be made and written (a probe file in it, or in its nearest existing
     ancestor: nothing is left behind), before any work. InputError names the option and the path."""
-    path = Path(path)
+    path = check_path_name(path, "output directory")
     source = f"{option} {path}" if option else str(path)
     if path.exists() and not path.is_dir():
         raise InputError("is a file, expected a directory", source=source)
@@ -89,6 +138,64 @@ def _fsync(path: Path, directory: bool = False) -> None:
 
 
 FULL_DISK = tuple(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)) if e is not None)
+REFUSED = (
+    errno.EROFS,
+    errno.EACCES,
+    errno.EPERM,
+    errno.ENAMETOOLONG,
+    errno.EISDIR,
+    errno.ENOTDIR,
+    errno.ELOOP,
+    errno.EFBIG,
+    errno.ENOENT,
+    errno.EMLINK,
+    errno.EEXIST,
+    errno.EXDEV,
+    errno.ETXTBSY,
+    errno.EINVAL,
+)  # fmt: skip - a write the system refuses for a reason a user can fix (exit 2), unlike an I/O error of the disk
+
+
+def write_error(path: str | Path, exc: OSError) -> OSError:
+    """The error to raise for `exc` met writing `path`: `DiskFull` or `WriteFailed` naming it, else `exc` itself."""
+    if isinstance(exc, WriteFailed):
+        return exc
+    if exc.errno in FULL_DISK:
+        return DiskFull(path, exc.errno)
+    if exc.errno in REFUSED:
+        return WriteFailed(path, exc.errno, exc.strerror or os.strerror(exc.errno))
+    return exc
+
+
+def read_regular(path: str | Path, limit: int, what: str) -> bytes:
+    """The bytes of `path` if it is a regular file (symlinks followed) of at most `limit` bytes; InputError naming it
+    otherwise (a directory, a FIFO or a device in its place, a symlink loop, unreadable, larger than `limit`).
+    FileNotFoundError passes through."""
+    source = str(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO opens at once instead of waiting for a writer
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read the {what} ({exc.strerror})", source=source) from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            kind = "a directory" if stat.S_ISDIR(info.st_mode) else "not a regular file"
+            raise InputError(f"cannot read the {what}: it is {kind}", source=source)
+        if info.st_size > limit:
+            raise InputError(f"{what} is {info.st_size} bytes, more than the {limit} bytes one can hold", source=source)
+        chunks, size = [], 0
+        while chunk := os.read(fd, 1 << 20):
+            chunks.append(chunk)
+            size += len(chunk)
+            if size > limit:
+                raise InputError(f"{what} grew past {limit} bytes while it was read", source=source)
+        return b"".join(chunks)
+    except OSError as exc:
+        raise InputError(f"cannot read the {what} ({exc.strerror})", source=source) from None
+    finally:
+        os.close(fd)
 
 
 def _temporary_name(path: Path) -> re.Pattern:
@@ -146,7 +253,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
     The temporary file is flushed to the disk before the rename and the directory after it, so after a crash
     (or a power cut) `path` holds either its old content or the whole new one, never a part of it. Stale
-    temporaries of `path` are removed first; a full disk (or quota) is `DiskFull` naming `path`."""
+    temporaries of `path` are removed first; a full disk (or quota) is `DiskFull` naming `path`, a write the system
+    refuses (read-only, no permission, ...) `WriteFailed`."""
     path = Path(path)
     remove_stale_temporaries(path)
     fd = -1
@@ -162,9 +270,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
                 tmp_path.unlink()
             raise
     except OSError as exc:
-        if exc.errno in FULL_DISK and not isinstance(exc, DiskFull):
-            raise DiskFull(path, exc.errno) from exc
-        raise
+        error = write_error(path, exc)
+        if error is exc:
+            raise
+        raise error from exc
     finally:
         if fd >= 0:
             os.close(fd)
