@@ -156,6 +156,10 @@ def _nan(t, x, f):
     return t, x, f
 
 
+def _in_us(t, x, f):  # a time column in µs read as s: the real-time check stepped 2e4 s at 10 µs (149 GiB)
+    return t * 1e6, x, f
+
+
 @pytest.mark.parametrize(
     "mutate, sets, expected",
     [
@@ -165,8 +169,9 @@ def _nan(t, x, f):
         (_nan, [], ["force_N", "NaN"]),
         (None, ["damper.model=bouc_wn"], ["damper.model", "bouc_wen"]),
         (None, ["damper.parameters.c00=5"], ["c00", "did you mean 'c0'"]),
+        (_in_us, [], ["t_s", "'data.units.time'", "lasts 1.99e+06 s", "ms or µs"]),
     ],
-    ids=["column", "unit", "time", "nan", "model", "parameter"],
+    ids=["column", "unit", "time", "nan", "model", "parameter", "time_in_us"],
 )
 def test_bad_input_exits_2_naming_the_column_or_key(tmp_path, mutate, sets, expected):
     config = measured_config(tmp_path, bench_csv(tmp_path, mutate))

@@ -28,7 +28,6 @@ from ._files_inputs import (
     markers_of,
     tiny_config,
     valid_run,
-    write_mat73,
     write_raw,
 )
 
