@@ -217,8 +217,8 @@ def _matv5_structure(rng, folder: Path) -> tuple[Path, str]:
         if tt.size != t.size:
             variables[f"t_{name}"] = tt
     if kind == "units":
-        variables["units"] = {NAMES[o]: rng.choice([1.5, "g\udcff".encode("utf-8", "surrogateescape"), "", "x" * 3000])
-                              for o in runs}  # fmt: skip
+        odd = [1.5, "g\udcff".encode("utf-8", "surrogateescape"), "", "x" * 3000, np.zeros(3)]
+        variables["units"] = {NAMES[o]: odd[int(rng.integers(len(odd)))] for o in runs}
     else:
         variables["units"] = {NAMES[o]: UNITS[o] for o in runs}
     path = folder / "run.mat"
