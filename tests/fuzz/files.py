@@ -152,14 +152,14 @@ def _mdf4_structure(rng, folder: Path) -> tuple[Path, str]:
             t[int(rng.integers(t.size))] = np.nan
         elif kind == "no_samples" and rng.random() < 0.3:
             t, samples = t[:0], samples[:0]
-        try:
-            signals.append(Signal(samples, t, name=name, unit=unit))
-        except Exception:  # noqa: BLE001 - asammdf refuses some names and shapes itself: keep the channel as it was
-            signals.append(Signal(y, runs[ours][0], name=NAMES[ours], unit=UNITS[ours]))
+        signals.append((Signal(y, runs[ours][0], name=NAMES[ours], unit=UNITS[ours]), (samples, t, name, unit)))
     if kind == "dup":
         signals.append(signals[int(rng.integers(len(signals)))])
-    for s in signals:
-        mdf.append([s])
+    for plain, (samples, t, name, unit) in signals:
+        try:
+            mdf.append([Signal(samples, t, name=name, unit=unit)])
+        except Exception:  # noqa: BLE001 - asammdf refuses some names, shapes and dtypes itself: the plain channel
+            mdf.append([plain])
     path = folder / "run.mf4"
     with open(path, "wb+") as fh:
         mdf.save(fh, overwrite=True, compression=int(rng.integers(0, 3)))
