@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import signal
+import warnings
 
 import numpy as np
 import pytest
@@ -391,3 +392,11 @@ def test_a_channel_too_short_for_the_anti_alias_filter_is_named(tmp_path):
     path.write_text("t,ACC\n" + "".join(f"{k / 1000},{np.sin(k)}\n" for k in range(20)))
     raises(path, str(path), "'acc' ('ACC')", "20 samples at 1000 Hz", "too few to low-pass", channels={"acc": "ACC"},
            rate=200.0)  # fmt: skip
+
+
+def test_a_sample_that_overflows_in_si_is_refused_without_a_numpy_warning(tmp_path):
+    path = tmp_path / "overflow.csv"
+    path.write_text("t,ACC\n" + "".join(f"{k / 100},{1e308 if k == 7 else 0.5}\n" for k in range(50)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's RuntimeWarning 'overflow encountered in multiply' was printed
+        raises(path, str(path), "'acc' ('ACC')", "non-finite", "sample 8", channels={"acc": "ACC"}, units={"acc": "g"})
