@@ -445,3 +445,23 @@ def test_bench_csv_sample_rate_rebuilds_a_rounded_time_column_and_keeps_the_samp
     with pytest.raises(InputError) as err:
         read_bench(path, columns, units, sample_rate=900.0)
     assert err.value.key == "data.sample_rate" and "'t_ms'" in str(err.value) and "900 Hz" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "sets, key",
+    [
+        (["bench.dt=10"], "bench.dt"),  # was IndexError (exit 1)
+        (["bench.cycles=0.0001"], "bench.cycles"),  # was IndexError
+        (["bench.excitation=sawtooth", "bench.cycles=0.0001"], "bench.cycles"),  # was np.gradient's ValueError
+        (["bench.excitation=sawtooth", "bench.velocity=1e-9"], "bench.cycles"),  # a 1e8 s grid
+    ],
+)
+def test_a_virtual_bench_whose_time_scale_cannot_be_a_run_is_exit_2_naming_the_key(tmp_path, sets, key):
+    from tests.conftest import invoke
+
+    out = tmp_path / "out.h5"
+    code, stdout, stderr = invoke("identify", synthetic_config(tmp_path), "-o", out, "--runs", "1",
+                                  *[a for s in sets for a in ("--set", s)])  # fmt: skip
+    assert code == 2, stdout + stderr
+    assert f"'{key}'" in stderr and not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damper.yaml"]
