@@ -156,6 +156,10 @@ def _nan(t, x, f):
     return t, x, f
 
 
+def _in_us(t, x, f):  # a time column in µs read as s: the real-time check stepped 2e4 s at 10 µs (149 GiB)
+    return t * 1e6, x, f
+
+
 @pytest.mark.parametrize(
     "mutate, sets, expected",
     [
@@ -165,8 +169,9 @@ def _nan(t, x, f):
         (_nan, [], ["force_N", "NaN"]),
         (None, ["damper.model=bouc_wn"], ["damper.model", "bouc_wen"]),
         (None, ["damper.parameters.c00=5"], ["c00", "did you mean 'c0'"]),
+        (_in_us, [], ["t_s", "'data.units.time'", "lasts 1.99e+06 s", "ms or µs"]),
     ],
-    ids=["column", "unit", "time", "nan", "model", "parameter"],
+    ids=["column", "unit", "time", "nan", "model", "parameter", "time_in_us"],
 )
 def test_bad_input_exits_2_naming_the_column_or_key(tmp_path, mutate, sets, expected):
     config = measured_config(tmp_path, bench_csv(tmp_path, mutate))
@@ -440,3 +445,23 @@ def test_bench_csv_sample_rate_rebuilds_a_rounded_time_column_and_keeps_the_samp
     with pytest.raises(InputError) as err:
         read_bench(path, columns, units, sample_rate=900.0)
     assert err.value.key == "data.sample_rate" and "'t_ms'" in str(err.value) and "900 Hz" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "sets, key",
+    [
+        (["bench.dt=10"], "bench.dt"),  # was IndexError (exit 1)
+        (["bench.cycles=0.0001"], "bench.cycles"),  # was IndexError
+        (["bench.excitation=sawtooth", "bench.cycles=0.0001"], "bench.cycles"),  # was np.gradient's ValueError
+        (["bench.excitation=sawtooth", "bench.velocity=1e-9"], "bench.cycles"),  # a 1e8 s grid
+    ],
+)
+def test_a_virtual_bench_whose_time_scale_cannot_be_a_run_is_exit_2_naming_the_key(tmp_path, sets, key):
+    from tests.conftest import invoke
+
+    out = tmp_path / "out.h5"
+    code, stdout, stderr = invoke("identify", synthetic_config(tmp_path), "-o", out, "--runs", "1",
+                                  *[a for s in sets for a in ("--set", s)])  # fmt: skip
+    assert code == 2, stdout + stderr
+    assert f"'{key}'" in stderr and not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damper.yaml"]

@@ -3,6 +3,10 @@ naming the file and the channel."""
 
 from __future__ import annotations
 
+import os
+import signal
+import warnings
+
 import numpy as np
 import pytest
 import scipy.io
@@ -273,3 +277,126 @@ def test_the_bench_reader_passes_resample_false_on(tmp_path):
     assert read_bench(path, columns, {}).t.size > 3  # resampled by default
     with pytest.raises(InputError, match="jitter.*data.resample"):
         read_bench(path, columns, {}, resample=False)
+
+
+# ------------------------------------------------------------------------------------------ damaged files (issue 22)
+
+
+def _damaged(files, fmt, tmp_path, edit):
+    data = bytearray(files[fmt].read_bytes())
+    edit(data)
+    path = tmp_path / files[fmt].name
+    path.write_bytes(bytes(data))
+    return path
+
+
+@pytest.mark.parametrize("fmt, what", [("mf4", "ASAM MDF"), ("h5", "HDF5"), ("mat73", "HDF5 (MATLAB v7.3)")])
+def test_a_truncated_binary_file_is_damaged_naming_the_file_and_printing_nothing(files, tmp_path, capfd, fmt, what):
+    path = _damaged(files, fmt, tmp_path, lambda d: d.__delitem__(slice(len(d) // 3, None)))
+    channels = H5_PATHS if fmt == "h5" else CHANNELS
+    raises(path, str(path), f"cannot read as {what}", "damaged", channels=channels)
+    captured = capfd.readouterr()  # asammdf's MDF4.__del__ traceback and HDF5's error stack stay in the child
+    assert "Traceback" not in captured.err + captured.out and "Exception ignored" not in captured.err
+
+
+def test_an_mdf4_channel_group_declaring_2_34_samples_is_refused_before_it_is_read(files, tmp_path):
+    from asammdf import MDF
+
+    with MDF(files["mf4"]) as mdf:
+        cycles = mdf.groups[0].channel_group.cycles_nr
+    needle = int(cycles).to_bytes(8, "little")
+
+    def inflate(data):
+        at = data.find(b"##CG")
+        at = data.find(needle, at)  # cg_cycle_count, the first 8-byte field after the links
+        data[at : at + 8] = (2**34).to_bytes(8, "little")
+
+    path = _damaged(files, "mf4", tmp_path, inflate)
+    raises(path, str(path), "channel group 0 declares 17179869184 samples", "GiB", "bytes can hold", channels=CHANNELS)
+
+
+def test_a_mat_reader_that_crashes_is_exit_2_not_a_dead_process(files, monkeypatch):
+    from vehid_cli.io.formats import mat
+
+    monkeypatch.setattr(mat, "_load_v5", lambda src: os.kill(os.getpid(), signal.SIGSEGV))
+    raises((files, "mat"), str(files["mat"]), "cannot read as a MATLAB file", "the reader crashed (SIGSEGV")
+
+
+def test_a_damaged_compressed_mat_v5_is_damaged_not_a_zlib_error(tmp_path):
+    path = tmp_path / "run.mat"
+    scipy.io.savemat(path, {"t": np.arange(500) / 100.0, "ACC": np.sin(np.arange(500))}, do_compression=True)
+    data = bytearray(path.read_bytes())
+    data[200:210] = bytes(10)
+    path.write_bytes(bytes(data))
+    raises(path, str(path), "cannot read as a MATLAB file", channels={"acc": "ACC"})
+
+
+def _h5_unit(path, value):
+    import h5py
+
+    with h5py.File(path, "w") as f:
+        f.create_dataset("t", data=np.arange(100) / 100.0)
+        f.create_dataset("acc", data=np.zeros(100)).attrs["unit"] = value
+
+
+def test_an_hdf5_unit_attribute_that_is_not_utf8_text_names_the_dataset(tmp_path):
+    path = tmp_path / "run.h5"
+    _h5_unit(path, np.bytes_(b"\xff\xfe m/s"))
+    raises(path, str(path), "dataset 'acc'", "not UTF-8 text", channels={"acc": "acc"})
+    _h5_unit(path, np.array([1.0, 2.0]))
+    raises(path, str(path), "dataset 'acc'", "not text (a float64 array of shape (2,))", channels={"acc": "acc"})
+    _h5_unit(path, "mm" * 50_000)
+    msg = raises(path, str(path), "'acc'", "100000 characters long", channels={"acc": "acc"})
+    assert len(msg) < 400
+
+
+def test_a_damaged_hdf5_chunk_is_damaged_naming_the_file(tmp_path):
+    import h5py
+
+    path = tmp_path / "run.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("t", data=np.arange(4000) / 100.0)
+        f.create_dataset("acc", data=np.sin(np.arange(4000.0)), chunks=(500,), compression="gzip", fletcher32=True)
+    data = bytearray(path.read_bytes())
+    data[-3000:-2990] = bytes(10)
+    path.write_bytes(bytes(data))
+    raises(path, str(path), "cannot read as HDF5", "damaged", channels={"acc": "acc"})
+
+
+def test_a_sample_beyond_1e12_is_no_measurement(tmp_path):
+    path = tmp_path / "huge.csv"
+    path.write_text("t,ACC\n" + "".join(f"{k / 100},{1e300 if k == 7 else 0.5}\n" for k in range(50)))
+    raises(path, str(path), "'acc' ('ACC')", "beyond ±1e+12", "sample 8", "1e+300", channels={"acc": "ACC"})
+
+
+# ------------------------------------------------------------------------------------------ the grid's size
+
+
+@pytest.mark.parametrize("rate", [1e9, 1e12, 1e300])
+def test_a_grid_rate_far_above_the_channels_is_refused_before_it_is_allocated(files, rate):
+    raises((files, "mf4"), "at most 100 times", "1000 Hz", f"{rate:g} Hz", rate=rate)
+
+
+def test_a_grid_beyond_the_memory_budget_is_refused_with_the_numbers(tmp_path, monkeypatch):
+    from vehid_cli.io import timegrid
+
+    monkeypatch.setattr(timegrid, "GRID_BUDGET", 1 << 20)
+    path = tmp_path / "long.csv"
+    path.write_text("t,ACC\n" + "".join(f"{k / 1000},{np.sin(k)}\n" for k in range(40_000)))
+    msg = raises(path, str(path), "39.999 s is 40000 samples", "GiB)", channels={"acc": "ACC"})
+    assert "the grid at most 0.000976562 GiB" in msg
+
+
+def test_a_channel_too_short_for_the_anti_alias_filter_is_named(tmp_path):
+    path = tmp_path / "short.csv"
+    path.write_text("t,ACC\n" + "".join(f"{k / 1000},{np.sin(k)}\n" for k in range(20)))
+    raises(path, str(path), "'acc' ('ACC')", "20 samples at 1000 Hz", "too few to low-pass", channels={"acc": "ACC"},
+           rate=200.0)  # fmt: skip
+
+
+def test_a_sample_that_overflows_in_si_is_refused_without_a_numpy_warning(tmp_path):
+    path = tmp_path / "overflow.csv"
+    path.write_text("t,ACC\n" + "".join(f"{k / 100},{1e308 if k == 7 else 0.5}\n" for k in range(50)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's RuntimeWarning 'overflow encountered in multiply' was printed
+        raises(path, str(path), "'acc' ('ACC')", "non-finite", "sample 8", channels={"acc": "ACC"}, units={"acc": "g"})

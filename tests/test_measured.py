@@ -279,3 +279,20 @@ def test_a_logger_run_from_the_independent_simulator_identifies_its_own_car(tmp_
     z = (estimate - np.array([truth[n] for n in system.names])) / bound.sd
     assert np.all(np.abs(z) < 4.5), dict(zip(system.names, z.round(2), strict=True))
     assert system.task.observed is not None and system.task.offsets
+
+
+def test_a_run_where_the_channels_overlap_by_a_few_samples_names_the_channel_and_the_count(runs, tmp_path):
+    """One clock in another time unit (issue 22): the channels overlap for 5 ms; no noise is estimated from 5
+    samples (numpy printed 'Mean of empty slice'): exit 2 naming the channel and how many samples it has."""
+    from vehid_cli.io.formats import FORMATS
+
+    cfg = load_config(RIG, SHORT)
+    names = {ours: cfg.data.channels.get(ours, ours) for ours in cfg.data.channels}
+    rec = read_record(runs["mat"], names, {n: "1" for n in names})
+    channels = {ours: (rec.t, rec.channel(ours)) for ours in names}
+    channels["road1"] = (rec.t[:6], rec.channel("road1")[:6])  # 5 ms of the road, then nothing
+    path = tmp_path / "few.mat"
+    FORMATS[".mat"].write(path, channels, names, dict.fromkeys(names, ""), start=None, comment="")
+    code, out, err = invoke("check", RIG, "--data", path, *sum((["--set", s] for s in SHORT), []))
+    assert code == 2, out + err
+    assert str(path) in err and "samples of its own" in err and "at least 8" in err and "Warning" not in out + err

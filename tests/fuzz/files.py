@@ -152,14 +152,14 @@ def _mdf4_structure(rng, folder: Path) -> tuple[Path, str]:
             t[int(rng.integers(t.size))] = np.nan
         elif kind == "no_samples" and rng.random() < 0.3:
             t, samples = t[:0], samples[:0]
-        try:
-            signals.append(Signal(samples, t, name=name, unit=unit))
-        except Exception:  # noqa: BLE001 - asammdf refuses some names and shapes itself: keep the channel as it was
-            signals.append(Signal(y, runs[ours][0], name=NAMES[ours], unit=UNITS[ours]))
+        signals.append((Signal(y, runs[ours][0], name=NAMES[ours], unit=UNITS[ours]), (samples, t, name, unit)))
     if kind == "dup":
         signals.append(signals[int(rng.integers(len(signals)))])
-    for s in signals:
-        mdf.append([s])
+    for plain, (samples, t, name, unit) in signals:
+        try:
+            mdf.append([Signal(samples, t, name=name, unit=unit)])
+        except Exception:  # noqa: BLE001 - asammdf refuses some names, shapes and dtypes itself: the plain channel
+            mdf.append([plain])
     path = folder / "run.mf4"
     with open(path, "wb+") as fh:
         mdf.save(fh, overwrite=True, compression=int(rng.integers(0, 3)))
@@ -217,7 +217,7 @@ def _matv5_structure(rng, folder: Path) -> tuple[Path, str]:
         if tt.size != t.size:
             variables[f"t_{name}"] = tt
     if kind == "units":
-        odd = [1.5, "g\udcff".encode("utf-8", "surrogateescape"), "", "x" * 3000]
+        odd = [1.5, "g\udcff".encode("utf-8", "surrogateescape"), "", "x" * 3000, np.zeros(3)]
         variables["units"] = {NAMES[o]: odd[int(rng.integers(len(odd)))] for o in runs}
     else:
         variables["units"] = {NAMES[o]: UNITS[o] for o in runs}

@@ -22,6 +22,7 @@ exist (Windows), `fn` runs in this process, its exceptions still turned into `Da
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import pickle
 import select
@@ -83,13 +84,15 @@ def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None =
         _child(fn, args, write_end, max(MEMORY_BUDGET, FILE_FACTOR * size))
     os.close(write_end)
     try:
-        data = _receive(read_end, pid, timeout)
+        data = _receive(read_end, timeout)
     except BaseException:  # interrupted (Ctrl-C, an alarm): the child goes too
-        os.kill(pid, signal.SIGKILL)
-        _reap(pid)
+        _kill(pid)
         raise
     finally:
         os.close(read_end)
+    if data is None:
+        _kill(pid)
+        raise Damaged(f"the reader did not finish within {timeout:.0f} s")
     status = _reap(pid)
     if not data:
         if os.WIFSIGNALED(status):
@@ -107,6 +110,7 @@ def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None =
 
 def _child(fn, args, write_end: int, budget: int) -> None:
     try:
+        faulthandler.disable()  # a crash is the parent's to report (pytest and PYTHONFAULTHANDLER enable it)
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, 1)
         os.dup2(devnull, 2)
@@ -144,20 +148,26 @@ def _limit_memory(budget: int) -> None:
         pass
 
 
-def _receive(fd: int, pid: int, timeout: float) -> bytes:
-    """Everything the child writes, until it closes the pipe; the child is killed after `timeout` s."""
+def _receive(fd: int, timeout: float) -> bytes | None:
+    """Everything the child writes, until it closes the pipe; None when that takes more than `timeout` s."""
     chunks, deadline = [], time.monotonic() + timeout
     while True:
         left = deadline - time.monotonic()
         ready, _, _ = select.select([fd], [], [], max(0.0, left))
         if not ready:
-            os.kill(pid, signal.SIGKILL)
-            _reap(pid)
-            raise Damaged(f"the reader did not finish within {timeout:.0f} s")
+            return None
         chunk = os.read(fd, 1 << 20)
         if not chunk:
             return b"".join(chunks)
         chunks.append(chunk)
+
+
+def _kill(pid: int) -> None:
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    _reap(pid)
 
 
 def _reap(pid: int) -> int:

@@ -150,9 +150,11 @@ def _in_si(
                 f"('{quoted(unit, 60)}'): not a unit",
                 source=src,
             )
-        r.y = r.y * unit_factor(unit, src, f"channel '{ours}' ('{channels[ours]}')")
-        if r.time:
-            r.t = r.t * UNITS["time"][time_unit]
+        factor = unit_factor(unit, src, f"channel '{ours}' ('{channels[ours]}')")
+        with np.errstate(over="ignore", invalid="ignore"):  # a value that overflows is refused by check_channel
+            r.y = r.y * factor
+            if r.time:
+                r.t = r.t * UNITS["time"][time_unit]
         steps[ours] = check_channel(ours, channels[ours], r, src)
         if nominal_rate is not None:
             on_nominal_rate(ours, channels[ours], r, nominal_rate, src)

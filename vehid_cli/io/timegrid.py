@@ -161,7 +161,7 @@ def check_grid_size(n: float, grid_rate: float, span: float, channels: int, fast
     needed = n * (channels + 1) * 8.0 * GRID_COPIES
     if grid_rate > UPSAMPLE_LIMIT * fastest * (1 + RATE_MATCH) or needed > GRID_BUDGET:
         raise InputError(
-            f"a grid at {grid_rate:g} Hz over the record's {span:.6g} s is {n:.4g} samples for {channels} channels "
+            f"a grid at {grid_rate:g} Hz over the record's {span:.6g} s is {n:.6g} samples for {channels} channels "
             f"(about {needed / 2**30:.3g} GiB); the fastest channel is sampled at {fastest:g} Hz: the grid rate may "
             f"be at most {UPSAMPLE_LIMIT:g} times that, and the grid at most {GRID_BUDGET / 2**30:g} GiB; give a "
             f"lower rate (data.rate) or a shorter window",

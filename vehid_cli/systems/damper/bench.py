@@ -30,13 +30,27 @@ def bench_history(cfg: DamperConfig, bench=None) -> BenchHistory:
     """The configured virtual-bench excitation (motion and control input, no force yet); `bench` replaces
     the config's bench section (a stage's own excitation)."""
     b = bench if bench is not None else cfg.bench
+    if not b.dt <= MAX_STEP_S:  # a step the excitation's samples and the real-time check cannot take
+        raise InputError(
+            f"bench.dt = {b.dt:g} s: a bench run is sampled at least every {MAX_STEP_S:g} s",
+            source=cfg.source,
+            key="bench.dt",
+        )
+    cycles = 1.0 if b.excitation == "constant_velocity" else b.cycles  # one slow stroke each way
+    span = cycles / b.frequency if b.excitation == "sine" else cycles * 4 * b.amplitude / b.velocity
+    if not MIN_RUN_S <= span <= MAX_RUN_S:  # before the grid is made (one sample has no velocity: np.gradient)
+        raise InputError(
+            f"the {b.excitation} excitation lasts {span:.3g} s at bench.dt = {b.dt:g} s; a bench run lasts "
+            f"{MIN_RUN_S:g} to {MAX_RUN_S:g} s: change the cycles, the frequency or the velocity",
+            source=cfg.source,
+            key="bench.cycles",
+        )
     if b.excitation == "sine":
         return sine(b.amplitude, b.frequency, b.cycles, b.dt, b.control)
     if b.excitation == "sawtooth":
         steps = None if b.steps is None else [tuple(s) for s in b.steps]
         return sawtooth(b.amplitude, b.velocity, b.cycles, b.dt, b.control, steps)
-    h = triangle(b.amplitude, b.velocity, 1.0, b.dt, b.control)  # constant_velocity: one slow stroke each way
-    return replace(h, source="constant_velocity")
+    return replace(triangle(b.amplitude, b.velocity, 1.0, b.dt, b.control), source="constant_velocity")
 
 
 def configured_spec(cfg: DamperConfig) -> DamperSpec:
