@@ -328,3 +328,66 @@ def hostile_options(rng: np.random.Generator, folder: Path) -> Case:
     if command == "diagnose":
         opt += ["--validate", data]
     return Case("options", f"{command} {' '.join(opt)[:60]}", (command, config, *opt))
+
+
+# ------------------------------------------------------------------------------------------ values
+
+CAR_KEYS = [
+    f"vehicle.{k}" for k in ("m", "mf", "mr", "Ix", "Iy", "a1", "b1", "kf", "kr", "ktf", "ktr", "kR", "cf", "cr")
+]
+CAR_KEYS += [
+    "road.speed_kmh", "road.bump.length", "road.bump.plateau", "road.bump.start_time", "road.bump.heights",
+    "simulation.duration", "simulation.dt", "noise.level", "noise.sigma.acc", "noise.sigma.disp",
+    "identify.bounds", "identify.runs", "identify.seed", "identify.budget", "identify.algorithm.population",
+    "identify.algorithm.iterations", "identify.limits.m", "vehicle.wheelbase", "vehicle.track",
+]  # fmt: skip
+RIG_KEYS = ["road.random.n_min", "road.random.n_max", "road.random.fade_in", "road.speed_kmh", "layout.0.x",
+            "noise.sigma.acc", "vehicle.m", "vehicle.cr"]  # fmt: skip
+DAMPER_KEYS = [
+    "bench.amplitude", "bench.frequency", "bench.velocity", "bench.cycles", "bench.dt", "bench.control",
+    "bench.substeps", "noise.level", "damper.parameters.c0", "damper.parameters.fc", "damper.parameters.v_eps",
+    "damper.parameters.k1", "damper.parameters.x0", "identify.realtime_dt", "identify.bounds", "identify.seed",
+    "identify.runs",
+]  # fmt: skip
+
+
+def _number(rng) -> str:
+    """A hostile number (or not a number), as YAML text."""
+    kind = int(rng.integers(8))
+    if kind == 0:
+        return _pick(rng, ["0", "-0", "-1", ".nan", ".inf", "-.inf", "1e999", "-1e999", "~", "true", "''", "[]", "{}"])
+    if kind == 1:
+        return f"{_pick(rng, ['', '-'])}1.0e{int(rng.integers(-320, 320))}"
+    if kind == 2:
+        return _pick(rng, ["9" * 400, "-" + "9" * 300, str(2**63), str(2**64), str(-(2**63) - 1), str(2**31)])
+    if kind == 3:
+        return _pick(rng, ["'1e30'", "'abc'", "1,5", "1_000", "0x1F", "0o17", "1:30", "[1, 2]", "[.nan, 1]", "{a: 1}"])
+    if kind == 4:  # a list of two values, for pairs (bounds, limits)
+        return f"[{_number_scalar(rng)}, {_number_scalar(rng)}]"
+    if kind == 5:  # a list of four, for the bump heights
+        return "[" + ", ".join(_number_scalar(rng) for _ in range(4)) + "]"
+    return _number_scalar(rng)
+
+
+def _number_scalar(rng) -> str:
+    """A number near a range's edge or across magnitudes."""
+    edge = float(_pick(rng, [0, 1e-7, 1e-4, 1e-3, 0.01, 0.1, 1, 10, 100, 1000, 1e4, 1e5, 1e6, 1e8, 1e10, 1e12]))
+    value = edge * float(_pick(rng, [1, 1.0000001, 0.9999999, 2, 0.5, -1]))
+    return repr(value) if rng.random() < 0.8 else str(int(value))
+
+
+@family("values")
+def hostile_values(rng: np.random.Generator, folder: Path) -> Case:
+    kind = _pick(rng, ["car", "car", "car", "rig", "damper", "damper"])
+    config, keys, tiny = {"car": (CAR, CAR_KEYS, TINY_CAR), "rig": (RIG, RIG_KEYS, TINY_CAR),
+                          "damper": (DAMPER, DAMPER_KEYS, TINY_DAMPER)}[kind]  # fmt: skip
+    chosen = [_pick(rng, keys) for _ in range(int(_pick(rng, [1, 1, 1, 2, 3])))]
+    sets = [f"{key}={_number(rng)}" for key in chosen]
+    what = f"{kind}: " + ", ".join(sets)[:120]
+    if kind == "rig":
+        tiny = ("simulation.duration=0.5", "simulation.dt=0.002")
+    if rng.random() < 0.25 and kind != "rig":  # a one-run campaign of one iteration: the search box, the bound
+        args = ("identify", str(config), "-o", "c.h5", "--jobs", "1", *_sets(tiny), *_sets(sets))
+        return Case("values", f"identify {what}", args)
+    sim = [t for t in tiny if t.startswith("simulation.")]
+    return Case("values", f"simulate {what}", ("simulate", str(config), "-o", "out.csv", *_sets(sim), *_sets(sets)))
