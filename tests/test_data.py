@@ -12,7 +12,7 @@ import pytest
 
 import vehid_cli.core.files as files
 from tests.conftest import VEHICLE_DATA, needs_shared
-from vehid_cli.core.errors import DiskFull, InputError
+from vehid_cli.core.errors import DiskFull, InputError, WriteFailed
 from vehid_cli.core.files import atomic_path, check_writable, check_writable_dir, write_bytes
 from vehid_cli.io.measurement import format_rows, read_measurement, read_table, time_grid, write_measurement_csv
 
@@ -124,8 +124,16 @@ def test_a_full_disk_is_disk_full_naming_the_file_and_leaves_no_temporary(tmp_pa
 
 
 def test_other_write_errors_are_not_disk_full(tmp_path):
-    with pytest.raises(PermissionError), atomic_path(tmp_path / "x.json"):
-        raise PermissionError(errno.EACCES, "denied")
+    """A refused write (no permission, a read-only file system) is WriteFailed naming the file (exit 2), not a full
+    disk; an I/O error of the disk stays what it is (exit 1)."""
+    for code in (errno.EACCES, errno.EROFS):
+        with pytest.raises(WriteFailed) as caught, atomic_path(tmp_path / "x.json"):
+            raise OSError(code, os.strerror(code))
+        assert not isinstance(caught.value, DiskFull) and caught.value.exit_code == 2
+        assert str(caught.value) == f"cannot write {tmp_path / 'x.json'}: {os.strerror(code)}"
+    with pytest.raises(OSError) as caught, atomic_path(tmp_path / "x.json"):
+        raise OSError(errno.EIO, "Input/output error")
+    assert not isinstance(caught.value, WriteFailed)
     assert list(tmp_path.iterdir()) == []
 
 

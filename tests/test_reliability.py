@@ -204,11 +204,11 @@ def temporaries(directory: Path) -> list[str]:
     return sorted(p.name for p in directory.glob(".*.tmp"))
 
 
-def test_simulate_into_a_full_disk_exits_1_naming_the_file_and_leaves_nothing(tmp_path, monkeypatch):
+def test_simulate_into_a_full_disk_exits_2_naming_the_file_and_leaves_nothing(tmp_path, monkeypatch):
     target = tmp_path / "x.h5"
     refused = fill_the_disk(monkeypatch)
     code, text = invoke("simulate", BASE_CONFIG, *sets(SIM), "-o", target)
-    assert code == 1, text
+    assert code == 2, text
     assert text.strip() == f"error: no space left on device writing {target}" and refused, text
     assert not target.exists() and temporaries(tmp_path) == []
     monkeypatch.undo()
@@ -224,12 +224,12 @@ def test_simulate_into_a_full_disk_exits_1_naming_the_file_and_leaves_nothing(tm
 def test_identify_that_cannot_write_its_file_keeps_every_run_and_the_rerun_finishes_from_them(
     tmp_path, monkeypatch, one_campaign
 ):
-    """The campaign file meets a full disk after all runs were checkpointed: exit 1 with the message, no
+    """The campaign file meets a full disk after all runs were checkpointed: exit 2 with the message, no
     temporary, the checkpoint kept; the rerun takes every run from it and writes the clean run's campaign."""
     target = tmp_path / "c.h5"
     refused = fill_the_disk(monkeypatch)
     code, text = invoke("identify", BASE_CONFIG, *sets(SMALL), "--runs", 2, "--jobs", 1, "-o", target)
-    assert code == 1, text
+    assert code == 2, text
     assert f"error: no space left on device writing {target}" in text and "Traceback" not in text, text
     assert [Path(r).name.startswith(".c.h5.") for r in refused] == [True]
     partial = tmp_path / "c.h5.partial"
@@ -244,7 +244,7 @@ def test_identify_that_cannot_write_its_file_keeps_every_run_and_the_rerun_finis
 
 
 @pytest.mark.skipif(shutil.which("unshare") is None, reason="needs util-linux unshare")
-def test_simulate_on_a_really_full_file_system_exits_1_without_a_crash(tmp_path):
+def test_simulate_on_a_really_full_file_system_exits_2_without_a_crash(tmp_path):
     """On a 40 kB tmpfs (a user namespace's mount: no root needed where the kernel allows it) HDF5 used to
     crash the process (exit 139) after h5py's 'Exception ignored' tracebacks."""
     mnt = tmp_path / "mnt"
@@ -257,7 +257,7 @@ def test_simulate_on_a_really_full_file_system_exits_1_without_a_crash(tmp_path)
     script = (f"mount -t tmpfs -o size=40k none {mnt} && {sys.executable} -m vehid_cli simulate {BASE_CONFIG} "
               f"{' '.join(sets(SIM))} -o {target}; echo status=$?; ls -A {mnt}")  # fmt: skip
     res = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True, cwd=ROOT)
-    assert "status=1\n" in res.stdout and res.stdout.endswith("status=1\n"), (res.stdout, res.stderr)
+    assert "status=2\n" in res.stdout and res.stdout.endswith("status=2\n"), (res.stdout, res.stderr)
     assert res.stderr.strip() == f"error: no space left on device writing {target}", res.stderr
 
 

@@ -28,6 +28,8 @@ def main() -> int:
     args = parser.parse_args()
     families = load_families()
     names = [n for n in args.families.split(",") if n] or sorted(families)
+    if not names:
+        parser.error("no fuzz family is registered (tests/fuzz/<module>.py with @family)")
     unknown = sorted(set(names) - set(families))
     if unknown:
         parser.error(f"unknown families {unknown}; known: {', '.join(sorted(families))}")

@@ -3,7 +3,8 @@ config loading. Imports only typer, rich and `vehid_cli.core` at module level: t
 command runs, so `vehid --help` starts in a fraction of a second.
 
 Exit status (SPEC section 3): 0 success; 2 bad input, with one message naming the file, key or
-column; 1 anything else. Set VEHID_DEBUG=1 to see the traceback of an unexpected error.
+column, or an output that cannot be written (a full disk, a read-only folder: nothing partial left); 1 anything
+else. Set VEHID_DEBUG=1 to see the traceback of an unexpected error.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 from rich.console import Console
 
-from ..core.errors import DiskFull, InputError
+from ..core.errors import InputError, WriteFailed
 
 if TYPE_CHECKING:  # the library is imported inside the commands: `vehid --help` starts in a fraction of a second
     from ..config import Config, DamperConfig
@@ -96,9 +97,9 @@ def guarded(command):
         except InputError as exc:
             err.print(f"error: {exc}", markup=False)
             raise typer.Exit(2) from None
-        except DiskFull as exc:  # a full disk or quota: the write was undone (nothing partial left), exit 1
+        except WriteFailed as exc:  # a full disk or quota, a read-only folder: the write was undone, exit 2
             err.print(f"error: {exc}", markup=False)
-            raise typer.Exit(1) from None
+            raise typer.Exit(2) from None
         except (typer.Exit, typer.Abort, KeyboardInterrupt):
             raise
         except Exception as exc:  # noqa: BLE001 - the last line of defence of the CLI

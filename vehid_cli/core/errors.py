@@ -1,4 +1,5 @@
-"""Errors the CLI reports in one line: input a user can fix (exit status 2), and a full disk (exit status 1)."""
+"""Errors the CLI reports in one line, exit status 2: input a user can fix, and an output that cannot be written
+(a full disk or quota, a read-only folder: `WriteFailed`, `DiskFull`)."""
 
 from __future__ import annotations
 
@@ -37,6 +38,18 @@ def _clip_quotes(message: str) -> str:
     return clip(message, MESSAGE)
 
 
+MAX_QUOTE = QUOTED  # characters of a bad value a message quotes
+
+
+def quote(value, limit: int = MAX_QUOTE) -> str:
+    """`repr(value)` cut to `limit` characters (a message never echoes a 100 kB value)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an integer of more digits than Python prints
+        return "(a number too long to print)"
+    return text if len(text) <= limit else f"{text[: limit - 20]}... ({len(text)} characters)"
+
+
 class InputError(Exception):
     """Bad input. The message names the file, the key or column, and what was expected. The source, the key and
     the message are clipped (`clip`): whatever a user's input holds, the message stays a paragraph."""
@@ -59,14 +72,25 @@ class InputError(Exception):
         super().__init__(f"{prefix}: {message}" if prefix else message)
 
 
-class DiskFull(OSError):
-    """The file system (or the user's quota) ran out of space writing `path` (ENOSPC, EDQUOT): exit status 1."""
+class WriteFailed(OSError):
+    """The system refused to write `path` (a read-only file system, no permission, a name too long, a directory
+    where a file belongs, ...): exit status 2, nothing partial left behind."""
 
-    exit_code = 1
+    exit_code = 2
+
+    def __init__(self, path, errno_: int, reason: str):
+        super().__init__(errno_, reason, str(path))
+        self.path = str(path)
+
+    def __str__(self) -> str:
+        return f"cannot write {self.path}: {self.strerror}"
+
+
+class DiskFull(WriteFailed):
+    """The file system (or the user's quota) ran out of space writing `path` (ENOSPC, EDQUOT): exit status 2."""
 
     def __init__(self, path, errno_: int):
-        super().__init__(errno_, "no space left on device", str(path))
-        self.path = str(path)
+        super().__init__(path, errno_, "no space left on device")
 
     def __str__(self) -> str:
         return f"no space left on device writing {self.path}"

@@ -1,5 +1,7 @@
 """Files written so that a failure loses nothing: atomic replacement (temporary, fsync, rename), stale temporaries of
-killed writers removed, a full disk reported as `DiskFull` naming the file; output paths checked before any work."""
+killed writers removed, a full disk reported as `DiskFull` and a refused write (read-only, no permission, a name too
+long) as `WriteFailed`, each naming the file; output paths checked before any work; files of our own read only when
+they are regular files of a sane size (a FIFO, a device or a huge file put in their place never hangs a read)."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
-from .errors import DiskFull, InputError
+from .errors import DiskFull, InputError, WriteFailed
 
 
 def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8", limit: int | None = None) -> str:
@@ -144,6 +146,64 @@ def _fsync(path: Path, directory: bool = False) -> None:
 
 
 FULL_DISK = tuple(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)) if e is not None)
+REFUSED = (
+    errno.EROFS,
+    errno.EACCES,
+    errno.EPERM,
+    errno.ENAMETOOLONG,
+    errno.EISDIR,
+    errno.ENOTDIR,
+    errno.ELOOP,
+    errno.EFBIG,
+    errno.ENOENT,
+    errno.EMLINK,
+    errno.EEXIST,
+    errno.EXDEV,
+    errno.ETXTBSY,
+    errno.EINVAL,
+)  # fmt: skip - a write the system refuses for a reason a user can fix (exit 2), unlike an I/O error of the disk
+
+
+def write_error(path: str | Path, exc: OSError) -> OSError:
+    """The error to raise for `exc` met writing `path`: `DiskFull` or `WriteFailed` naming it, else `exc` itself."""
+    if isinstance(exc, WriteFailed):
+        return exc
+    if exc.errno in FULL_DISK:
+        return DiskFull(path, exc.errno)
+    if exc.errno in REFUSED:
+        return WriteFailed(path, exc.errno, exc.strerror or os.strerror(exc.errno))
+    return exc
+
+
+def read_regular(path: str | Path, limit: int, what: str) -> bytes:
+    """The bytes of `path` if it is a regular file (symlinks followed) of at most `limit` bytes; InputError naming it
+    otherwise (a directory, a FIFO or a device in its place, a symlink loop, unreadable, larger than `limit`).
+    FileNotFoundError passes through."""
+    source = str(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO opens at once instead of waiting for a writer
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read the {what} ({exc.strerror})", source=source) from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            kind = "a directory" if stat.S_ISDIR(info.st_mode) else "not a regular file"
+            raise InputError(f"cannot read the {what}: it is {kind}", source=source)
+        if info.st_size > limit:
+            raise InputError(f"{what} is {info.st_size} bytes, more than the {limit} bytes one can hold", source=source)
+        chunks, size = [], 0
+        while chunk := os.read(fd, 1 << 20):
+            chunks.append(chunk)
+            size += len(chunk)
+            if size > limit:
+                raise InputError(f"{what} grew past {limit} bytes while it was read", source=source)
+        return b"".join(chunks)
+    except OSError as exc:
+        raise InputError(f"cannot read the {what} ({exc.strerror})", source=source) from None
+    finally:
+        os.close(fd)
 
 
 def _temporary_name(path: Path) -> re.Pattern:
@@ -201,7 +261,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
     The temporary file is flushed to the disk before the rename and the directory after it, so after a crash
     (or a power cut) `path` holds either its old content or the whole new one, never a part of it. Stale
-    temporaries of `path` are removed first; a full disk (or quota) is `DiskFull` naming `path`."""
+    temporaries of `path` are removed first; a full disk (or quota) is `DiskFull` naming `path`, a write the system
+    refuses (read-only, no permission, ...) `WriteFailed`."""
     path = Path(path)
     remove_stale_temporaries(path)
     fd = -1
@@ -217,9 +278,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
                 tmp_path.unlink()
             raise
     except OSError as exc:
-        if exc.errno in FULL_DISK and not isinstance(exc, DiskFull):
-            raise DiskFull(path, exc.errno) from exc
-        raise
+        error = write_error(path, exc)
+        if error is exc:
+            raise
+        raise error from exc
     finally:
         if fd >= 0:
             os.close(fd)

@@ -9,7 +9,10 @@ A results file (a campaign) begins with a 512-byte HDF5 user block (which HDF5 s
 every byte after it. Every read checks it before HDF5 parses anything (`open_results`), so a file damaged after it
 was written (truncated, partly copied, a disk error, an edit) is reported naming the file, never used, and never
 handed to the HDF5 library, whose reactions to damaged metadata range over a dozen exception types. The file stays
-ordinary HDF5 for every other tool. `save` and `load` carry any `core.result.Result` through it.
+ordinary HDF5 for every other tool. A checksum proves the bytes are the ones written, not that vehid wrote them (it
+can be recomputed after an edit), so the file is then parsed in a child process (`h5snapshot`: a loop or a crash
+of HDF5 on crafted metadata is an error naming the file) and its readers validate what they find. `save` and
+`load` carry any `core.result.Result` through it.
 """
 
 from __future__ import annotations
@@ -17,13 +20,16 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import itertools
+import os
+import stat
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 import h5py
 
-from .errors import InputError
+from .errors import InputError, quote
 from .files import write_bytes
+from .h5snapshot import Tree, read_tree
 from .provenance import provenance
 from .result import Result
 
@@ -78,19 +84,47 @@ def stamp_checksum(path: str | Path) -> str:
     return block[len(STAMP) : len(STAMP) + 64].decode()
 
 
+MAX_BYTES = 4 << 30  # a results file larger than this is not one vehid wrote (and would take minutes to check)
+
+
+def _regular_fd(path: str | Path) -> int:
+    """A read-only descriptor of `path` if it is a regular file (a FIFO never blocks the open); InputError naming
+    it otherwise. FileNotFoundError passes through."""
+    source = str(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror})", source=source) from None
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file (a FIFO, a device or a socket)"
+        raise InputError(f"is {kind}, expected a results file", source=source)
+    return fd
+
+
 def check_integrity(path: str | Path) -> str | None:
     """InputError naming the file if it carries a vehid checksum its bytes no longer match (or a damaged one);
     the checksum when it matches; None for an HDF5 file without one (written before checksums, or by another
     tool: HDF5 then reports what it finds)."""
     source = str(path)
+    fd = _regular_fd(path)
     try:
-        with open(path, "rb") as fh:
+        size = os.fstat(fd).st_size
+        if size > MAX_BYTES:
+            raise InputError(f"is {size} bytes, larger than any results file vehid writes ({MAX_BYTES})", source=source)
+        with os.fdopen(os.dup(fd), "rb") as fh:
             head = fh.read(USERBLOCK)
-            body = hashlib.sha256(fh.read()).hexdigest()
-    except FileNotFoundError:
-        raise
+            digest = hashlib.sha256()
+            while chunk := fh.read(1 << 20):
+                digest.update(chunk)
+        body = digest.hexdigest()
     except OSError as exc:
         raise InputError(f"cannot read the file ({exc.strerror})", source=source) from None
+    finally:
+        os.close(fd)
     if head.startswith(HDF5_SIGNATURE):
         return None
     if not head.startswith(STAMP):
@@ -109,25 +143,43 @@ def check_integrity(path: str | Path) -> str | None:
     return stored
 
 
-def open_results(path: str | Path, kind: str, what: str) -> h5py.File:
-    """Open a results file for reading, checking its kind; InputError for a missing, unreadable or other file."""
+_TREES: dict[tuple, tuple[str | None, Tree]] = {}  # the files this process read, by identity and modification
+
+
+def read_results(path: str | Path, what: str) -> tuple[str | None, Tree]:
+    """(checksum or None, every part of the file as plain data) for a results file: its checksum verified, then
+    parsed in a child process (`h5snapshot.read_tree`: no damage or crafting of its bytes can hang or crash vehid).
+    A file read before and unchanged since is not read again. InputError naming the file; FileNotFoundError
+    passes through."""
     source = str(path)
     try:
-        check_integrity(path)
-        h5 = h5py.File(path, "r")
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror})", source=source) from None
+    key = (os.path.abspath(source), info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns)
+    if key not in _TREES:
+        checksum = check_integrity(path)
+        tree = read_tree(path, what)
+        if len(_TREES) >= 64:
+            _TREES.pop(next(iter(_TREES)))
+        _TREES[key] = (checksum, tree)
+    return _TREES[key]
+
+
+def open_results(path: str | Path, kind: str, what: str) -> Tree:
+    """A results file read for its readers (`read_results`), checking its kind; InputError for a missing,
+    unreadable or other file. (A context manager, as the h5py file it replaces.)"""
+    source = str(path)
+    try:
+        _, tree = read_results(path, what)
     except FileNotFoundError:
         raise InputError(f"{what} not found", source=source) from None
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file: truncated, damaged or not HDF5 ({exc})", source=source) from None
-    try:
-        found = h5.attrs.get("kind")
-    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # damaged metadata (no checksum)
-        h5.close()
-        raise InputError(f"damaged HDF5 file ({exc})", source=source) from None
-    if found != kind:
-        h5.close()
-        raise InputError(f"not a vehid {what} (kind {found!r})", source=source)
-    return h5
+    found = tree.attrs.get("kind")
+    if not isinstance(found, str) or found != kind:
+        raise InputError(f"not a vehid {what} (kind {quote(found, 60)})", source=source)
+    return tree
 
 
 def save(path: str | Path, kind: str, result: Result, attrs: Mapping[str, str] | None = None) -> None:
@@ -146,5 +198,5 @@ def load(path: str | Path, kind: str, cls: type[Result], what: str = "results fi
     with open_results(path, kind, what) as h5:
         try:
             return cls.read_h5(h5)
-        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:  # HDF5's reactions to damage
+        except (KeyError, ValueError, TypeError, IndexError) as exc:  # a part missing or of another shape
             raise InputError(f"{what} is damaged or incomplete ({exc})", source=str(path)) from None

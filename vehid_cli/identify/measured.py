@@ -36,6 +36,7 @@ from .experiment import Experiment, check_time_step
 
 ROAD = ("road1", "road2", "road3", "road4")
 TRACKS = ("track1", "track2")
+MIN_OWN_SAMPLES = 8  # samples of its own a measured channel needs in a run (third differences, shapes)
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,7 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
         names = layout.names(family)
         outputs[family] = np.column_stack([record.channel(n) for n in names])
         observed[family] = np.column_stack([_observed(record, n) for n in names])
+        _enough(record, names, observed[family])
     every = all(mask.all() for mask in observed.values())
     road = _road(config, record, road_names)
     origin = {n: (units[n], "data.units" if n in data.units else "data.units (its family)") for n in units}
@@ -155,6 +157,19 @@ def rewired(record: Record, invert, swap) -> Record:
         for table in (channels, stamps, rates):
             table[a], table[b] = table[b], table[a]
     return replace(record, channels=channels, stamps=stamps, rates=rates)
+
+
+def _enough(record: Record, names, observed: NDArray) -> None:
+    """Each channel with at least MIN_OWN_SAMPLES samples of its own in the record: its noise is estimated from
+    third differences, and its checks compare shapes."""
+    for name, count in zip(names, observed.sum(axis=0), strict=True):
+        if count < MIN_OWN_SAMPLES:
+            raise InputError(
+                f"channel '{name}' has {int(count)} samples of its own in the record ({record.t.size} grid samples "
+                f"over {record.t[-1] - record.t[0]:.6g} s, where all channels overlap): at least {MIN_OWN_SAMPLES} "
+                "are needed to estimate its noise and check it",
+                source=record.source,
+            )
 
 
 def _observed(record: Record, name: str) -> NDArray:

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from ..core.errors import InputError
 from ..core.hints import did_you_mean
+from ..core.isolated import quoted
 from ..core.units import UNITS, unit_factor
 from .formats import FORMATS, SUFFIXES, LoggerFormat, Raw
 from .record import Record
@@ -35,6 +36,8 @@ from .timegrid import (
     refuse_off_grid,
     refuse_resampling,
 )
+
+UNIT_LENGTH = 64  # characters: a longer unit string is no unit (and is not quoted whole)
 
 
 def read_record(
@@ -80,7 +83,9 @@ def read_record(
     if not resample:
         for ours, r in raw.items():
             refuse_off_grid(ours, channels[ours], r, steps[ours], grid, src)
-    values = {ours: onto(r, steps[ours], grid, grid_rate) for ours, r in raw.items()}
+    values = {
+        ours: onto(r, steps[ours], grid, grid_rate, f"'{ours}' ('{channels[ours]}')", src) for ours, r in raw.items()
+    }
     t, values = _windowed(np.arange(grid.size) / grid_rate, values, window, src)
     near = NATIVE_MATCH / grid_rate
     stamps = {ours: r.t - start for ours, r in raw.items()}
@@ -139,6 +144,12 @@ def _in_si(
     steps = {}
     for ours, r in raw.items():
         unit = units.get(ours, r.unit)
+        if len(unit) > UNIT_LENGTH:
+            raise InputError(
+                f"channel '{ours}' ('{channels[ours]}'): its unit is {len(unit)} characters long "
+                f"('{quoted(unit, 60)}'): not a unit",
+                source=src,
+            )
         r.y = r.y * unit_factor(unit, src, f"channel '{ours}' ('{channels[ours]}')")
         if r.time:
             r.t = r.t * UNITS["time"][time_unit]

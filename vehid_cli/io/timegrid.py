@@ -37,6 +37,10 @@ DOWNSAMPLE_CUTOFF = 0.4  # its cut-off as a fraction of the new rate (0.8 x the 
 RATE_MATCH = 1e-2  # a channel within 1 % of the grid rate is at the grid rate (no filter)
 NOMINAL_RATE_MATCH = 0.05  # time stamps printed off a nominal rate: each step within 5 % of 1 / rate
 NATIVE_MATCH = 1e-3  # a channel's sample within 1e-3 of a grid step of a grid point is on that grid point
+LARGEST = 1e12  # |value| [SI] beyond which a sample or time stamp is no measurement (1e12 s, m, m/s², N)
+UPSAMPLE_LIMIT = 100.0  # a grid rate at most this many times the fastest channel's rate
+GRID_BUDGET = 2 << 30  # bytes the grid's channels may take (GRID_COPIES working copies of each)
+GRID_COPIES = 4  # the values, the spline's coefficients and the record's copies
 RESAMPLE_HINT = "allow resampling to read it (resample=True; config key data.resample)"
 
 
@@ -88,6 +92,14 @@ def check_channel(name: str, theirs: str, raw: Raw, src: str) -> float:
                 f"(NaN or Inf), first at sample {bad[0] + 1}",
                 source=src,
             )
+        huge = np.flatnonzero(np.abs(values) > LARGEST)
+        if huge.size:
+            raise InputError(
+                f"{label} has {huge.size} {what}(s){_named(raw.time, ' in') if what[0] == 't' else ''} beyond "
+                f"±{LARGEST:g} (SI units), first at sample {huge[0] + 1}: {values[huge[0]]:.6g}; a damaged file or a "
+                f"wrong unit",
+                source=src,
+            )
     steps = np.diff(raw.t)
     if np.any(steps <= 0):
         k = int(np.flatnonzero(steps <= 0)[0])
@@ -126,17 +138,35 @@ def common_grid(
     raw: Mapping[str, Raw], channels: Mapping[str, str], rates: Mapping[str, float], rate: float | None, src: str
 ) -> tuple[NDArray, float, float]:
     """The grid [s, on the file's axis], its rate [Hz] (`rate`, else the highest channel rate) and its start (the
-    latest first stamp): over the time all channels cover; InputError when that is less than 3 samples."""
+    latest first stamp): over the time all channels cover; InputError when that is less than 3 samples, or more
+    than memory and the channels' rates justify (`check_grid_size`)."""
     grid_rate = rate if rate is not None else max(rates.values())
     start = max(float(r.t[0]) for r in raw.values())
     stop = min(float(r.t[-1]) for r in raw.values())
-    n = int(math.floor((stop - start) * grid_rate + 1e-6)) + 1  # 1e-6: a sample at `stop` despite round-off
-    if stop <= start or n < 3:
+    samples = (stop - start) * grid_rate  # a float first: a hostile rate or span must not reach an allocation
+    if not stop > start or not samples >= 2 - 1e-6:
         raise InputError(
             f"the channels ({', '.join(channels)}) share no common time span of 3 samples at {grid_rate:g} Hz",
             source=src,
         )
+    check_grid_size(samples + 1, grid_rate, stop - start, len(raw), max(rates.values()), src)
+    n = int(math.floor(samples + 1e-6)) + 1  # 1e-6: a sample at `stop` despite round-off
     return start + np.arange(n) / grid_rate, grid_rate, start
+
+
+def check_grid_size(n: float, grid_rate: float, span: float, channels: int, fastest: float, src: str) -> None:
+    """A grid of `n` samples at `grid_rate` [Hz] over `span` [s] for `channels` channels (the fastest sampled at
+    `fastest` Hz): InputError when it up-samples beyond UPSAMPLE_LIMIT x the fastest channel (interpolated
+    samples carry nothing, and every later step pays for them), or needs more than GRID_BUDGET bytes."""
+    needed = n * (channels + 1) * 8.0 * GRID_COPIES
+    if grid_rate > UPSAMPLE_LIMIT * fastest * (1 + RATE_MATCH) or needed > GRID_BUDGET:
+        raise InputError(
+            f"a grid at {grid_rate:g} Hz over the record's {span:.6g} s is {n:.4g} samples for {channels} channels "
+            f"(about {needed / 2**30:.3g} GiB); the fastest channel is sampled at {fastest:g} Hz: the grid rate may "
+            f"be at most {UPSAMPLE_LIMIT:g} times that, and the grid at most {GRID_BUDGET / 2**30:g} GiB; give a "
+            f"lower rate (data.rate) or a shorter window",
+            source=src,
+        )
 
 
 def _grid_slice(raw: Raw, dt: float, grid: NDArray) -> slice | None:
@@ -149,7 +179,7 @@ def _grid_slice(raw: Raw, dt: float, grid: NDArray) -> slice | None:
     return keep if np.allclose(raw.t[keep], grid, rtol=0, atol=UNIFORM_TOLERANCE * dt) else None
 
 
-def onto(raw: Raw, dt: float, grid: NDArray, rate: float) -> NDArray:
+def onto(raw: Raw, dt: float, grid: NDArray, rate: float, name: str = "", src: str = "") -> NDArray:
     """A channel on the grid: its own samples when they lie on the grid (`_grid_slice`); else an anti-alias
     low-pass first when its rate is above the grid's, then a cubic spline."""
     from scipy.interpolate import CubicSpline
@@ -165,6 +195,14 @@ def onto(raw: Raw, dt: float, grid: NDArray, rate: float) -> NDArray:
             tu = t[0] + np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1) * dt
             y, t = CubicSpline(t, y)(tu), tu
         sos = butter(DOWNSAMPLE_ORDER, DOWNSAMPLE_CUTOFF * rate, fs=own, output="sos")
+        pad = 3 * (2 * sos.shape[0] + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
+        if y.size <= pad:  # sosfiltfilt's padding at either end (its default padlen)
+            raise InputError(
+                f"channel {name}: {y.size} samples at {own:g} Hz are too few to low-pass it before it is "
+                f"down-sampled onto the {rate:g} Hz grid (the filter needs more than {pad}); read it at its own "
+                f"rate (data.rate) or give a longer record",
+                source=src,
+            )
         y = sosfiltfilt(sos, y)
     return CubicSpline(t, y)(grid)
 

@@ -5,16 +5,16 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import h5py
+import numpy as np
 import yaml
 from rich.console import Console
 from rich.markup import escape
 
 from ..campaign.results import CAMPAIGN_KIND, read_campaign_h5
 from ..campaign.sweep import read_index
-from ..core.errors import InputError
+from ..core.errors import InputError, quote
 from ..core.jsonio import to_json
-from ..core.store import check_integrity, open_results
+from ..core.store import open_results, read_results
 from ..identify.records import Campaign
 from ..systems import SYSTEMS, System
 
@@ -25,13 +25,10 @@ def is_campaign_file(path: Path) -> bool:
     """A vehid campaign file? False for other HDF5 files; InputError for a file HDF5 cannot open (truncated or
     damaged): a report never drops a campaign silently."""
     try:
-        check_integrity(path)
-        with h5py.File(path, "r") as h5:
-            return h5.attrs.get("kind") == CAMPAIGN_KIND
-    except (OSError, RuntimeError) as exc:
-        raise InputError(
-            f"not a readable HDF5 file: truncated, damaged or not HDF5 ({exc})", source=str(path)
-        ) from None
+        _, tree = read_results(path, "campaign file")
+    except FileNotFoundError:
+        raise InputError("not found (removed while the report was made?)", source=str(path)) from None
+    return tree.attrs.get("kind") == CAMPAIGN_KIND
 
 
 def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
@@ -91,13 +88,18 @@ def file_provenance(path: str) -> dict:
         "created_utc", "numpy_version", "scipy_version", "numba_version", "h5py_version", "pydantic_version",
         "sweep_vary",
     )  # fmt: skip
-    with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
-        out = {"file_sha256": check_integrity(path)}
-        for k in keys:
-            if k in h5.attrs:
-                v = h5.attrs[k]
-                out[k] = v.item() if hasattr(v, "item") else str(v)
-        return out
+    h5 = open_results(path, CAMPAIGN_KIND, "campaign file")
+    out = {"file_sha256": read_results(path, "campaign file")[0]}
+    for k in keys:
+        v = h5.attrs.get(k)
+        if isinstance(v, np.ndarray) and v.size == 1:
+            v = v.reshape(())[()]
+        if isinstance(v, (str, bool, int, float, np.number, np.bool_)):
+            out[k] = v.item() if hasattr(v, "item") else v
+        elif v is not None:
+            raise InputError(f"campaign file is damaged or was edited: attribute '{k}' should be a single value, "
+                             f"found {quote(v, 80)}", source=str(path))  # fmt: skip
+    return out
 
 
 def system_of(campaigns: list[Campaign], files: list[str]) -> type[System]:

@@ -25,9 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
-from ..campaign.results import CAMPAIGN_KIND
+from ..campaign.results import CAMPAIGN_KIND, stored_attributes, stored_yaml
 from ..config import flatten
 from ..core.errors import InputError
 from ..core.store import open_results
@@ -54,21 +52,16 @@ class Provenance:
 def read_provenance(path: str | Path) -> Provenance:
     """The provenance attributes of a campaign file (InputError for a file that is not one)."""
     source = str(path)
-    with open_results(path, CAMPAIGN_KIND, "campaign file") as h5:
-        attrs = dict(h5.attrs)
-    try:
-        config = yaml.safe_load(str(attrs["config_yaml"]))
-        varied = json.loads(str(attrs.get("sweep_vary", "[]")))
-    except (KeyError, ValueError, yaml.YAMLError) as exc:
-        raise InputError(f"campaign file has unreadable provenance ({exc})", source=source) from None
+    r = stored_attributes(open_results(path, CAMPAIGN_KIND, "campaign file"), source)
+    config = stored_yaml(r.text("config_yaml"), source)
     return Provenance(
         file=source,
         config=config if isinstance(config, dict) else {},
-        config_sha256=str(attrs.get("config_sha256", "")),
-        data_file=str(attrs.get("data_file", "")),
-        data_sha256=str(attrs.get("data_sha256", "")),
-        code={k: str(attrs[k]) for k in CODE_KEYS if k in attrs},
-        varied=frozenset(str(v) for v in varied) if isinstance(varied, list) else frozenset(),
+        config_sha256=r.text("config_sha256", ""),
+        data_file=r.text("data_file", ""),
+        data_sha256=r.text("data_sha256", ""),
+        code={k: r.text(k) for k in CODE_KEYS if k in r.h5.attrs},
+        varied=frozenset(r.json_list("sweep_vary", str)),
     )
 
 

@@ -9,7 +9,7 @@ from rich import box
 from rich.console import Group
 from rich.table import Table
 
-from ..core.errors import DiskFull, InputError
+from ..core.errors import InputError, WriteFailed
 from .diagnose_plots import plot_diagnosis
 
 
@@ -53,10 +53,11 @@ def diagnosis_tables(result):
 
 
 def plot_diagnosis_files(result, directory: Path, stem: str) -> list[Path]:
-    """The diagnosis figures, with a clear error if the directory cannot be written (a full disk stays DiskFull)."""
+    """The diagnosis figures, with a clear error if the directory cannot be written (a full disk stays DiskFull, a
+    refused write WriteFailed)."""
     try:
         return plot_diagnosis(result, directory, stem)
-    except DiskFull:
+    except WriteFailed:  # a full disk or a refused write: its own message
         raise
     except OSError as exc:
         raise InputError(f"cannot write figures: {exc.strerror}", source=str(directory)) from None

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from ...core.errors import InputError
 from ...core.files import atomic_path
+from ...core.isolated import Damaged, in_child
 from .base import (
     TIME_NAMES,
     LoggerFormat,
@@ -55,17 +56,17 @@ class Mat(LoggerFormat):
     def read(
         self, path: Path, channels: Mapping[str, str], *, time: str | None, rate: float | None, variable: str | None
     ) -> dict[str, Raw]:
-        import scipy.io
-
         src = str(path)
-        try:
-            mat = scipy.io.loadmat(path, simplify_cells=True)
-        except NotImplementedError:  # MATLAB v7.3: an HDF5 file behind a 512-byte MATLAB header
+        if _is_hdf5(path):  # MATLAB v7.3: an HDF5 file behind a 512-byte MATLAB header
             return read_hdf5(path, channels, time, rate, variable, matlab=True)
-        except (ValueError, OSError, TypeError) as exc:
-            if _is_hdf5(path):
-                return read_hdf5(path, channels, time, rate, variable, matlab=True)
-            raise InputError(f"cannot read as a MATLAB file: {exc}", source=src) from None
+        size = path.stat().st_size
+        try:  # scipy.io.loadmat can crash the process on a damaged header: it reads in a child (core.isolated)
+            mat = in_child(_load_v5, src, size=size)
+        except Damaged as exc:
+            raise InputError(f"cannot read as a MATLAB file (damaged, or not one): {exc.reason}", source=src) from None
+        if mat is None:  # the header says v7.3, but no HDF5 file follows it
+            raise InputError("cannot read as a MATLAB file: its header says v7.3 (HDF5), but it holds no HDF5 file",
+                             source=src)  # fmt: skip
         top = {k: v for k, v in mat.items() if not k.startswith("__")}
         container = _container(top, variable, channels, src)
         return _collect(container, channels, time, rate, src)
@@ -87,7 +88,20 @@ class Mat(LoggerFormat):
 def _is_hdf5(path: Path) -> bool:
     import h5py
 
-    return h5py.is_hdf5(path)
+    try:
+        return bool(h5py.is_hdf5(path))
+    except (OSError, ValueError):
+        return False
+
+
+def _load_v5(src: str) -> dict | None:
+    """In the child: the variables of a MAT v5 file (None when its header says v7.3)."""
+    import scipy.io
+
+    try:
+        return scipy.io.loadmat(src, simplify_cells=True)
+    except NotImplementedError:  # MATLAB v7.3 in the header
+        return None
 
 
 def _container(top: dict, variable: str | None, channels: Mapping[str, str], src: str) -> dict:

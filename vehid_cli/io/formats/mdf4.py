@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from ...core.errors import InputError
 from ...core.files import atomic_path
+from ...core.isolated import Damaged, in_child
 from .base import LoggerFormat, Raw, groups, missing, numeric, register
 
 
@@ -33,37 +34,24 @@ class Mdf4(LoggerFormat):
     def read(
         self, path: Path, channels: Mapping[str, str], *, time: str | None, rate: float | None, variable: str | None
     ) -> dict[str, Raw]:
-        from asammdf import MDF
-        from asammdf.blocks.utils import MdfException
-
         src = str(path)
-        try:
-            mdf = MDF(path)
-        except (MdfException, OSError, ValueError) as exc:
-            raise InputError(f"cannot read as ASAM MDF: {exc}", source=src) from None
-        try:
-            masters = mdf.masters_db
-            present = [
-                name
-                for name, where in mdf.channels_db.items()
-                if any(masters.get(g) != i for g, i in where)  # the master (time) channels are not data
-            ]
-            raw = {}
-            for ours, theirs in channels.items():
-                if theirs not in present:
-                    raise missing("channel", theirs, present, src, key=ours)
-                where = [(g, i) for g, i in mdf.channels_db[theirs] if masters.get(g) != i]
-                if len(where) > 1:
-                    listed = ", ".join(str(g) for g, _ in where)
-                    raise InputError(
-                        f"channel '{theirs}' is in several channel groups ({listed})", source=src, key=ours
-                    )
-                signal = mdf.get(theirs, group=where[0][0], index=where[0][1])
-                y = numeric(signal.samples, src, f"channel '{theirs}'")
-                raw[ours] = Raw(np.asarray(signal.timestamps, dtype=float), y, str(signal.unit or ""))
-            return raw
-        finally:
-            mdf.close()
+        size = path.stat().st_size
+        try:  # asammdf can abort the process on damaged bytes: it reads in a child (core.isolated)
+            present, located, signals = in_child(_load, src, list(channels.values()), size, size=size)
+        except Damaged as exc:
+            raise InputError(f"cannot read as ASAM MDF: the file is damaged: {exc.reason}", source=src) from None
+        raw = {}
+        for ours, theirs in channels.items():
+            if theirs not in present:
+                raise missing("channel", theirs, present, src, key=ours)
+            if len(located[theirs]) > 1:
+                listed = ", ".join(str(g) for g, _ in located[theirs])
+                raise InputError(f"channel '{theirs}' is in several channel groups ({listed})", source=src, key=ours)
+            samples, stamps, unit = signals[theirs]
+            y = numeric(samples, src, f"channel '{theirs}'")
+            t = numeric(stamps, src, f"the time stamps of channel '{theirs}'")
+            raw[ours] = Raw(t, y, unit if isinstance(unit, str) else "")
+        return raw
 
     def write(
         self,
@@ -92,3 +80,48 @@ class Mdf4(LoggerFormat):
                     mdf.save(fh, overwrite=True)
             finally:
                 mdf.close()
+
+
+def _load(src: str, names: list[str], size: int) -> tuple[list[str], dict, dict]:
+    """In the child: the data channels' names, where each name asked for is (group, index), and for each found in
+    one group its (samples, time stamps, unit) as asammdf gives them; a channel group that declares more records
+    than the file can hold is refused before any is read."""
+    from asammdf import MDF
+
+    mdf = MDF(src)
+    try:
+        masters = mdf.masters_db
+        present = [
+            name
+            for name, where in mdf.channels_db.items()
+            if any(masters.get(g) != i for g, i in where)  # the master (time) channels are not data
+        ]
+        located = {n: [(g, i) for g, i in mdf.channels_db.get(n, ()) if masters.get(g) != i] for n in names}
+        signals = {}
+        for name in names:
+            if len(located[name]) != 1:
+                continue
+            group, index = located[name][0]
+            _check_declared(mdf, group, size, src)
+            signal = mdf.get(name, group=group, index=index)
+            signals[name] = (np.asarray(signal.samples), np.asarray(signal.timestamps), str(signal.unit or ""))
+        return present, located, signals
+    finally:
+        mdf.close()
+
+
+DEFLATE_RATIO = 1032  # the most deflate can compress (a DZ block): a record count beyond this is not in the file
+
+
+def _check_declared(mdf, group: int, size: int, src: str) -> None:
+    """InputError when channel group `group` declares more bytes of records than the file holds, even deflated."""
+    cg = mdf.groups[group].channel_group
+    record = int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr)
+    declared = int(cg.cycles_nr) * record
+    if declared > DEFLATE_RATIO * size + (1 << 20):
+        raise InputError(
+            f"channel group {group} declares {int(cg.cycles_nr)} samples of {record} bytes ({declared / 2**30:.3g} "
+            f"GiB), more than the file's {size} bytes can hold even compressed (at most {DEFLATE_RATIO} x): the "
+            f"file is damaged",
+            source=src,
+        )

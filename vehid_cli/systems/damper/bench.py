@@ -100,6 +100,24 @@ def write_bench_h5(path: str | Path, cfg: DamperConfig, run: SimulatedBench, see
 
 MEASURED = NoiseModel(0.0)  # a measured bench run: the force noise estimated from the data (third differences)
 MIN_RUN_S = 0.1  # [s] shortest bench run: fit.realtime_check resamples it at steps up to 50 ms
+MAX_STEP_S = 0.05  # [s] coarsest sampling step of a bench run: the real-time check's coarsest step
+MAX_RUN_S = 300.0  # [s] longest bench run: the real-time check steps it at 10 µs (3e7 steps, about 1.4 GiB)
+
+
+def _check_time_scale(t: NDArray, columns: Mapping[str, str | None], units: Mapping[str, str], src: str) -> None:
+    """A run's sampling step and length within what a damper bench records and the real-time check can step
+    (a time column in ms or µs read as seconds lasts 1000 or 10^6 times longer, at a step as much coarser)."""
+    dt = float((t[-1] - t[0]) / (t.size - 1))
+    span = float(t[-1] - t[0])
+    unit = units.get("time", "s")
+    if dt > MAX_STEP_S or span > MAX_RUN_S:
+        raise InputError(
+            f"column '{columns['time']}' read in {unit}: the run lasts {span:.6g} s at a step of {dt:.6g} s; a bench "
+            f"run is sampled at least every {MAX_STEP_S:g} s and lasts at most {MAX_RUN_S:g} s (the real-time check "
+            f"steps it at 10 µs); is the time column in ms or µs (data.units.time), or cut it with data.window",
+            source=src,
+            key="data.units.time",
+        )
 
 
 def read_bench(
@@ -167,6 +185,7 @@ def load_measured(cfg: DamperConfig, path: str | Path) -> BenchHistory:
         )  # fmt: skip
     if history.t.size < 3:
         raise InputError(f"only {history.t.size} samples left after window and decimation", source=str(path))
+    _check_time_scale(history.t, columns, units, str(path))
     if history.t[-1] - history.t[0] < MIN_RUN_S:
         raise InputError(
             f"the run lasts {history.t[-1] - history.t[0]:.3g} s after window and decimation; a bench run must last at "
