@@ -351,6 +351,12 @@ DAMPER_KEYS = [
 ]  # fmt: skip
 
 
+SIZE_KEYS = {"identify.runs", "identify.budget", "identify.algorithm.population", "identify.algorithm.iterations",
+             "simulation.duration", "simulation.dt", "bench.cycles", "bench.dt", "bench.frequency", "bench.velocity",
+             "bench.substeps", "identify.realtime_dt"}  # fmt: skip
+COUNTS = ["0", "-1", "1.5", "2", "3", "4", str(2**63), "1e30", "100001", "10001", "1000001", "1e999", "abc", "[]"]
+
+
 def _number(rng) -> str:
     """A hostile number (or not a number), as YAML text."""
     kind = int(rng.integers(8))
@@ -387,7 +393,11 @@ def hostile_values(rng: np.random.Generator, folder: Path) -> Case:
     if kind == "rig":
         tiny = ("simulation.duration=0.5", "simulation.dt=0.002")
     if rng.random() < 0.25 and kind != "rig":  # a one-run campaign of one iteration: the search box, the bound
+        # a valid but large campaign or record runs as long as the user asked: such values go to `simulate`
+        sets = [
+            f"{k}={_pick(rng, COUNTS)}" if k in SIZE_KEYS else f"{k}={v}" for k, v in (i.split("=", 1) for i in sets)
+        ]
         args = ("identify", str(config), "-o", "c.h5", "--jobs", "1", *_sets(tiny), *_sets(sets))
-        return Case("values", f"identify {what}", args)
+        return Case("values", f"identify {', '.join(sets)[:120]}", args)
     sim = [t for t in tiny if t.startswith("simulation.")]
     return Case("values", f"simulate {what}", ("simulate", str(config), "-o", "out.csv", *_sets(sim), *_sets(sets)))

@@ -36,6 +36,7 @@ DamperValue = within(
     -PARAMETER_MAX, PARAMETER_MAX
 )  # a damper parameter [SI]; each model's physical limits are checked beside it
 BENCH_SAMPLES = 2_000_000  # samples of a synthetic bench history at most
+BENCH_STEPS = 20_000_000  # integration steps of one simulated bench history (samples x substeps) at most
 
 
 class DamperSection(_Section):
@@ -98,6 +99,11 @@ class BenchSection(_Section):
             raise ValueError(
                 f"the {self.excitation} holds {samples:.3g} samples of dt = {self.dt:g} s; keep it below "
                 f"{BENCH_SAMPLES:,} (a larger dt, fewer cycles, a faster motion)"
+            )
+        if samples * self.substeps > BENCH_STEPS:
+            raise ValueError(
+                f"the {self.excitation} takes {samples * self.substeps:.3g} integration steps ({samples:.3g} samples "
+                f"x {self.substeps} substeps); keep it below {BENCH_STEPS:,}"
             )
         return self
 

@@ -49,6 +49,7 @@ RollStiffness = within(*RANGES["kR"])
 Damping = within(*RANGES["cf"])
 Height = within(-1, 1)  # m, a bump under one corner
 SIMULATION_SAMPLES = 1_000_000  # samples of a simulated record at most (1000 s at 1 kHz)
+SIMULATION_STEPS = 20_000_000  # integration steps (samples x substeps) of one simulation at most
 
 
 def _parameter_range(name: str) -> tuple[float, float] | None:
@@ -264,6 +265,12 @@ class Simulation(_Section):
     def _grid(self) -> Simulation:
         if self.dt * 2 > self.duration:
             raise ValueError(f"dt = {self.dt:g} s leaves fewer than 3 samples in duration = {self.duration:g} s")
+        steps = self.duration / self.dt * (self.substeps or 1)
+        if steps > SIMULATION_STEPS and self.substeps:
+            raise ValueError(
+                f"duration/dt x substeps = {steps:.3g} integration steps is more than {SIMULATION_STEPS:,}: fewer "
+                "substeps, a larger dt or a shorter duration"
+            )
         if self.duration / self.dt > SIMULATION_SAMPLES:
             raise ValueError(
                 f"duration/dt = {self.duration / self.dt:.3g} samples is more than {SIMULATION_SAMPLES:,} "
