@@ -283,3 +283,52 @@ def test_identify_default_output_directory_is_checked(tmp_path):
         res = cli("identify", BASE_CONFIG, "--runs", "1", cwd=ro)
         assert res.exit_code == 2, res.output
         assert "the default output directory runs" in res.stderr and "Permission denied" in res.stderr
+
+
+# ------------------------------------------------------------------------------------------ hostile options (issue 22)
+
+
+@pytest.mark.parametrize(
+    "name, expected",
+    [
+        ("o" * 256 + ".csv", "a name of 260 bytes in the output; at most 235 bytes (255 per name, less 20"),
+        ("o" * 240 + ".csv", "a name of 244 bytes in the output; at most 235 bytes"),  # its temporary would not fit
+        ("€" * 90 + ".csv", "a name of 274 bytes"),
+        ("/".join(["d" * 250] * 20) + "/x.csv", "the file system takes at most 4095 for the output"),
+    ],
+)
+def test_an_output_name_the_file_system_cannot_take_exits_2(tmp_path, name, expected, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    res = cli("simulate", BASE_CONFIG, "-o", name)
+    assert res.exit_code == 2 and expected in res.stderr, res.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_seed_outside_64_bits_is_refused_before_any_run(tmp_path):
+    for args in (["identify", BASE_CONFIG, "--seed", str(2**64)], ["simulate", BASE_CONFIG, "--seed", str(2**63)]):
+        res = cli(*args, "-o", tmp_path / ("c.h5" if args[0] == "identify" else "c.csv"))
+        assert res.exit_code == 2 and "must be in [0, 9223372036854775807]" in res.stderr, res.stderr
+    assert list(tmp_path.iterdir()) == []  # no .partial: nothing ran
+
+
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        (["identify", BASE_CONFIG, "--runs", str(2**63)], "'identify.runs': must be in [1, 100000]"),
+        (["identify", BASE_CONFIG, "--jobs", str(2**31)], "--jobs must be in [1, 1024]"),
+        (["design", BASE_CONFIG, "--verify", str(10**9)], "--verify must be a number of runs in [0, 100000]"),
+        (["sweep", BASE_CONFIG, "--vary", "noise.level=0.1", "--shard", "1/" + "9" * 5000], "--shard expects K/N"),
+    ],
+)
+def test_counts_out_of_range_exit_2_before_any_work(tmp_path, args, expected):
+    res = cli(*args, "-o", tmp_path / ("s" if args[0] == "sweep" else "c.h5" if args[0] == "identify" else "d.yaml"))
+    assert res.exit_code == 2 and expected in res.stderr, res.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sweep_of_a_long_value_names_its_file_within_the_limit(tmp_path):
+    from vehid_cli.campaign.sweep import parse_vary, plan_sweep
+
+    value = "0." + "1" * 300
+    (planned,) = plan_sweep(BASE_CONFIG, [], parse_vary([f"noise.level={value}"]), tmp_path)
+    assert len(planned.path.name) < 100 and planned.path.name.startswith("level-0.111")

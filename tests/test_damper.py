@@ -276,3 +276,14 @@ def test_generalized_bouc_wen_round_trip_with_compression_and_rebound_sets():
     assert result.J < 4e-4 * 1.05
     for n in ("c0_comp", "c0_reb", "alpha_comp", "alpha_reb"):
         assert result.spec.values[n] == pytest.approx(truth_values[n], rel=0.15), n
+
+
+def test_J_of_a_constant_measured_force_is_nan_without_a_warning():
+    import warnings
+
+    from vehid_cli.systems.damper.fit import cost_J
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isnan(cost_J(np.zeros(5), np.ones(5)))
+        assert cost_J(np.array([0.0, 1.0]), np.array([0.0, 1.0])) == 0.0

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import hashlib
 import io
 import itertools
 import json
@@ -85,16 +86,20 @@ def parse_shard(text: str | None) -> tuple[int, int]:
     """`K/N` -> (K, N) with 1 <= K <= N; None -> (1, 1)."""
     if text is None:
         return 1, 1
-    m = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", text)
+    m = re.fullmatch(r"\s*([0-9]{1,9})\s*/\s*([0-9]{1,9})\s*", text)  # a billion shards at most
     if not m or not (1 <= int(m.group(1)) <= int(m.group(2))):
-        raise InputError(f"--shard expects K/N with 1 <= K <= N, got '{text}'")
+        raise InputError(f"--shard expects K/N with 1 <= K <= N (at most 9 digits each), got '{text}'")
     return int(m.group(1)), int(m.group(2))
 
 
 def _slug(key: str, value: str) -> str:
+    """`level-0.1` for noise.level=0.1; a long value is cut and told apart by a hash, so that a campaign's file name
+    stays within the file system's 255 bytes."""
     name = key.split(".")[-1]
-    value = re.sub(r"[^A-Za-z0-9.+-]+", "-", value).strip("-") or "x"
-    return f"{name}-{value}"
+    slug = f"{name}-{re.sub(r'[^A-Za-z0-9.+-]+', '-', value).strip('-') or 'x'}"
+    if len(slug) > 60:
+        slug = f"{slug[:50]}-{hashlib.sha256(f'{key}={value}'.encode()).hexdigest()[:8]}"
+    return slug
 
 
 def plan_sweep(config_path: str | Path, base_overrides: Sequence[str], variations: Sequence[Variation], out_dir: Path):
@@ -105,6 +110,8 @@ def plan_sweep(config_path: str | Path, base_overrides: Sequence[str], variation
         named = [Override(o, f"--vary {o}") for o in overrides]  # an error names the --vary value
         config = load_config(config_path, list(base_overrides) + named)
         name = "_".join(_slug(v.key, value) for v, value in zip(variations, combo, strict=True))
+        if len(name.encode()) > 200:  # many varied keys: the file name stays within the file system's limit
+            name = f"{name[:150]}-{hashlib.sha256(name.encode()).hexdigest()[:12]}"
         planned.append(PlannedCampaign(index, overrides, config, out_dir / f"{name}.h5"))
     names = [p.path.name for p in planned]
     if len(set(names)) != len(names):

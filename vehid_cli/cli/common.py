@@ -122,9 +122,17 @@ def campaign_overrides(set_: list[str] | None, runs: int | None, seed: int | Non
         overrides.append(Override(f"identify.runs={runs}", "--runs"))
     if seed is not None:
         overrides.append(Override(f"identify.seed={seed}", "--seed"))
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    check_jobs(jobs)
     return overrides
+
+
+JOBS_MAX = 1024  # worker processes: more than any machine's cores, fewer than a fork bomb
+
+
+def check_jobs(jobs: int | None) -> None:
+    """--jobs in 1..JOBS_MAX, before any work."""
+    if jobs is not None and not 1 <= jobs <= JOBS_MAX:
+        raise InputError(f"--jobs must be in [1, {JOBS_MAX}] (worker processes), got {jobs}")
 
 
 def progress_bar(verb: str):

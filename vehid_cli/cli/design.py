@@ -12,6 +12,7 @@ from ..core.interrupt import interruptible
 from .common import (
     JobsOption,
     SetOption,
+    check_jobs,
     check_output_dir,
     check_writable,
     guarded,
@@ -21,6 +22,8 @@ from .common import (
     warn,
 )
 
+VERIFY_MAX = 100_000  # runs of a verification campaign, as identify.runs
+
 
 def _check_options(output: Path | None, json_out: Path | None, plots: Path | None, verify: int, jobs: int | None):
     """-o, --json and --plots checked writable, --verify and --jobs checked in range, before any work."""
@@ -29,10 +32,9 @@ def _check_options(output: Path | None, json_out: Path | None, plots: Path | Non
             check_writable(path, suffixes)
     if plots is not None:
         check_output_dir(plots, "--plots")
-    if verify < 0:
-        raise InputError(f"--verify must be a non-negative number of runs, got {verify}")
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be at least 1, got {jobs}")
+    if not 0 <= verify <= VERIFY_MAX:
+        raise InputError(f"--verify must be a number of runs in [0, {VERIFY_MAX}], got {verify}")
+    check_jobs(jobs)
 
 
 def _print_design(result, output: Path | None, json_out: Path | None, plots: Path | None) -> None:

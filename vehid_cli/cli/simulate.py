@@ -49,8 +49,8 @@ def simulate(
     target = check_writable(output, simulation_suffixes())
     if plot is not None:
         check_writable(plot, (".png",))
-    if seed is not None and seed < 0:
-        raise InputError(f"--seed must be a non-negative integer, got {seed}")
+    if seed is not None and not 0 <= seed <= 2**63 - 1:  # as identify.seed: a signed 64-bit integer
+        raise InputError(f"--seed must be in [0, {2**63 - 1}], got {seed}")
     cfg = load_config(config, set_ or ())
     seed = cfg.identify.seed if seed is None else seed
     simulated = write_simulation(cfg, target, seed, road, origin=f"simulate {config}")

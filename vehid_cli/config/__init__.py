@@ -185,6 +185,9 @@ def _range_of(loc: tuple, root: type[BaseModel] | None) -> str:
         loc = loc[:-1]
     parent = _model_at(loc[:-1], root)
     field = parent.model_fields.get(str(loc[-1])) if parent is not None else None
+    if field is None and len(loc) >= 2:  # a value of a mapping (damper.parameters.c0): the mapping's value type
+        parent = _model_at(loc[:-2], root)
+        field = parent.model_fields.get(str(loc[-2])) if parent is not None else None
     if field is None:
         return ""
     found: dict[str, float] = {}

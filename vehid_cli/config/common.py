@@ -36,6 +36,7 @@ def int_in(low: int, high: int) -> Any:
 
 
 Seed = int_in(0, SEED_MAX)
+PARAMETER_MAX = 1e12  # |value| of any identified parameter, in SI units (a search range beyond it breaks numerics)
 Factor = within(0, 1000, low_open=True)  # identify.bounds: a factor of a configured value
 BumpShape = Literal["step", "cosine_step", "half_sine", "trapezoid"]  # road.bump.shape, design.shapes
 
@@ -133,12 +134,23 @@ class IdentifyCommon(_Section):
         if not lo_f < hi_f:
             raise _KeyedError("identify.bounds", f"lower factor {lo_f:g} must be below upper factor {hi_f:g}")
 
-    def check_box(self, values: Mapping[str, float], box: Mapping[str, tuple[float, float]]) -> None:
-        """Every unknown's search range is a range and holds its configured value."""
+    def check_box(
+        self,
+        values: Mapping[str, float],
+        box: Mapping[str, tuple[float, float]],
+        ranges: typing.Callable[[str], tuple[float, float] | None] = lambda name: None,
+    ) -> None:
+        """Every unknown's search range is a range, holds its configured value and stays inside the parameter's
+        physical range (`ranges(name)`, None: any finite value), so that no candidate breaks the numerics."""
         for name, (lo, hi) in box.items():
             key = f"identify.limits.{name}" if name in self.limits else "identify.bounds"
             if not lo < hi:
                 raise _KeyedError(key, f"lower limit {lo:g} must be below upper limit {hi:g}")
+            low, high = ranges(name) or (-PARAMETER_MAX, PARAMETER_MAX)
+            if not low <= lo <= hi <= high:
+                raise _KeyedError(
+                    key, f"the search range [{lo:g}, {hi:g}] of '{name}' leaves its physical range [{low:g}, {high:g}]"
+                )
             if not lo <= values[name] <= hi:
                 raise _KeyedError(
                     key, f"the search range [{lo:g}, {hi:g}] of '{name}' excludes its configured value {values[name]:g}"

@@ -13,6 +13,7 @@ from ..models.bench import BENCH_QUANTITIES
 from ..models.damper import MODELS, default_values
 from ..models.effects import LIBRARY, bench_names, bound_violation
 from .common import (
+    PARAMETER_MAX,
     Algorithm,
     Factor,
     Finite,
@@ -31,8 +32,11 @@ from .common import (
 )
 
 DAMPER_STRUCTURAL = ("m", "nv", "nu")  # table sizes: set by damper.table, never identified
-DamperValue = within(-1e12, 1e12)  # a damper parameter [SI]; each model's physical limits are checked beside it
+DamperValue = within(
+    -PARAMETER_MAX, PARAMETER_MAX
+)  # a damper parameter [SI]; each model's physical limits are checked beside it
 BENCH_SAMPLES = 2_000_000  # samples of a synthetic bench history at most
+BENCH_STEPS = 20_000_000  # integration steps of one simulated bench history (samples x substeps) at most
 
 
 class DamperSection(_Section):
@@ -58,7 +62,7 @@ class BenchSection(_Section):
     """The virtual test bench (Fleps-Dezasse section 4.2) that synthetic data is simulated on."""
 
     excitation: Literal["sine", "sawtooth", "constant_velocity"] = "sine"
-    amplitude: within(0, 10, low_open=True) = Field(
+    amplitude: within(1e-6, 10) = Field(
         0.025, description="displacement amplitude [m] (stroke/2 for constant_velocity)"
     )
     frequency: within(0, 1e4, low_open=True) = Field(0.8, description="sine frequency [Hz]")
@@ -86,10 +90,20 @@ class BenchSection(_Section):
         else:  # one slow stroke each way
             seconds = 4 * self.amplitude / self.velocity
         samples = seconds / self.dt
+        if not samples >= 3:
+            raise ValueError(
+                f"the {self.excitation} lasts {seconds:.3g} s: fewer than 3 samples of dt = {self.dt:g} s "
+                "(more cycles, a smaller dt, a slower motion)"
+            )
         if samples > BENCH_SAMPLES:
             raise ValueError(
                 f"the {self.excitation} holds {samples:.3g} samples of dt = {self.dt:g} s; keep it below "
                 f"{BENCH_SAMPLES:,} (a larger dt, fewer cycles, a faster motion)"
+            )
+        if samples * self.substeps > BENCH_STEPS:
+            raise ValueError(
+                f"the {self.excitation} takes {samples * self.substeps:.3g} integration steps ({samples:.3g} samples "
+                f"x {self.substeps} substeps); keep it below {BENCH_STEPS:,}"
             )
         return self
 
@@ -257,8 +271,18 @@ class DamperConfig(SystemConfig):
         if ident.stages and set(staged) != seen:
             missing = sorted(seen - set(staged))
             raise _KeyedError("identify.stages", f"no stage identifies {missing}: every unknown needs a stage")
-        ident.check_box(self.values(), self.search_box())
+        ident.check_box(self.values(), self.search_box(), self._parameter_range)
         return self
+
+    def _parameter_range(self, name: str) -> tuple[float, float]:
+        """The physical range of an identifiable value: the model's limits or an effect's, within +-1e12."""
+        if "." in name:
+            effect, param = name.split(".", 1)
+            p = next(p for p in LIBRARY[effect].params if p.name == param)
+            low, high = p.lower, p.upper
+        else:
+            low, high = MODELS[self.damper.model].bounds.get(name, (-np.inf, np.inf))
+        return max(low, -PARAMETER_MAX), min(high, PARAMETER_MAX)
 
     def _check_effects(self) -> None:
         """Bench effects exist, their parameters exist and lie in their physical bounds."""

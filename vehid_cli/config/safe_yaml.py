@@ -136,9 +136,17 @@ def load_yaml(text: str, source: str, what: str = "not valid YAML") -> object:
         return loader.construct_document(node)
     except _Refused as exc:
         raise InputError(f"refused{_line(exc.mark)}: {exc}", source=source) from None
+    except yaml.reader.ReaderError as exc:  # a character YAML does not allow (a NUL, a control character)
+        where = text[: exc.position]
+        line, column = where.count("\n") + 1, exc.position - (where.rfind("\n") + 1) + 1
+        raise InputError(
+            f"{what} at line {line}, column {column}: character #x{exc.character:04x} is not allowed in YAML",
+            source=source,
+        ) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         problem = getattr(exc, "problem", None) or str(exc)
+        problem = " ".join(str(problem).split())  # one line
         raise InputError(f"{what}{_line(mark)}: {clip(problem)}", source=source) from None
     except RecursionError:  # a guard: MAX_DEPTH keeps the composer and the constructor far from the limit
         raise InputError(f"refused: nested too deeply (at most {MAX_DEPTH} levels)", source=source) from None

@@ -29,14 +29,36 @@ from .sensors import SensorSpec
 
 # The car's parameters: positive (kR, cf and cr may be 0) and within broad physical bounds, from a go-kart to a
 # heavy truck, so that every frequency and time constant of the model stays finite on any time grid.
-Mass = within(0.1, 1e6)  # kg
-Unsprung = within(0.01, 1e5)  # kg
-Inertia = within(0.01, 1e8)  # kg m²
-Length = within(1e-3, 100)  # m
-Stiffness = within(1, 1e10)  # N/m
-RollStiffness = within(0, 1e10)  # N m/rad
-Damping = within(0, 1e8)  # N s/m
+RANGES = {
+    "m": (0.1, 1e6),
+    "mf": (0.01, 1e5),
+    "Ix": (0.01, 1e8),
+    "a1": (1e-3, 100),
+    "kf": (1, 1e10),
+    "kR": (0, 1e10),
+    "cf": (0, 1e8),
+}  # fmt: skip  (kg, kg m², m, N/m, N m/rad, N s/m)
+RANGES.update(mr=RANGES["mf"], Iy=RANGES["Ix"], kr=RANGES["kf"], ktf=RANGES["kf"], ktr=RANGES["kf"], cr=RANGES["cf"])
+RANGES.update({n: RANGES["a1"] for n in ("a2", "b1", "b2", "wheelbase", "track")})
+Mass = within(*RANGES["m"])
+Unsprung = within(*RANGES["mf"])
+Inertia = within(*RANGES["Ix"])
+Length = within(*RANGES["a1"])
+Stiffness = within(*RANGES["kf"])
+RollStiffness = within(*RANGES["kR"])
+Damping = within(*RANGES["cf"])
 Height = within(-1, 1)  # m, a bump under one corner
+SIMULATION_SAMPLES = 1_000_000  # samples of a simulated record at most (1000 s at 1 kHz)
+SIMULATION_STEPS = 20_000_000  # integration steps (samples x substeps) of one simulation at most
+
+
+def _parameter_range(name: str) -> tuple[float, float] | None:
+    """The physical range of an identifiable value: a car's parameter (RANGES) or a declared effect's."""
+    if "." in name:
+        effect, param = name.split(".", 1)
+        p = LIBRARY[effect].param(param)
+        return (p.lower, p.upper)
+    return RANGES.get(name)
 
 
 class Vehicle(_Section):
@@ -243,8 +265,17 @@ class Simulation(_Section):
     def _grid(self) -> Simulation:
         if self.dt * 2 > self.duration:
             raise ValueError(f"dt = {self.dt:g} s leaves fewer than 3 samples in duration = {self.duration:g} s")
-        if self.duration / self.dt > 10_000_000:
-            raise ValueError(f"duration/dt = {self.duration / self.dt:.3g} samples is more than 10 million")
+        steps = self.duration / self.dt * (self.substeps or 1)
+        if steps > SIMULATION_STEPS and self.substeps:
+            raise ValueError(
+                f"duration/dt x substeps = {steps:.3g} integration steps is more than {SIMULATION_STEPS:,}: fewer "
+                "substeps, a larger dt or a shorter duration"
+            )
+        if self.duration / self.dt > SIMULATION_SAMPLES:
+            raise ValueError(
+                f"duration/dt = {self.duration / self.dt:.3g} samples is more than {SIMULATION_SAMPLES:,} "
+                "(a longer record than any test needs: a larger dt or a shorter duration)"
+            )
         return self
 
 
@@ -460,7 +491,7 @@ class Config(SystemConfig):
         if ident.objective == "f2" and self.sensors == "disp":
             raise _KeyedError("identify.objective", "f2 compares accelerations; set sensors to 'acc' or 'both'")
         box = self.search_box()
-        ident.check_box(values, box)
+        ident.check_box(values, box, _parameter_range)
         for name, (lo, hi) in box.items():
             span = {"a1": self.vehicle.L, "a2": self.vehicle.L, "b1": self.vehicle.w, "b2": self.vehicle.w}.get(name)
             if span is not None and (lo <= 0 or hi >= span):

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import re
+
 QUOTED = 200  # characters of a user's value an error message quotes at most
 MESSAGE = 2000  # characters of a whole message at most (a message lists choices, never a file's content)
 
@@ -19,12 +21,32 @@ def clip(text: object, limit: int = QUOTED) -> str:
     return f"{text[:limit]}... ({len(text)} characters)"
 
 
+def _clip_middle(text: str, limit: int = QUOTED) -> str:
+    """A long file name or option clipped in the middle: its start and its end (the file's own name) are kept."""
+    if len(text) <= limit:
+        return text
+    half = limit // 2
+    return f"{text[:half]}...{text[-half:]} ({len(text)} characters)"
+
+
+_LONG_QUOTE = re.compile(rf"'([^'\n]{{{QUOTED + 1},}})'")
+
+
+def _clip_quotes(message: str) -> str:
+    """Each quoted value ('...') of a message clipped to QUOTED characters, then the whole to MESSAGE."""
+    message = _LONG_QUOTE.sub(lambda m: f"'{m.group(1)[:QUOTED]}...' ({len(m.group(1))} characters)", message)
+    return clip(message, MESSAGE)
+
+
 MAX_QUOTE = QUOTED  # characters of a bad value a message quotes
 
 
 def quote(value, limit: int = MAX_QUOTE) -> str:
     """`repr(value)` cut to `limit` characters (a message never echoes a 100 kB value)."""
-    text = repr(value)
+    try:
+        text = repr(value)
+    except ValueError:  # an integer of more digits than Python prints
+        return "(a number too long to print)"
     return text if len(text) <= limit else f"{text[: limit - 20]}... ({len(text)} characters)"
 
 
@@ -35,9 +57,9 @@ class InputError(Exception):
     exit_code = 2
 
     def __init__(self, message: str, *, source: str | None = None, key: str | None = None):
-        source = None if source is None else clip(source, 2 * QUOTED)
+        source = None if source is None else _clip_middle(str(source))
         key = None if key is None else clip(key, QUOTED)
-        message = clip(message, MESSAGE)
+        message = _clip_quotes(str(message))
         self.source = source
         self.key = key
         self.detail = message

@@ -43,9 +43,13 @@ def read_text(path: str | Path, what: str, expected: str, encoding: str = "utf-8
         ) from None
 
 
-def check_path_name(path: str | Path, what: str = "path") -> Path:
+OUTPUT_RESERVE = 20  # bytes an output's name leaves for the files made beside it (.NAME.XXXXXXXX.tmp, .NAME.lock)
+
+
+def check_path_name(path: str | Path, what: str = "path", reserve: int = 0) -> Path:
     """`path`, or an InputError when the file system cannot take it as a name: a NUL byte, a name longer than the
-    file system's limit (NAME_MAX, 255 bytes on most), a path longer than PATH_MAX."""
+    file system's limit (NAME_MAX, 255 bytes on most) less `reserve` bytes for the files named after it (an
+    output's temporary and lock), a path longer than PATH_MAX."""
     text = os.fspath(path)
     if "\0" in text:
         raise InputError(f"the {what}'s name holds a NUL byte, which no file name may hold", source=repr(text))
@@ -55,12 +59,16 @@ def check_path_name(path: str | Path, what: str = "path") -> Path:
         raise InputError(f"the {what}'s name cannot be encoded for the file system", source=repr(text)) from None
     parent = os.path.dirname(text) or "."
     name_max, path_max = _limits(parent)
-    for part in raw.split(b"/"):
-        if len(part) > name_max:
-            raise InputError(
-                f"a name of {len(part)} bytes in the {what}; the file system takes at most {name_max} per name",
-                source=text,
+    parts = raw.split(b"/")
+    for i, part in enumerate(parts):
+        room = name_max - (reserve if i == len(parts) - 1 else 0)
+        if len(part) > room:
+            spare = (
+                f" ({name_max} per name, less {reserve} for vehid's temporary and lock files)"
+                if room < name_max
+                else ""
             )
+            raise InputError(f"a name of {len(part)} bytes in the {what}; at most {room} bytes{spare}", source=text)
     if len(raw) >= path_max:
         raise InputError(
             f"a path of {len(raw)} bytes; the file system takes at most {path_max - 1} for the {what}", source=text
@@ -81,7 +89,7 @@ def _limits(directory: str) -> tuple[int, int]:
 
 def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
     """Check an output path has a known suffix and a writable directory, before any work is done."""
-    path = check_path_name(path, "output")
+    path = check_path_name(path, "output", OUTPUT_RESERVE)
     if path.suffix.lower() not in suffixes:
         raise InputError(
             f"unknown output type '{path.suffix}'; expected one of {', '.join(suffixes)}", source=str(path)
@@ -100,7 +108,7 @@ def check_writable(path: str | Path, suffixes: Sequence[str]) -> Path:
 def check_writable_dir(path: str | Path, option: str | None = None) -> Path:
     """Check an output directory can be made and written (a probe file in it, or in its nearest existing
     ancestor: nothing is left behind), before any work. InputError names the option and the path."""
-    path = check_path_name(path, "output directory")
+    path = check_path_name(path, "output directory", OUTPUT_RESERVE)
     source = f"{option} {path}" if option else str(path)
     if path.exists() and not path.is_dir():
         raise InputError("is a file, expected a directory", source=source)

@@ -36,7 +36,8 @@ class CramerRao:
     @property
     def sd(self) -> NDArray:
         """Absolute standard deviation bound (D,) in the parameters' units."""
-        return self.re_sd_percent / 100.0 * np.abs(self.values)
+        with np.errstate(invalid="ignore"):  # an unidentifiable parameter (inf) of value 0: nan
+            return self.re_sd_percent / 100.0 * np.abs(self.values)
 
     def unidentifiable(self) -> list[str]:
         return [n for n, ok in zip(self.names, self.identifiable, strict=True) if not ok]

@@ -159,10 +159,11 @@ def summarise(
     mean, sd = est.mean(axis=0), est.std(axis=0, ddof=1) if len(records) > 1 else np.zeros(est.shape[1])
     re = nre = per_re = per_nre = None
     if truth is not None:
-        re = 100.0 * (mean - truth) / truth
-        nre = float(np.linalg.norm(re))
-        per_re = 100.0 * (est - truth) / truth
-        per_nre = np.linalg.norm(per_re, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a true value of 0 has no relative error: inf/nan
+            re = 100.0 * (mean - truth) / truth
+            nre = float(np.linalg.norm(re))
+            per_re = 100.0 * (est - truth) / truth
+            per_nre = np.linalg.norm(per_re, axis=1)
     return Summary(
         names=tuple(names),
         truth=truth,

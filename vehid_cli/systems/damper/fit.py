@@ -30,7 +30,10 @@ PENALTY_FACTOR = 10.0  # an unstable candidate costs this many times the initial
 def cost_J(measured: NDArray, simulated: NDArray) -> NDArray:
     """Eq. 7: mean squared error over the variance of the measured force (mean removed); (..., n) -> (...)."""
     measured = np.asarray(measured, dtype=float)
-    return np.mean((measured - simulated) ** 2, axis=-1) / np.var(measured)
+    mse, var = np.mean((measured - simulated) ** 2, axis=-1), np.var(measured)
+    if not var > 0:  # a constant measured force (no motion, a zero force law): J is undefined, not a division by 0
+        return np.full(np.shape(mse), np.nan)
+    return mse / var
 
 
 @dataclass(frozen=True)
