@@ -376,11 +376,12 @@ def sweep_folder(rng: np.random.Generator, folder: Path) -> Case:
 ERRORS = {"ENOSPC": 28, "EDQUOT": 122, "EROFS": 30, "EACCES": 13}
 SCENARIOS = [  # (kind, operation, command, what the folder holds first)
     ("lock", "create", "identify", ""), ("lock", "write", "identify", ""), ("mkdir", "create", "identify", ""),
-    ("stamp", "create", "identify", ""), ("stamp", "fsync", "identify", ""), ("record", "create", "identify", "one"),
-    ("record", "fsync", "identify", "one"), ("record", "fsync", "identify", ""), ("campaign", "create", "identify", "all"),
-    ("campaign", "fsync", "identify", "all"), ("json", "fsync", "identify", "file"), ("json", "create", "identify", "file"),
-    ("index", "fsync", "sweep", "dir"), ("index", "create", "sweep", "dir"), ("lock", "create", "sweep", "dir"),
-    ("lock", "write", "sweep", "index"), ("campaign", "fsync", "sweep", "partial"),
+    ("stamp", "create", "identify", ""), ("stamp", "fsync", "identify", ""),
+    ("record", "create", "identify", "one"), ("record", "fsync", "identify", "one"),
+    ("record", "fsync", "identify", ""), ("campaign", "create", "identify", "all"),
+    ("campaign", "fsync", "identify", "all"), ("json", "fsync", "identify", "file"),
+    ("json", "create", "identify", "file"), ("index", "fsync", "sweep", "dir"), ("index", "create", "sweep", "dir"),
+    ("lock", "create", "sweep", "dir"), ("lock", "write", "sweep", "index"), ("campaign", "fsync", "sweep", "partial"),
 ]  # fmt: skip
 
 

@@ -67,9 +67,9 @@ _TEMPORARY = re.compile(r"\..+\.tmp")
 class Checkpoint:
     """Per-run records of an unfinished campaign, in a directory beside its output file.
 
-    Only vehid's own entries are handled: `campaign.json`, `run-NNNNN.npz` and the temporaries of their atomic
-    writes. Anything else found there (a directory, a file of another name), or a checkpoint that is not a
-    directory (a file, a symlink loop), is an InputError naming it: it is never removed, nor followed."""
+    It holds `campaign.json`, `run-NNNNN.npz` and the temporaries of their atomic writes, all files. A directory
+    found in it, or a checkpoint that is not a directory (a file, a symlink, a symlink loop), is an InputError
+    naming it: never removed, nor followed."""
 
     def __init__(self, directory: Path, key: str, log: Log | None = None):
         self.directory = directory
@@ -95,11 +95,8 @@ class Checkpoint:
         except OSError as exc:
             raise self._refuse(f"cannot be read ({exc.strerror})") from None
         for path in entries:
-            ours = path.name == "campaign.json" or _RECORD.fullmatch(path.name) or _TEMPORARY.fullmatch(path.name)
-            if not ours:
-                raise self._refuse(f"holds '{path.name}', which vehid did not write there")
             if path.is_dir() and not path.is_symlink():
-                raise self._refuse(f"holds a directory '{path.name}' where vehid keeps a file")
+                raise self._refuse(f"holds a directory '{path.name}', which vehid never makes there")
         return entries
 
     def open(self) -> dict[int, RunRecord]:
@@ -112,10 +109,8 @@ class Checkpoint:
         for tmp in [p for p in entries if _TEMPORARY.fullmatch(p.name)]:
             tmp.unlink()
         records = [p for p in entries if _RECORD.fullmatch(p.name)]
-        if entries and not records:
+        if not records:
             self.remove()
-            return {}
-        if not entries:
             return {}
         stamp = self.directory / "campaign.json"
         try:
