@@ -181,7 +181,8 @@ class Summary:
     def re_sd_percent(self) -> NDArray:
         """Spread of the estimates over runs, relative to the truth (or to the mean when unknown) [%]."""
         ref = self.truth if self.truth is not None else self.mean
-        return 100.0 * self.sd / np.abs(ref)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a mean of zero: no relative spread (inf), quietly
+            return 100.0 * self.sd / np.abs(ref)
 
 
 def summarise(
