@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
 
@@ -386,3 +388,120 @@ def test_identify_says_when_the_model_is_wrong(run, inadequate):
     assert s.model_inadequate is inadequate
     if not inadequate:
         assert s.chi2_median == pytest.approx(1.0, abs=5 * np.sqrt(2 / s.residual_samples))
+
+
+# ------------------------------------------------------------------------------ tampered checkpoints (issue 22)
+
+TINY = ("simulation.duration=0.5", "simulation.dt=0.005", "identify.algorithm.population=4",
+        "identify.algorithm.iterations=2", "identify.runs=2")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tiny_checkpoint(tmp_path_factory):
+    """A whole campaign's file and its checkpoint (both runs)."""
+    d = tmp_path_factory.mktemp("tiny")
+    write_campaign_h5(d / "whole.h5", run_campaign(small_config(*TINY), jobs=1, checkpoint_dir=d / "c.h5.partial"))
+    return d
+
+
+def _fields(path):
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files if k != "sha256"}
+
+
+def _rewrite(path, fields):
+    """A record written with its digest recomputed: only validation can tell it is wrong."""
+    from vehid_cli.identify.records import _digest
+
+    with open(path, "wb") as fh:
+        np.savez(fh, sha256=np.array(_digest(fields)), **fields)
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("estimate", np.ones(4)), ("estimate", np.ones((1, 5))), ("estimate", np.full(5, np.nan)),
+     ("cost", np.array(["text"])), ("evaluations", np.array(-3)), ("history_evals", np.arange(99))],
+    ids=["wrong length", "2-D", "NaN", "cost text", "negative count", "history length"],
+)  # fmt: skip
+def test_a_record_with_a_valid_digest_but_wrong_fields_is_redone(tmp_path, tiny_checkpoint, field, value):
+    partial = tmp_path / "c.h5.partial"
+    shutil.copytree(tiny_checkpoint / "c.h5.partial", partial)
+    fields = _fields(partial / "run-00001.npz")
+    fields[field] = value
+    _rewrite(partial / "run-00001.npz", fields)
+    messages = []
+    resumed = run_campaign(small_config(*TINY), jobs=1, checkpoint_dir=partial, log=messages.append)
+    assert any("run-00001.npz: damaged checkpoint record" in m for m in messages), messages
+    write_campaign_h5(tmp_path / "c.h5", resumed)
+    assert_same_content(tiny_checkpoint / "whole.h5", tmp_path / "c.h5")
+
+
+def _replace(path, how):
+    path.unlink()
+    if how == "directory":
+        path.mkdir()
+    elif how == "fifo":
+        os.mkfifo(path)
+    elif how == "loop":
+        os.symlink(path.name, path)
+
+
+@pytest.mark.parametrize(
+    "entry, how, outcome",
+    [("run-00001.npz", "fifo", "redone"), ("run-00001.npz", "loop", "redone"),
+     ("run-00001.npz", "directory", "holds a directory"),
+     ("campaign.json", "fifo", "no readable campaign.json"), ("campaign.json", "directory", "holds a directory"),
+     (".", "loop", "is not a directory")],
+)  # fmt: skip
+def test_entries_replaced_in_a_checkpoint_never_hang_and_are_named(tmp_path, tiny_checkpoint, entry, how, outcome):
+    from vehid_cli.core.errors import InputError
+
+    partial = tmp_path / "c.h5.partial"
+    shutil.copytree(tiny_checkpoint / "c.h5.partial", partial)
+    if entry == ".":
+        shutil.rmtree(partial)
+        os.symlink(partial.name, partial)
+    else:
+        _replace(partial / entry, how)
+    messages = []
+    if outcome == "redone":
+        run_campaign(small_config(*TINY), jobs=1, checkpoint_dir=partial, log=messages.append)
+        assert any(f"{entry}: damaged checkpoint record" in m for m in messages), messages
+        return
+    with pytest.raises(InputError, match=outcome) as caught:
+        run_campaign(small_config(*TINY), jobs=1, checkpoint_dir=partial)
+    assert str(partial) in str(caught.value) and os.path.lexists(partial)  # named, and nothing removed
+
+
+def test_a_first_checkpoint_write_that_fails_leaves_no_checkpoint(tmp_path, monkeypatch):
+    import errno
+
+    import vehid_cli.core.files as files
+    from vehid_cli.core.errors import DiskFull
+
+    def full(path, directory=False):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(files, "_fsync", full)
+    partial = tmp_path / "c.h5.partial"
+    with pytest.raises(DiskFull, match="campaign.json"):
+        run_campaign(small_config(*TINY), jobs=1, checkpoint_dir=partial)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_count_of_runs_beyond_any_campaign_is_refused_before_anything_is_sized(tmp_path):
+    from vehid_cli.campaign.runner import MAX_RUNS
+    from vehid_cli.core.errors import InputError
+
+    with pytest.raises(InputError, match="identify.runs"):
+        run_campaign(small_config(*TINY, f"identify.runs={MAX_RUNS + 1}"), jobs=1, checkpoint_dir=tmp_path / "p")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_that_is_a_directory_is_refused_before_any_run(tmp_path):
+    from vehid_cli.core.errors import InputError
+
+    (tmp_path / "c.h5").mkdir()
+    with pytest.raises(InputError, match="not a regular file"):
+        run_campaign_to_file(small_config(*TINY), tmp_path / "c.h5", jobs=1, force=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.h5"]

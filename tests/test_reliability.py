@@ -377,3 +377,46 @@ def test_unstable_parameter_sets_are_penalised_counted_and_reported(tmp_path):
     with h5py.File(out) as h5:
         assert h5["summary"].attrs["penalised"] == campaign.summary.penalised
         assert list(h5["runs/penalised"][()]) == [r.penalised for r in campaign.records]
+
+
+@pytest.mark.parametrize("what", ["symlink", "directory", "fifo"])
+def test_a_lock_file_replaced_by_something_else_is_refused_and_kept(tmp_path, what):
+    """Never written through (a symlink to another file would have been truncated), never hanging on a FIFO."""
+    target, lock = tmp_path / "c.h5", lock_path(tmp_path / "c.h5")
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    if what == "symlink":
+        lock.symlink_to(victim)
+    elif what == "directory":
+        lock.mkdir()
+    else:
+        os.mkfifo(lock)
+    with pytest.raises(InputError, match=lock.name), exclusive(target):
+        pass
+    assert victim.read_text() == "keep me" and os.path.lexists(lock)
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EROFS], ids=["ENOSPC", "EROFS"])
+def test_a_lock_whose_pid_cannot_be_written_is_removed_and_exits_2(tmp_path, monkeypatch, code):
+    """A full disk (or a read-only folder) at the lock file's pid write: exit 2 naming the lock, no lock left."""
+    import vehid_cli.core.locking as locking
+
+    def refuse(fd, data):
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(locking.os, "write", refuse)
+    target = tmp_path / "c.h5"
+    code_, text = invoke("identify", BASE_CONFIG, *sets(SMALL), "--runs", 1, "--jobs", 1, "-o", target)
+    monkeypatch.undo()
+    assert code_ == 2 and lock_path(target).name in text and "Traceback" not in text, text
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_holder_tells_a_held_lock_without_taking_or_making_it(tmp_path):
+    from vehid_cli.core.locking import holder
+
+    target = tmp_path / "c.h5"
+    assert not holder(target) and not lock_path(target).exists()
+    with exclusive(target):
+        assert holder(target)
+    assert not holder(target)

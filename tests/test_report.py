@@ -165,3 +165,16 @@ def test_report_plots_directory_is_checked_before_any_work(campaign_dir, tmp_pat
     assert res.exit_code == 2, res.output
     assert res.stderr.startswith(f"error: --plots {target}: cannot create the directory"), res.stderr
     assert "NRE of mean" not in res.stdout  # refused before the tables
+
+
+def test_sweep_notes_tell_a_running_campaign_from_an_interrupted_one(tmp_path):
+    from vehid_cli.core.locking import exclusive
+    from vehid_cli.report import sweep_notes
+
+    (tmp_path / "a.h5.partial").mkdir()
+    (tmp_path / "a.h5.partial" / "run-00000.npz").write_bytes(b"")
+    (tmp_path / "b.h5.partial").mkdir()
+    with exclusive(tmp_path / "a.h5"):  # what the process running a.h5's campaign holds
+        notes = sweep_notes([tmp_path])
+    assert any("a.h5.partial: a campaign running now (1 finished run(s) so far)" in n for n in notes), notes
+    assert any("b.h5.partial: an interrupted campaign (0 finished run(s))" in n for n in notes), notes

@@ -105,3 +105,20 @@ def test_sweep_of_a_damper_config_runs_and_reports_like_the_car(tmp_path):
     assert report.returncode == 0, report.stderr
     rows = list(csv.DictReader(io.StringIO(report.stdout)))
     assert {Path(r["file"]).name for r in rows} == {"seed-1.h5", "seed-2.h5"}
+
+
+@pytest.mark.parametrize(
+    "text, fragment",
+    [(b"\xff\xfe garbage", "cannot read"), (b"index,file\n0,a.h5\n", "no overrides"),
+     (b"index,file,overrides,config_sha256\n0,../../etc/passwd.h5,x,y\n", "not a campaign file"),
+     (b"index,file,overrides,config_sha256\n0,a.h5\n", "no overrides"),
+     (b"index,file,overrides,config_sha256\n0,a.h5,x,y,z\n", "more cells")],
+    ids=["not UTF-8", "columns missing", "a path", "a short row", "a long row"],
+)  # fmt: skip
+def test_a_damaged_sweep_index_is_refused_naming_the_line(tmp_path, text, fragment):
+    from vehid_cli.campaign.sweep import read_index
+
+    (tmp_path / "index.csv").write_bytes(text)
+    with pytest.raises(InputError, match=fragment) as caught:
+        read_index(tmp_path / "index.csv")
+    assert "index.csv" in str(caught.value)

@@ -14,7 +14,10 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import os
+import re
 import time
+import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -22,8 +25,8 @@ import numpy as np
 
 from .. import __version__
 from ..config import AnyConfig
-from ..core.errors import InputError
-from ..core.files import atomic_path, remove_stale_temporaries
+from ..core.errors import InputError, quote
+from ..core.files import atomic_path, read_regular, remove_stale_temporaries, write_error
 from ..core.locking import exclusive
 from ..core.provenance import git_commit
 from ..core.store import check_integrity, open_results
@@ -54,8 +57,19 @@ def campaign_key(config: AnyConfig, data_files: Sequence[str | Path] = ()) -> st
     return h.hexdigest()
 
 
+STAMP_LIMIT = 1 << 16  # bytes of a checkpoint's campaign.json (it holds one key)
+RECORD_LIMIT = 64 << 20  # bytes of one run's record (its estimate, history and per-channel chi2)
+MAX_RUNS = 1_000_000  # runs of one campaign: a larger count is a typo, never a campaign (nothing is sized by it)
+_RECORD = re.compile(r"run-\d{5,}\.npz")
+_TEMPORARY = re.compile(r"\..+\.tmp")
+
+
 class Checkpoint:
-    """Per-run records of an unfinished campaign, in a directory beside its output file."""
+    """Per-run records of an unfinished campaign, in a directory beside its output file.
+
+    It holds `campaign.json`, `run-NNNNN.npz` and the temporaries of their atomic writes, all files. A directory
+    found in it, or a checkpoint that is not a directory (a file, a symlink, a symlink loop), is an InputError
+    naming it: never removed, nor followed."""
 
     def __init__(self, directory: Path, key: str, log: Log | None = None):
         self.directory = directory
@@ -66,63 +80,101 @@ class Checkpoint:
         if self.log is not None:
             self.log(f"warning: {message}")
 
+    def _refuse(self, what: str) -> InputError:
+        return InputError(f"{what}; remove it to start the campaign afresh", source=str(self.directory))
+
+    def _entries(self) -> list[Path]:
+        """The checkpoint's entries, [] when there is no checkpoint; InputError for what vehid did not put there."""
+        d = self.directory
+        if not os.path.lexists(d):
+            return []
+        if d.is_symlink() or not d.is_dir():
+            raise self._refuse("is not a directory (a file or a symlink where vehid keeps a campaign's checkpoint)")
+        try:
+            entries = sorted(d.iterdir())
+        except OSError as exc:
+            raise self._refuse(f"cannot be read ({exc.strerror})") from None
+        for path in entries:
+            if path.is_dir() and not path.is_symlink():
+                raise self._refuse(f"holds a directory '{path.name}', which vehid never makes there")
+        return entries
+
     def open(self) -> dict[int, RunRecord]:
         """Read back the runs the directory holds (refusing another campaign's runs). A checkpoint without
         runs (a campaign that failed before finishing one) holds nothing to protect and is started afresh.
         Unfinished writes (temporary files a kill left) are removed; a record that does not read back whole
-        (truncated, CRC error, wrong run) is discarded with a warning and its run is redone."""
-        stamp = self.directory / "campaign.json"
-        if self.directory.is_dir():
-            for tmp in self.directory.glob(".*.tmp"):
-                tmp.unlink()
-        if self.directory.exists() and not any(self.directory.glob("run-*.npz")):
+        (truncated, CRC error, wrong run, a field of the wrong type or shape) is discarded with a warning and its
+        run is redone."""
+        entries = self._entries()
+        for tmp in [p for p in entries if _TEMPORARY.fullmatch(p.name)]:
+            tmp.unlink()
+        records = [p for p in entries if _RECORD.fullmatch(p.name)]
+        if not records:
             self.remove()
-        if self.directory.exists():
-            try:
-                meta = json.loads(stamp.read_text())
-            except (OSError, ValueError):
-                raise InputError(
-                    "checkpoint directory has no readable campaign.json; remove it to start afresh",
-                    source=str(self.directory),
-                ) from None
-            if not isinstance(meta, dict) or meta.get("key") != self.key:
-                raise InputError(
-                    "checkpoint belongs to a different config or data file; remove it or choose another -o",
-                    source=str(self.directory),
-                )
+            return {}
+        stamp = self.directory / "campaign.json"
+        try:
+            meta = json.loads(read_regular(stamp, STAMP_LIMIT, "checkpoint stamp").decode("utf-8"))
+        except (FileNotFoundError, InputError, UnicodeDecodeError, ValueError, RecursionError):
+            raise self._refuse("checkpoint directory has no readable campaign.json") from None
+        if not isinstance(meta, dict) or meta.get("key") != self.key:
+            raise InputError(
+                "checkpoint belongs to a different config or data file; remove it or choose another -o",
+                source=str(self.directory),
+            )
         done = {}
-        for path in sorted(self.directory.glob("run-*.npz")):
+        for path in records:
             try:
-                record = RunRecord.load(path)
+                record = RunRecord.load(path, RECORD_LIMIT)
                 if path.name != f"run-{record.index:05d}.npz":
                     raise ValueError(f"it holds run {record.index}")
-            except Exception as exc:  # noqa: BLE001 - a damaged record is redone, never trusted
-                self._warn(f"{path}: damaged checkpoint record ({exc.__class__.__name__}: {exc}); discarded, "
-                           "the run is redone")  # fmt: skip
-                path.unlink()
+            except (ValueError, KeyError, InputError, OSError, MemoryError, zipfile.BadZipFile) as exc:
+                self.discard(path, f"{exc.__class__.__name__}: {exc}")
                 continue
             done[record.index] = record
         return done
 
+    def discard(self, path: Path, reason: str) -> None:
+        """Remove a damaged record (its run is redone), with a warning naming it."""
+        self._warn(f"{path}: damaged checkpoint record ({quote(reason, 160)[1:-1]}); discarded, the run is redone")
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+
     def save(self, record: RunRecord) -> None:
-        """Persist one finished run (creating the checkpoint, stamped with the campaign key, on the first)."""
-        if not self.directory.exists():
-            self.directory.mkdir(parents=True)
-            with atomic_path(self.directory / "campaign.json") as tmp:
-                tmp.write_text(json.dumps({"key": self.key}))
-        record.save(self.directory / f"run-{record.index:05d}.npz")
+        """Persist one finished run (creating the checkpoint, stamped with the campaign key, on the first). A write
+        that fails (a full disk, a read-only folder) leaves no checkpoint without runs behind."""
+        created = False
+        if not os.path.lexists(self.directory):
+            try:
+                self.directory.mkdir(parents=True)
+            except OSError as exc:
+                raise write_error(self.directory, exc) from None
+            created = True
+        try:
+            if created:
+                with atomic_path(self.directory / "campaign.json") as tmp:
+                    tmp.write_text(json.dumps({"key": self.key}))
+            record.save(self.directory / f"run-{record.index:05d}.npz")
+        except BaseException:
+            if created or not any(self.directory.glob("run-*.npz")):
+                with contextlib.suppress(OSError, InputError):
+                    self.remove()
+            raise
 
     def remove(self) -> None:
         """Delete the checkpoint: its runs first, campaign.json last, so that a kill midway leaves one that still
         opens (stamped, with fewer runs or none), never runs without their stamp."""
-        if self.directory.is_dir():
-            stamp = self.directory / "campaign.json"
-            for path in self.directory.iterdir():
-                if path != stamp:
+        entries = self._entries()
+        if not os.path.lexists(self.directory):
+            return
+        stamp = self.directory / "campaign.json"
+        for path in entries:
+            if path != stamp:
+                with contextlib.suppress(FileNotFoundError):
                     path.unlink()
-            with contextlib.suppress(FileNotFoundError):
-                stamp.unlink()
-            self.directory.rmdir()
+        with contextlib.suppress(FileNotFoundError):
+            stamp.unlink()
+        self.directory.rmdir()
 
 
 def run_campaign(
@@ -149,11 +201,18 @@ def run_campaign(
     if checks and found is not None and found.stopping:
         raise InputError(found.stop_message(), source=system.data_file)
     n_runs = system.runs
+    if not 1 <= n_runs <= MAX_RUNS:
+        raise InputError(f"a campaign has 1 to {MAX_RUNS} runs, got {n_runs}", key="identify.runs")
     start = time.perf_counter()
     bound = system.bound()  # before the runs: a bad experiment fails before any work
     key = campaign_key(config, system.data_files())
     checkpoint = Checkpoint(checkpoint_dir, key, log) if checkpoint_dir else None
     done = checkpoint.open() if checkpoint else {}
+    for i, r in list(done.items()):
+        if r.estimate.shape != (len(system.box.names),):
+            checkpoint.discard(checkpoint.directory / f"run-{i:05d}.npz",
+                               f"{r.estimate.size} estimates for {len(system.box.names)} unknowns")  # fmt: skip
+            del done[i]
     done = {i: r for i, r in done.items() if i < n_runs}
     if done and log is not None:
         log(f"note: resumed {len(done)} of {n_runs} runs from {checkpoint_dir}")
@@ -277,13 +336,19 @@ def run_campaign_to_file(
     file (a sweep records its varied keys). An output file holding another campaign (another config or data) is
     an InputError naming the difference, unless `force`."""
     output = Path(output)
+    if os.path.lexists(output) and not output.is_file():
+        raise InputError(
+            "is not a regular file (a directory, a FIFO or a broken symlink where the campaign file goes); remove it "
+            "or choose another output",
+            source=str(output),
+        )
     data_file = DataSource.resolve(config, data_file)  # resolved once, passed down
     with exclusive(output) if lock else contextlib.nullcontext():
         if output.exists() and not force:
             check_same_campaign(output, config, data_file)
         remove_stale_temporaries(output)
         partial = checkpoint_dir_for(output)
-        if partial.exists():  # a kill during the clean-up after the file was written leaves a stale checkpoint
+        if partial.is_dir():  # a kill during the clean-up after the file was written leaves a stale checkpoint
             finished = finished_campaign(output, config, data_file)
             if finished is not None:
                 Checkpoint(partial, "").remove()

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..config import AnyConfig, Override, load_config
-from ..core.errors import InputError
-from ..core.files import atomic_path
+from ..core.errors import InputError, quote
+from ..core.files import atomic_path, read_regular
 from ..core.locking import Busy, exclusive
 from .results import campaign_file_digest, config_difference
 
@@ -152,14 +152,32 @@ def file_state(path: Path) -> tuple[str | None, str | None]:
 INDEX_COLUMNS = ["index", "file", "overrides", "config_sha256"]
 
 
+INDEX_LIMIT = 16 << 20  # bytes of an index.csv (a row per campaign: a sweep of 100 000 campaigns fits)
+
+
 def read_index(path: Path) -> list[dict[str, str]]:
-    """The rows of an index.csv (InputError naming the file if it is not one)."""
+    """The rows of an index.csv (InputError naming the file if it is not one: not a regular file, not UTF-8 CSV, a
+    column missing or empty, a file that is not a plain `.h5` name in the sweep's directory)."""
+    source = str(path)
     try:
-        rows = list(csv.DictReader(io.StringIO(path.read_text())))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(f"cannot read the sweep index ({exc})", source=str(path)) from None
-    if rows and not set(INDEX_COLUMNS) <= set(rows[0]):
-        raise InputError(f"not a sweep index: expected the columns {', '.join(INDEX_COLUMNS)}", source=str(path))
+        text = read_regular(path, INDEX_LIMIT, "sweep index").decode("utf-8")
+        rows = list(csv.DictReader(io.StringIO(text, newline="")))
+    except FileNotFoundError:
+        raise InputError("sweep index not found", source=source) from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read the sweep index ({quote(str(exc), 120)[1:-1]})", source=source) from None
+    for n, row in enumerate(rows, start=2):
+        missing = [c for c in INDEX_COLUMNS if not isinstance(row.get(c), str) or (c == "file" and not row[c])]
+        if missing or None in row:
+            what = f"no {', '.join(missing)}" if missing else "more cells than columns"
+            raise InputError(
+                f"not a sweep index: line {n} has {what} (expected the columns {', '.join(INDEX_COLUMNS)})",
+                source=source,
+            )
+        name = row["file"]
+        if Path(name).name != name or not name.endswith(".h5") or name.startswith("."):
+            raise InputError(f"not a sweep index: line {n} names {quote(name, 80)}, not a campaign file of the "
+                             "sweep's directory", source=source)  # fmt: skip
     return rows
 
 

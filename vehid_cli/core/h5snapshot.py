@@ -196,11 +196,21 @@ class _Walk:
             return value
         return Data(np.asarray(value), self.attrs(ds, where, source))
 
+    @staticmethod
+    def token(obj):
+        """What tells HDF5 objects apart in one file (its address; a token in newer HDF5)."""
+        import h5py
+
+        info = h5py.h5o.get_info(obj.id)
+        return getattr(info, "token", None) or getattr(info, "addr", None)
+
     def group(self, group, where: str, source: str, depth: int) -> Tree:
         import h5py
 
         if depth > MAX_DEPTH:
             raise ValueError(f"groups nested more than {MAX_DEPTH} deep")
+        if depth == 0:
+            self.seen.add(self.token(group))
         members: dict[str, Any] = {}
         for name in list(group):
             self.count()
@@ -210,8 +220,7 @@ class _Walk:
                 members[name] = Broken(f"a {link.__class__.__name__}, not data stored in the file")
                 continue
             obj = group[name]
-            info = h5py.h5o.get_info(obj.id)
-            token = getattr(info, "token", None) or getattr(info, "addr", None)
+            token = self.token(obj)
             if token in self.seen:  # a hard link back to a group already read: a cycle, or shared data
                 members[name] = Broken("a second link to an object already read")
                 continue

@@ -7,6 +7,8 @@ collects them, `results` writes and reads them, `report` renders them.
 from __future__ import annotations
 
 import hashlib
+import io
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import AnyConfig
-from ..core.files import atomic_path
+from ..core.files import atomic_path, read_regular
 from ..core.jsonio import finite_or_none
 from ..core.result import Result
 from ..optimizers.base import Problem
@@ -72,27 +74,58 @@ class RunRecord:
             np.savez(fh, sha256=np.array(_digest(arrays)), **arrays)
 
     @classmethod
-    def load(cls, path: Path) -> RunRecord:
-        """A record `save` wrote; ValueError when its fields do not match the digest it was written with."""
-        with np.load(path) as z:
-            if "sha256" in z:
-                fields = {k: z[k] for k in z.files if k != "sha256"}
-                if str(z["sha256"]) != _digest(fields):
-                    raise ValueError("its fields do not match the SHA-256 it was written with")
-            return cls(
-                index=int(z["index"]),
-                estimate=z["estimate"],
-                cost=float(z["cost"]),
-                evaluations=int(z["evaluations"]),
-                penalised=int(z["penalised"]),
-                wall_s=float(z["wall_s"]),
-                history_evals=z["history_evals"],
-                history_cost=z["history_cost"],
-                truth_cost=float(z["truth_cost"]),
-                chi2=float(z["chi2"]),
-                initial_cost=float(z["initial_cost"]) if "initial_cost" in z else float("nan"),
-                channel_chi2=z["channel_chi2"] if "channel_chi2" in z else np.zeros(0),
-            )
+    def load(cls, path: Path, limit: int = 64 << 20) -> RunRecord:
+        """A record `save` wrote; ValueError when its fields do not match the digest it was written with, or are
+        not what `save` writes (a number where a number belongs, 1-D arrays, a finite estimate); InputError when
+        the file is not a regular file of at most `limit` bytes."""
+        data = read_regular(path, limit, "checkpoint record")
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
+            packed = [i.filename for i in archive.infolist() if i.compress_type != zipfile.ZIP_STORED]
+            if packed:
+                raise ValueError(f"compressed members {packed[:3]}, which np.savez never writes")
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            fields = {k: z[k] for k in z.files if k != "sha256"}
+            if "sha256" in z and str(z["sha256"]) != _digest(fields):
+                raise ValueError("its fields do not match the SHA-256 it was written with")
+        number, count = _field(fields, "f"), _field(fields, "i")
+        record = cls(
+            index=count("index"), estimate=_field(fields, "f", 1)("estimate"), cost=number("cost"),
+            evaluations=count("evaluations"), penalised=count("penalised"), wall_s=number("wall_s"),
+            history_evals=_field(fields, "i", 1)("history_evals"), history_cost=_field(fields, "f", 1)("history_cost"),
+            truth_cost=number("truth_cost"), chi2=number("chi2"),
+            initial_cost=number("initial_cost") if "initial_cost" in fields else float("nan"),
+            channel_chi2=_field(fields, "f", 1)("channel_chi2") if "channel_chi2" in fields else np.zeros(0),
+        )  # fmt: skip
+        if not np.isfinite(record.estimate).all():
+            raise ValueError("its estimate is not finite")
+        if record.history_evals.shape != record.history_cost.shape:
+            raise ValueError("its history of evaluations and of costs differ in length")
+        return record
+
+
+def _field(fields: dict[str, np.ndarray], kinds: str, ndim: int = 0):
+    """A reader of one field of a record: a number (ndim 0, int for kinds 'i') or a 1-D array; ValueError naming
+    the field when it is missing or of another type or shape."""
+
+    def read(name: str):
+        if name not in fields:
+            raise ValueError(f"no field '{name}'")
+        a = fields[name]
+        ok = "iub" if kinds == "i" else "fiub"
+        if kinds == "i" and ndim and a.dtype.kind == "f" and (a.size == 0 or bool(np.all(a == np.round(a)))):
+            ok = "f"  # counts held as whole floats (an empty history is float64)
+        if a.ndim != ndim or a.dtype.kind not in ok:
+            raise ValueError(f"field '{name}' has type {a.dtype} and shape {a.shape}")
+        if ndim:
+            return a.astype(np.int64 if kinds == "i" else float)
+        value = a[()]
+        if kinds == "i":
+            if int(value) < 0:
+                raise ValueError(f"field '{name}' is negative")
+            return int(value)
+        return float(value)
+
+    return read
 
 
 @dataclass(frozen=True)
@@ -148,7 +181,8 @@ class Summary:
     def re_sd_percent(self) -> NDArray:
         """Spread of the estimates over runs, relative to the truth (or to the mean when unknown) [%]."""
         ref = self.truth if self.truth is not None else self.mean
-        return 100.0 * self.sd / np.abs(ref)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a mean of zero: no relative spread (inf), quietly
+            return 100.0 * self.sd / np.abs(ref)
 
 
 def summarise(

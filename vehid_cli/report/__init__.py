@@ -14,6 +14,7 @@ from ..campaign.results import CAMPAIGN_KIND, read_campaign_h5
 from ..campaign.sweep import read_index
 from ..core.errors import InputError, quote
 from ..core.jsonio import to_json
+from ..core.locking import holder
 from ..core.store import open_results, read_results
 from ..identify.records import Campaign
 from ..systems import SYSTEMS, System
@@ -28,7 +29,8 @@ def is_campaign_file(path: Path) -> bool:
         _, tree = read_results(path, "campaign file")
     except FileNotFoundError:
         raise InputError("not found (removed while the report was made?)", source=str(path)) from None
-    return tree.attrs.get("kind") == CAMPAIGN_KIND
+    kind = tree.attrs.get("kind")
+    return isinstance(kind, str) and kind == CAMPAIGN_KIND
 
 
 def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
@@ -50,7 +52,8 @@ def collect(paths: list[Path]) -> tuple[list[Campaign], list[str]]:
 
 def sweep_notes(paths: list[Path]) -> list[str]:
     """Warnings about unfinished sweeps in the directories among `paths`: campaigns index.csv lists that have
-    no file yet (a shard not run, still running or failed), and checkpoints of interrupted campaigns."""
+    no file yet (a shard not run, still running or failed), and checkpoints of campaigns: running now (a live
+    process holds the campaign file's lock) or interrupted."""
     notes = []
     for path in paths:
         if not path.is_dir():
@@ -65,8 +68,14 @@ def sweep_notes(paths: list[Path]) -> list[str]:
                     "running or failed; the report shows the finished ones"
                 )
         for partial in sorted(path.glob("*.partial")):
-            runs = len(list(partial.glob("run-*.npz")))
-            notes.append(f"{partial}: an interrupted campaign ({runs} finished run(s)); rerun its command to finish it")
+            runs = len(list(partial.glob("run-*.npz"))) if partial.is_dir() else 0
+            if holder(partial.with_name(partial.name.removesuffix(".partial"))):
+                notes.append(f"{partial}: a campaign running now ({runs} finished run(s) so far); report again when "
+                             "it is done")  # fmt: skip
+            else:
+                notes.append(
+                    f"{partial}: an interrupted campaign ({runs} finished run(s)); rerun its command to finish it"
+                )
     return notes
 
 

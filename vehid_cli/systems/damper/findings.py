@@ -75,8 +75,11 @@ class Findings(Result):
         realtime = RealTime.read_h5(group["realtime"], model=model)
         traces = tuple(Trace.read_h5(t) for _, t in sorted(group["traces"].items()))
         files = _text(group["validation/files"][()])
+        names, values = _text(group["model_names"][()]), np.asarray(group["model_values"][()])
+        if values.shape != (len(names),) or values.dtype.kind not in "fiu":
+            raise ValueError(f"model_values of shape {values.shape} and type {values.dtype} for {len(names)} names")
         return cls(
-            model=model, names=_text(group["model_names"][()]), values=group["model_values"][()],
+            model=model, names=names, values=values.astype(float),
             validation=tuple(zip(files, map(float, group["validation/J"][()]), strict=True)), realtime=realtime,
             traces=traces,
         )  # fmt: skip
