@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from vehid_cli.core.errors import InputError
-from vehid_cli.core.isolated import Damaged, in_child, quoted
+from vehid_cli.core.errors import clip as quoted
+from vehid_cli.core.isolated import Damaged, in_child
 
 
 def _arrays(n):

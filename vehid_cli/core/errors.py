@@ -10,10 +10,11 @@ MESSAGE = 2000  # characters of a whole message at most (a message lists choices
 
 
 def clip(text: object, limit: int = QUOTED) -> str:
-    """`text` as a string of at most about `limit` characters: a long value (a 100 kB string, a huge list) is cut,
-    saying how long it was, so that an error message quoting it stays one readable paragraph."""
+    """`text` as one line of at most about `limit` characters: a long value (a 100 kB string, a huge list, a
+    library's message quoting a whole file) is cut, saying how long it was, so that an error message quoting it
+    stays one readable paragraph."""
     try:
-        text = str(text)
+        text = str(text).replace("\n", " ")
     except ValueError:  # an integer of more digits than Python prints
         return "(a number too long to print)"
     if len(text) <= limit:
@@ -35,19 +36,16 @@ _LONG_QUOTE = re.compile(rf"'([^'\n]{{{QUOTED + 1},}})'")
 def _clip_quotes(message: str) -> str:
     """Each quoted value ('...') of a message clipped to QUOTED characters, then the whole to MESSAGE."""
     message = _LONG_QUOTE.sub(lambda m: f"'{m.group(1)[:QUOTED]}...' ({len(m.group(1))} characters)", message)
-    return clip(message, MESSAGE)
+    return message if len(message) <= MESSAGE else f"{message[:MESSAGE]}... ({len(message)} characters)"
 
 
-MAX_QUOTE = QUOTED  # characters of a bad value a message quotes
-
-
-def quote(value, limit: int = MAX_QUOTE) -> str:
-    """`repr(value)` cut to `limit` characters (a message never echoes a 100 kB value)."""
+def quote(value, limit: int = QUOTED) -> str:
+    """`repr(value)` clipped to about `limit` characters (a message never echoes a 100 kB value)."""
     try:
         text = repr(value)
     except ValueError:  # an integer of more digits than Python prints
         return "(a number too long to print)"
-    return text if len(text) <= limit else f"{text[: limit - 20]}... ({len(text)} characters)"
+    return clip(text, limit)
 
 
 class InputError(Exception):

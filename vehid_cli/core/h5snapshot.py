@@ -3,11 +3,11 @@
 HDF5 trusts the metadata it parses. A damaged or crafted file (even one whose vehid checksum was recomputed after
 the damage) can make it loop forever (a flipped byte in the attribute storage of the root group hangs the read of
 the `kind` attribute), crash the process (a segmentation fault), or allocate what a declared shape asks for. So
-the file is parsed in a forked child that sends back plain data: every group, attribute and dataset as Python and
-NumPy values (`Tree`, `Data`), each size checked against a budget before it is read. A child that hangs is killed
-after a timeout, one that crashes is seen by its signal; both are an `InputError` naming the file. A part the child
-could not read (an unsupported type, a soft or external link, a value it could not decode) is kept as `Broken`, and
-the reader that asks for it gets an InputError naming the part and why.
+the file is parsed in a forked child (`isolated.in_child`) that sends back plain data: every group, attribute and
+dataset as Python and NumPy values (`Tree`, `Data`), each size checked against a budget before it is read. A child
+that hangs is killed after a timeout, one that crashes is seen by its signal; both are an `InputError` naming the
+file. A part the child could not read (an unsupported type, a soft or external link, a value it could not decode) is
+kept as `Broken`, and the reader that asks for it gets an InputError naming the part and why.
 
 The tree reads like h5py for what vehid's readers use: `tree.attrs[name]`, `tree["a/b"]`, `name in tree`,
 `tree.items()`, `data[()]`, `data.attrs`, `data.shape`.
@@ -15,12 +15,7 @@ The tree reads like h5py for what vehid's readers use: `tree.attrs[name]`, `tree
 
 from __future__ import annotations
 
-import faulthandler
 import os
-import pickle
-import select
-import signal
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
+from .isolated import Damaged, in_child
 
 BUDGET = 1 << 30  # bytes of attributes and datasets one file may make us read (a declared shape never exceeds it)
 MAX_OBJECTS = 100_000  # groups, datasets and attributes in one file
@@ -234,58 +230,15 @@ class _Walk:
         return Tree(where, source, self.attrs(group, where, source), members)
 
 
-def _read_in_child(path: str, budget: int) -> tuple[str, Any]:
+def _read(path: str, budget: int) -> Tree:
+    """The child's part: the whole file as plain data (a library's exception is the parent's to report)."""
     import h5py
 
-    try:
-        with h5py.File(path, "r") as h5:
-            return "ok", _Walk(budget).group(h5, "/", path, 0)
-    except Exception as exc:  # noqa: BLE001 - whatever the library raises on this file: the parent reports it
-        return "error", f"{exc.__class__.__name__}: {exc}"[:300]
-
-
-def _child(path: str, budget: int, fd: int) -> None:
-    """The forked child: read, send the pickled result, exit without running the parent's clean-ups."""
-    code = 1
-    try:
-        null = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(null, 2)  # HDF5 diagnostics and a crash report of the library are the parent's to say
-        if faulthandler.is_enabled():
-            faulthandler.disable()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, signal.SIG_DFL)
-        data = pickle.dumps(_read_in_child(path, budget), protocol=pickle.HIGHEST_PROTOCOL)
-        view = memoryview(data)
-        while view:
-            view = view[os.write(fd, view) :]
-        code = 0
-    finally:
-        os._exit(code)
+    with h5py.File(path, "r") as h5:
+        return _Walk(budget).group(h5, "/", path, 0)
 
 
 # ------------------------------------------------------------------------------------------ in the parent
-
-
-def _collect(pid: int, fd: int, deadline: float) -> tuple[bytes, int | None]:
-    """Everything the child sends, and its wait status (None: it did not finish before the deadline)."""
-    chunks = []
-    while True:
-        left = deadline - time.monotonic()
-        if left <= 0:
-            return b"".join(chunks), None
-        ready, _, _ = select.select([fd], [], [], min(left, 1.0))
-        if ready:
-            chunk = os.read(fd, 1 << 20)
-            if not chunk:
-                break
-            chunks.append(chunk)
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            return b"".join(chunks), status
-        if time.monotonic() > deadline:
-            return b"".join(chunks), None
-        time.sleep(0.005)
 
 
 def read_tree(path: str | Path, what: str, timeout: float | None = None, budget: int = BUDGET) -> Tree:
@@ -294,43 +247,11 @@ def read_tree(path: str | Path, what: str, timeout: float | None = None, budget:
     import h5py  # noqa: F401 - imported before the fork: the child imports nothing
 
     source = str(path)
+    size = os.path.getsize(path)
     if timeout is None:
-        timeout = 10.0 + os.path.getsize(path) / 10e6
-    r, w = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # pragma: no cover - the child
-        os.close(r)
-        _child(source, budget, w)
-    os.close(w)
-    data, status = b"", None
+        timeout = 10.0 + size / 10e6
     try:
-        data, status = _collect(pid, r, time.monotonic() + timeout)
-    finally:
-        os.close(r)
-        if status is None:
-            _kill(pid)
-    if status is None:
-        raise InputError(
-            f"the HDF5 library did not finish reading it in {timeout:.0f} s (damaged metadata that loops); it is not a "
-            f"readable {what}",
-            source=source,
-        )
-    if os.WIFSIGNALED(status):
-        name = signal.Signals(os.WTERMSIG(status)).name
-        raise InputError(f"the HDF5 library crashed ({name}) reading it: damaged, not a readable {what}", source=source)
-    try:
-        state, value = pickle.loads(data)
-    except Exception:  # noqa: BLE001 - a child that died before sending everything (out of memory)
-        raise InputError(f"could not be read (the reader stopped, status {status}); not a readable {what}",
-                         source=source) from None  # fmt: skip
-    if state != "ok":
-        raise InputError(f"not a readable HDF5 file: truncated, damaged or not HDF5 ({value})", source=source)
-    return value
-
-
-def _kill(pid: int) -> None:
-    try:
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
-    except (ProcessLookupError, ChildProcessError):
-        pass
+        return in_child(_read, source, budget, size=size, timeout=timeout)
+    except Damaged as exc:
+        reason = f"truncated, damaged or not HDF5 ({exc.reason})"
+        raise InputError(f"not a readable {what}: {reason}", source=source) from None

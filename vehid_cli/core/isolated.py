@@ -32,7 +32,7 @@ import warnings
 from collections.abc import Callable
 from typing import TypeVar
 
-from .errors import InputError
+from .errors import InputError, clip
 
 T = TypeVar("T")
 MEMORY_BUDGET = 4 << 30  # bytes of address space the child may add to what the parent has mapped
@@ -48,15 +48,9 @@ class Damaged(Exception):
         self.reason = reason
 
 
-def quoted(text: object, limit: int = QUOTE) -> str:
-    """`text` as a string of at most `limit` characters (a library's message may quote the whole file)."""
-    text = str(text).replace("\n", " ")
-    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
-
-
 def describe(exc: BaseException, budget: int | None = None) -> str:
     """A library's exception in words: its type and (quoted) message."""
-    message = quoted(exc)
+    message = clip(exc, QUOTE)
     if isinstance(exc, MemoryError):
         limit = f" of {budget / 2**30:.3g} GiB" if budget else ""
         return f"it declares more data than the reader's memory budget{limit} ({message or 'MemoryError'})"

@@ -20,9 +20,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core.errors import InputError
+from ..core.errors import InputError, clip
 from ..core.hints import did_you_mean
-from ..core.isolated import quoted
 from ..core.units import UNITS, unit_factor
 from .formats import FORMATS, SUFFIXES, LoggerFormat, Raw
 from .record import Record
@@ -147,7 +146,7 @@ def _in_si(
         if len(unit) > UNIT_LENGTH:
             raise InputError(
                 f"channel '{ours}' ('{channels[ours]}'): its unit is {len(unit)} characters long "
-                f"('{quoted(unit, 60)}'): not a unit",
+                f"('{clip(unit, 60)}'): not a unit",
                 source=src,
             )
         factor = unit_factor(unit, src, f"channel '{ours}' ('{channels[ours]}')")

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ...core.errors import InputError
-from ...core.isolated import Damaged, in_child, quoted
+from ...core.errors import InputError, clip
+from ...core.isolated import Damaged, in_child
 from .base import (
     TIME_NAMES,
     LoggerFormat,
@@ -143,7 +143,7 @@ def _unit(name: str, value: object, src: str) -> str:
             value = value.decode("utf-8")
         except UnicodeDecodeError:
             raise InputError(
-                f"dataset '{name}': its unit attribute is not UTF-8 text ({quoted(value, 60)})", source=src
+                f"dataset '{name}': its unit attribute is not UTF-8 text ({clip(value, 60)})", source=src
             ) from None
     if not isinstance(value, str):
         kind = f"{value.dtype} array of shape {value.shape}" if isinstance(value, np.ndarray) else type(value).__name__
