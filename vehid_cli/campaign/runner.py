@@ -188,6 +188,7 @@ def run_campaign(
     log: Log | None = None,
     system: System | None = None,
     checks: bool = True,
+    unidentifiable: bool = False,
 ) -> Campaign:
     """Run every run of the configured campaign (resuming from `checkpoint_dir` if it holds some), for any system.
 
@@ -195,7 +196,8 @@ def run_campaign(
     run is checkpointed before the next result is taken. `on_run(done, total)` reports progress; `log` receives
     warnings (damaged checkpoint records) and notes ("resumed N of M runs"). With `checks` (the default), measured
     data whose channels fail a check that makes any fit meaningless (a sign, a swap, a unit factor) is an InputError
-    naming each channel, the evidence and the fix, before any run."""
+    naming each channel, the evidence and the fix, before any run. Unknowns the data cannot separate
+    (`System.unidentifiable`) are an InputError naming the free combination, unless `unidentifiable` (--force)."""
     system = system if system is not None else build_system(config, data_file)
     found = system.checks()
     if checks and found is not None and found.stopping:
@@ -205,6 +207,9 @@ def run_campaign(
         raise InputError(f"a campaign has 1 to {MAX_RUNS} runs, got {n_runs}", key="identify.runs")
     start = time.perf_counter()
     bound = system.bound()  # before the runs: a bad experiment fails before any work
+    free = system.unidentifiable(bound)
+    if free is not None and not unidentifiable:
+        raise InputError(f"{free}; --force runs it anyway", source=config.source, key="identify.unknowns")
     key = campaign_key(config, system.data_files())
     checkpoint = Checkpoint(checkpoint_dir, key, log) if checkpoint_dir else None
     done = checkpoint.open() if checkpoint else {}
@@ -236,6 +241,8 @@ def run_campaign(
             finished(record)
     records = tuple(done[i] for i in range(n_runs))
     warnings = [] if found is None else found.warnings()
+    if free is not None:
+        warnings.insert(0, f"run anyway (--force): {free}")
     if not checks and found is not None and found.stopping:
         warnings.insert(0, "checks overridden (--no-checks): " + found.stop_message())
     if n_runs == 1 and system.box.truth is None:  # one fit on measured data: its interval comes from the bound there
@@ -364,6 +371,7 @@ def run_campaign_to_file(
             on_run=on_run,
             log=log,
             checks=checks,
+            unidentifiable=force,
         )
         write_campaign_h5(output, campaign, attrs=attrs)
         Checkpoint(partial, "").remove()

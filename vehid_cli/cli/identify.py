@@ -64,7 +64,7 @@ def identify(
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
     force: Annotated[
-        bool, typer.Option("--force", help="Overwrite an output file that holds a campaign of another config.")
+        bool, typer.Option("--force", help="Overwrite an output file that holds a campaign of another config, and run with unknowns the data cannot separate.")
     ] = False,
     no_checks: Annotated[
         bool,

@@ -140,3 +140,14 @@ def road_function(road: Road, wheelbase: float, rng: np.random.Generator | None 
         return out
 
     return heights
+
+
+def chirp(t: ArrayLike, f0: float, f1: float, amplitude: float, start: float, duration: float, fade: float) -> NDArray:
+    """A linear sine sweep (a rig's road plate or actuator): amplitude sin(2 pi (f0 s + (f1 - f0) s² / (2 T))) for
+    s = t - start in [0, T], T = duration, zero outside; faded in and out by a half cosine over `fade` seconds, so
+    that the rig starts and ends at rest."""
+    s = np.asarray(t, dtype=float) - start
+    inside = (s >= 0) & (s <= duration)
+    phase = 2 * np.pi * (f0 * s + (f1 - f0) * s**2 / (2 * duration))
+    ramp = np.clip(np.minimum(s, duration - s) / fade, 0.0, 1.0) if fade > 0 else np.ones_like(s)
+    return np.where(inside, amplitude * np.sin(phase) * 0.5 * (1 - np.cos(np.pi * ramp)), 0.0)

@@ -275,3 +275,69 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray |
         ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[bad])
         Y[bad] = _statespace_outputs(A[bad], Bs[bad], G[bad], q0[bad], ub, dt)
     return _split(Y, batch)
+
+
+MAX_MODAL_INPUTS = 4  # the modal recursion's inputs per step (fewer are padded with zeros: a zero adds nothing)
+
+
+def linear_foh(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: NDArray, Dy: NDArray) -> NDArray:
+    """Outputs y = Cy s + Dy u (P, n, ny) of sd = A s + Bs u for any linear system, exact for u linear between
+    samples (first-order hold): the modal recursions of the full car, generic over the state size.
+
+    A (P, ns, ns), Bs (P, ns, nu), s0 (P, ns) the start, u (n, nu) one input for all or (P, n, nu), Cy (P, ny, ns),
+    Dy (P, ny, nu). Candidates with an ill-conditioned eigenvector matrix (or more than MAX_MODAL_INPUTS inputs) go
+    through the real state-space recursion: the same discretisation either way."""
+    P, ns = A.shape[0], A.shape[-1]
+    nu = Bs.shape[-1]
+    u3 = np.array(u[None] if u.ndim == 2 else u, dtype=float, order="C")
+    n = u3.shape[1]
+    drive = (u3 @ np.swapaxes(Dy, -1, -2)) if Dy.size else 0.0  # (P or 1, n, ny) feedthrough
+    if nu > MAX_MODAL_INPUTS:
+        return _statespace_linear(A, Bs, s0, u3, dt, Cy) + drive
+    lam, V = np.linalg.eig(A)
+    lam, V = lam.astype(complex), V.astype(complex)
+    W = np.linalg.inv(V)
+    cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(W).sum(axis=-2).max(axis=-1)
+    good = np.isfinite(cond) & (cond < COND_MAX)
+    keep = lam.imag >= 0
+    weight = np.where(lam.imag > 0, 2.0, 1.0) * keep
+    m = int(keep.sum(axis=-1).max())
+    idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]
+    lam_k = np.take_along_axis(lam, idx, axis=-1)
+    w_k = np.take_along_axis(weight, idx, axis=-1)
+    V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)  # (P, ns, m)
+    W_k = np.take_along_axis(W, idx[:, :, None], axis=-2)  # (P, m, ns)
+    bm = np.zeros((P, m, MAX_MODAL_INPUTS), dtype=complex)
+    bm[..., :nu] = W_k @ Bs
+    z0 = (W_k @ s0[:, :, None])[..., 0]
+    x = lam_k * dt
+    phi1, phi2 = _phi12(x)
+    g1 = (dt * phi1)[..., None] * bm
+    g2 = (dt * phi2)[..., None] * bm
+    a = np.ascontiguousarray(np.moveaxis(g1 - g2, -1, 0).reshape(MAX_MODAL_INPUTS, P * m))
+    b = np.ascontiguousarray(np.moveaxis(g2, -1, 0).reshape(MAX_MODAL_INPUTS, P * m))
+    padded = np.zeros(u3.shape[:2] + (MAX_MODAL_INPUTS,))
+    padded[..., :nu] = u3
+    out = np.empty((n, P, 2 * m + MAX_MODAL_INPUTS))
+    _modal_recursion(np.exp(x).reshape(P * m), a, b, z0.reshape(P * m), padded, out)
+    ct = np.swapaxes((Cy @ V_k) * w_k[:, None, :], -1, -2)  # (P, m, ny)
+    proj = np.concatenate([ct.real, -ct.imag], axis=1)
+    Y = np.matmul(out.transpose(1, 0, 2)[..., : 2 * m], proj)
+    if not good.all():
+        bad = np.flatnonzero(~good)
+        ub = u3 if u3.shape[0] == 1 else np.ascontiguousarray(u3[bad])
+        Y[bad] = _statespace_linear(A[bad], Bs[bad], s0[bad], ub, dt, Cy[bad])
+    return Y + drive
+
+
+def _statespace_linear(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: NDArray) -> NDArray:
+    """(P, n, ny) Cy s of the real state-space recursion (exact FOH via scipy's expm), compiled."""
+    P, ns = s0.shape
+    n, nu = u.shape[1], u.shape[2]
+    Phi, G1, G2 = foh_discretisation(A, Bs, dt)
+    out = np.empty((P, n, ns + nu))
+    _statespace_recursion(
+        np.ascontiguousarray(Phi), np.ascontiguousarray(G1), np.ascontiguousarray(G2),
+        np.ascontiguousarray(s0, dtype=float), u, out,
+    )  # fmt: skip
+    return out[..., :ns] @ np.swapaxes(Cy, -1, -2)

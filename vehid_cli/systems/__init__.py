@@ -18,9 +18,12 @@ from ..identify.source import DataFiles, DataSource, as_paths
 from .base import Box, Log, Simulated, System
 from .damper.findings import Findings
 from .damper.system import DamperSystem
+from .quarter_car.system import QuarterCarSystem
 from .vehicle.system import VehicleSystem
 
-SYSTEMS: dict[str, type[System]] = {VehicleSystem.name: VehicleSystem, DamperSystem.name: DamperSystem}
+SYSTEMS: dict[str, type[System]] = {
+    VehicleSystem.name: VehicleSystem, DamperSystem.name: DamperSystem, QuarterCarSystem.name: QuarterCarSystem,
+}  # fmt: skip
 
 
 def register_system(cls: type[System]) -> type[System]:

@@ -181,6 +181,11 @@ class System(ABC):
             nre_rms_percent=float("nan"), identifiable=np.ones(D, dtype=bool), condition=float("nan"),
         )  # fmt: skip
 
+    def unidentifiable(self, bound: CramerRao) -> str | None:
+        """Why the data cannot separate the unknowns (the free combination and what would fix it), or None: a campaign
+        stops on it unless forced."""
+        return None
+
     def start(self, rng: np.random.Generator) -> NDArray | None:
         """Where a run's optimizer starts: the configured values (`config`, or `auto` on measured data), else None
         (the optimizer's own random start from the run's stream)."""
