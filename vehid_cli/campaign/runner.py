@@ -207,9 +207,7 @@ def run_campaign(
         raise InputError(f"a campaign has 1 to {MAX_RUNS} runs, got {n_runs}", key="identify.runs")
     start = time.perf_counter()
     bound = system.bound()  # before the runs: a bad experiment fails before any work
-    free = system.unidentifiable(bound)
-    if free is not None and not unidentifiable:
-        raise InputError(f"{free}; --force runs it anyway", source=config.source, key="identify.unknowns")
+    free = _free_unknowns(system, bound, unidentifiable)
     key = campaign_key(config, system.data_files())
     checkpoint = Checkpoint(checkpoint_dir, key, log) if checkpoint_dir else None
     done = checkpoint.open() if checkpoint else {}
@@ -240,9 +238,7 @@ def run_campaign(
         for record in results:
             finished(record)
     records = tuple(done[i] for i in range(n_runs))
-    warnings = [] if found is None else found.warnings()
-    if free is not None:
-        warnings.insert(0, f"run anyway (--force): {free}")
+    warnings = ([] if free is None else [f"run anyway (--force): {free}"]) + ([] if found is None else found.warnings())
     if not checks and found is not None and found.stopping:
         warnings.insert(0, "checks overridden (--no-checks): " + found.stop_message())
     if n_runs == 1 and system.box.truth is None:  # one fit on measured data: its interval comes from the bound there
@@ -260,6 +256,14 @@ def run_campaign(
         findings=findings, data_files=system.data_files(), objective=system.objective_label(config),
         channels=system.channel_names, checks=() if found is None else tuple(found.to_json()), warnings=tuple(warnings),
     )  # fmt: skip
+
+
+def _free_unknowns(system: System, bound: CramerRao, allowed: bool) -> str | None:
+    """Why the data cannot separate the unknowns (`System.unidentifiable`): an InputError unless `allowed`."""
+    free = system.unidentifiable(bound)
+    if free is not None and not allowed:
+        raise InputError(f"{free}; --force runs it anyway", source=system.config.source, key="identify.unknowns")
+    return free
 
 
 def single_fit_bound(system: System, record: RunRecord) -> tuple[CramerRao, list[str]]:

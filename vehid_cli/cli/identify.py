@@ -64,7 +64,12 @@ def identify(
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
     force: Annotated[
-        bool, typer.Option("--force", help="Overwrite an output file that holds a campaign of another config, and run with unknowns the data cannot separate.")
+        bool,
+        typer.Option(
+            "--force",
+            help="Overwrite an output file that holds a campaign of another config; run with unknowns the data cannot "
+            "separate.",
+        ),
     ] = False,
     no_checks: Annotated[
         bool,

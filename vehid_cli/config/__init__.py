@@ -30,8 +30,8 @@ from .damper import (
     DataColumns,
     DataUnits,
 )
-from .safe_yaml import MAX_BYTES, MAX_DEPTH, load_yaml
 from .quarter_car import QuarterCarConfig
+from .safe_yaml import MAX_BYTES, MAX_DEPTH, load_yaml
 from .vehicle import Bump, Config, Identify, Noise, RandomRoad, Road, Simulation, Vehicle
 
 AnyConfig = Union[Config, DamperConfig, QuarterCarConfig]  # noqa: UP007

@@ -287,8 +287,7 @@ def linear_foh(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: 
     A (P, ns, ns), Bs (P, ns, nu), s0 (P, ns) the start, u (n, nu) one input for all or (P, n, nu), Cy (P, ny, ns),
     Dy (P, ny, nu). Candidates with an ill-conditioned eigenvector matrix (or more than MAX_MODAL_INPUTS inputs) go
     through the real state-space recursion: the same discretisation either way."""
-    P, ns = A.shape[0], A.shape[-1]
-    nu = Bs.shape[-1]
+    P, nu = A.shape[0], Bs.shape[-1]
     u3 = np.array(u[None] if u.ndim == 2 else u, dtype=float, order="C")
     n = u3.shape[1]
     drive = (u3 @ np.swapaxes(Dy, -1, -2)) if Dy.size else 0.0  # (P or 1, n, ny) feedthrough

@@ -13,9 +13,9 @@ summed), and unknowns the data cannot separate stop the campaign with the free c
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np

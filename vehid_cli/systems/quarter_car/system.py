@@ -16,9 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...config.lumped import LumpedConfig
-from ...models.road import bump_unit, chirp
-from ...models.road import RandomProfile
 from ...core.streams import experiment_rng
+from ...models.road import RandomProfile, bump_unit, chirp
 from ..lumped import LumpedSystem
 
 ROWS = {"body_disp": (1.0, 0.0), "wheel_disp": (0.0, 1.0), "deflection": (1.0, -1.0)}
