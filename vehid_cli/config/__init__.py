@@ -30,15 +30,19 @@ from .damper import (
     DataColumns,
     DataUnits,
 )
+from .half_car import HalfCarConfig
 from .quarter_car import QuarterCarConfig
 from .safe_yaml import MAX_BYTES, MAX_DEPTH, load_yaml
 from .vehicle import Bump, Config, Identify, Noise, RandomRoad, Road, Simulation, Vehicle
 
-AnyConfig = Union[Config, DamperConfig, QuarterCarConfig]  # noqa: UP007
+AnyConfig = Union[Config, DamperConfig, QuarterCarConfig, HalfCarConfig]  # noqa: UP007
 
 # The config class of each system, by the `system` key of a config (a missing key is the car). A system of its own
 # registers its config here (`register_config`); nothing else in the package asks which system a config is.
-CONFIGS: dict[str, type[SystemConfig]] = {"vehicle": Config, "damper": DamperConfig, "quarter_car": QuarterCarConfig}
+CONFIGS: dict[str, type[SystemConfig]] = {
+    "vehicle": Config, "damper": DamperConfig, "quarter_car": QuarterCarConfig,
+    "half_car": HalfCarConfig,
+}  # fmt: skip
 
 
 def register_config(name: str, cls: type[SystemConfig]) -> None:

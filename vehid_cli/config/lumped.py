@@ -55,8 +55,10 @@ class RigBump(_Section):
 class RigRoad(_Section):
     """The rig's inputs: the road under the wheel(s) and an actuator force between body and wheel."""
 
-    input: Literal["config", "measured"] = Field(
-        "config", description="config: the chirp, bump and random road below; measured: the data file's road columns"
+    input: Literal["config", "measured", "track"] = Field(
+        "config",
+        description="config: the chirp, bump and random road below; measured: the data file's road columns; track: "
+        "its column road1, which the later wheels meet wheelbase/speed later",
     )
     actuator_force: Literal["none", "config", "measured"] = Field(
         "none",
@@ -181,6 +183,10 @@ class LumpedConfig(SystemConfig):
     def input_names(self) -> tuple[str, ...]:
         """The input columns of a data file: the road, then `force` with a measured or configured actuator."""
         return self.inputs + (("force",) if self.road.actuator_force != "none" else ())
+
+    def delays(self) -> tuple[float, ...]:
+        """When each wheel meets the road after the first [s] (the road's inputs in order)."""
+        return (0.0,) * len(self.inputs)
 
     def check_sensor(self, index: int, sensor: RigSensor) -> None:
         """Refuse a sensor the rig cannot place (the subclass knows where its sensors go)."""

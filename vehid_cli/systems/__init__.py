@@ -18,11 +18,13 @@ from ..identify.source import DataFiles, DataSource, as_paths
 from .base import Box, Log, Simulated, System
 from .damper.findings import Findings
 from .damper.system import DamperSystem
+from .half_car.system import HalfCarSystem
 from .quarter_car.system import QuarterCarSystem
 from .vehicle.system import VehicleSystem
 
 SYSTEMS: dict[str, type[System]] = {
     VehicleSystem.name: VehicleSystem, DamperSystem.name: DamperSystem, QuarterCarSystem.name: QuarterCarSystem,
+    HalfCarSystem.name: HalfCarSystem,
 }  # fmt: skip
 
 

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from .. import __version__
 from ..config.lumped import LumpedConfig
 from ..core.errors import InputError
-from ..core.streams import run_streams
+from ..core.streams import experiment_rng, run_streams
 from ..identify.crlb import CramerRao, bound_from_information
 from ..identify.experiment import measurement_noise
 from ..identify.objectives import Objective
@@ -32,6 +32,7 @@ from ..identify.source import DataFiles, DataSource
 from ..io.measurement import time_grid, write_csv
 from ..io.read import read_record
 from ..models.noise import NoiseModel
+from ..models.road import RandomProfile, bump_unit, chirp
 from ..optimizers.base import Problem
 from ..sim.lumped import lumped_outputs
 from .base import Box, Simulated, System
@@ -277,8 +278,10 @@ def read_rig_run(config: LumpedConfig, path: str | Path, families: tuple[str, ..
     """A measured run: the layout's channels and the inputs (measured ones read, configured ones on its grid)."""
     data = config.data
     sensors = [s.name for f in families for s in config.layout if s.family == f]
+    delays = dict(zip(config.inputs, config.delays(), strict=True))
     measured_inputs = [n for n in config.input_names if (n == "force" and config.road.actuator_force == "measured")
-                       or (n != "force" and config.road.input == "measured")]  # fmt: skip
+                       or (n != "force" and config.road.input == "measured")
+                       or (config.road.input == "track" and n == config.inputs[0])]  # fmt: skip
     ours = sensors + measured_inputs
     family = {s.name: s.family for s in config.layout} | dict.fromkeys(config.inputs, "disp")
     units = {n: data.units.get(n) or data.units.get(family.get(n, ""), "") for n in ours}
@@ -296,8 +299,37 @@ def read_rig_run(config: LumpedConfig, path: str | Path, families: tuple[str, ..
     for j, name in enumerate(config.input_names):
         if name in measured_inputs:
             columns.append(sign[name] * record.channel(name))
+        elif config.road.input == "track" and name in delays:  # a later wheel on the measured track
+            first = sign[config.inputs[0]] * record.channel(config.inputs[0])
+            columns.append(np.interp(t - delays[name], t, first, left=first[0]))
         else:
             if configured is None:
                 configured = inputs(config, t)
             columns.append(configured[:, j])
     return RigRun(t, np.column_stack(columns), outputs, str(path))
+
+
+def road_profile(config: LumpedConfig, t: NDArray, delay: float = 0.0) -> NDArray:
+    """The configured road (n,) [m] under a wheel that meets it `delay` seconds after the first: the chirp, the bump
+    and the random road (experiment stream) summed."""
+    road = config.road
+    y = np.zeros(t.size)
+    end = float(t[-1]) if t.size else 0.0
+    if road.chirp is not None:
+        c = road.chirp
+        y += chirp(t - delay, c.f0, c.f1, c.amplitude, c.start, c.duration or end - c.start, c.fade)
+    if road.bump is not None:
+        b = road.bump
+        y += b.height * bump_unit(b.shape, road.V * (t - delay - b.start_time), b.length, b.plateau)
+    if road.random is not None:
+        y += RandomProfile(road.random, experiment_rng(config.identify.seed)).height(0, road.V * (t - delay))
+    return y
+
+
+def force_profile(config: LumpedConfig, t: NDArray) -> NDArray:
+    """The configured actuator force (n,) [N] (zero without one)."""
+    f = config.road.force
+    if f is None:
+        return np.zeros(t.size)
+    end = float(t[-1]) if t.size else 0.0
+    return chirp(t, f.f0, f.f1, f.amplitude, f.start, f.duration or end - f.start, f.fade)

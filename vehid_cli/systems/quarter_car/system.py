@@ -16,9 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...config.lumped import LumpedConfig
-from ...core.streams import experiment_rng
-from ...models.road import RandomProfile, bump_unit, chirp
-from ..lumped import LumpedSystem
+from ..lumped import LumpedSystem, force_profile, road_profile
 
 ROWS = {"body_disp": (1.0, 0.0), "wheel_disp": (0.0, 1.0), "deflection": (1.0, -1.0)}
 ACC_ROWS = {"body_acc": (1.0, 0.0), "wheel_acc": (0.0, 1.0)}
@@ -51,22 +49,9 @@ class QuarterCarSystem(LumpedSystem):
 
     @classmethod
     def configured_inputs(cls, config: LumpedConfig, t: NDArray) -> NDArray:
-        road = config.road
-        y = np.zeros(t.size)
-        end = float(t[-1]) if t.size else 0.0
-        if road.chirp is not None:
-            c = road.chirp
-            y += chirp(t, c.f0, c.f1, c.amplitude, c.start, c.duration or end - c.start, c.fade)
-        if road.bump is not None:
-            b = road.bump
-            y += b.height * bump_unit(b.shape, road.V * (t - b.start_time), b.length, b.plateau)
-        if road.random is not None:
-            y += RandomProfile(road.random, experiment_rng(config.identify.seed)).height(0, road.V * t)
-        columns = [y]
-        if road.actuator_force != "none":
-            f = road.force
-            columns.append(np.zeros(t.size) if f is None else
-                           chirp(t, f.f0, f.f1, f.amplitude, f.start, f.duration or end - f.start, f.fade))  # fmt: skip
+        columns = [road_profile(config, t)]
+        if config.road.actuator_force != "none":
+            columns.append(force_profile(config, t))
         return np.column_stack(columns)
 
     def remedies(self, free: tuple[str, ...]) -> str:
