@@ -61,7 +61,8 @@ class LumpedSystem(System):
 
     objective: ClassVar[str] = "wls"
     simulation_suffixes: ClassVar[tuple[str, ...]] = (".csv",)
-    diagnosis_defaults: ClassVar[tuple[str, ...]] = ("noise.level=0",)
+    diagnosis_defaults: ClassVar[tuple[str, ...]] = ("noise.level=0",)  # the noise estimated from the data
+    groups: ClassVar[tuple[tuple[str, tuple[str, ...]], ...]] = ()  # known parameters a diagnosis may free, grouped
     config: LumpedConfig
 
     # ------------------------------------------------------------------ what a rig defines
@@ -126,12 +127,12 @@ class LumpedSystem(System):
             self.sigma_source = self.noise.describe_measured(self.families)
         self.sigma = {(f if i == 0 else f"{f}.run{i + 1}"): s for i, w in enumerate(self.weights) for f, s in w.items()}
 
-    def parameters(self, X: NDArray) -> dict[str, NDArray]:
-        """Every parameter for a batch of the unknowns' values X (P, D): the configured ones elsewhere."""
+    def parameters(self, X: NDArray, names: tuple[str, ...] | None = None) -> dict[str, NDArray]:
+        """Every parameter for a batch of values X (P, D) of `names` (default the unknowns); configured elsewhere."""
         P = X.shape[0]
         values = self.config.parameter_values()
         out = {n: np.full(P, float(v)) for n, v in values.items()}
-        out.update({n: np.asarray(X[:, j], dtype=float) for j, n in enumerate(self.names)})
+        out.update({n: np.asarray(X[:, j], dtype=float) for j, n in enumerate(names or self.names)})
         return out
 
     def check_time_step(self, dt: float, key: str) -> None:
@@ -145,9 +146,10 @@ class LumpedSystem(System):
                              f"{dt_max:.3g} s", source=self.config.source, key=key)  # fmt: skip
 
     # ------------------------------------------------------------------ simulation
-    def outputs(self, X: NDArray, run: int = 0) -> dict[str, NDArray]:
-        """The layout's channels (family -> (P, n, k)) of a batch of unknowns' values X (P, D) on run `run`."""
-        p = self.parameters(X)
+    def outputs(self, X: NDArray, run: int = 0, names: tuple[str, ...] | None = None) -> dict[str, NDArray]:
+        """The layout's channels (family -> (P, n, k)) of a batch of values X (P, D) of `names` (default the
+        unknowns) on run `run`."""
+        p = self.parameters(X, names)
         M, C, K, B0, B1 = self.matrices(p)
         Sq, Sa = self.sensor_rows(p)
         rig = self.rigs[run]
@@ -176,18 +178,22 @@ class LumpedSystem(System):
         rng = run_streams(self.config.identify.seed, run).noise
         return (measurement_noise(self.clean, self.drawn, rng),)
 
-    def problem(self, reference: tuple[dict[str, NDArray], ...]) -> Problem:
+    def problem(self, reference: tuple[dict[str, NDArray], ...], box: Box | None = None) -> Problem:
+        """The wls problem over the unknowns (or over `box`: any parameters, their bounds)."""
         objectives = self.objectives(reference)
+        box = box or self.box
 
         def residuals(X: NDArray) -> NDArray:
-            return np.concatenate([o.residuals(self.outputs(X, i)) for i, o in enumerate(objectives)], axis=-1)
+            return np.concatenate(
+                [o.residuals(self.outputs(X, i, box.names)) for i, o in enumerate(objectives)], axis=-1
+            )
 
         def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
             r = residuals(X)
             return np.mean(r**2, axis=-1), r
 
-        return Problem(self.box.lower, self.box.upper, lambda X: cost_and_residuals(X)[0], cost_and_residuals,
-                       names=self.names)  # fmt: skip
+        return Problem(box.lower, box.upper, lambda X: cost_and_residuals(X)[0], cost_and_residuals,
+                       names=box.names)  # fmt: skip
 
     # ------------------------------------------------------------------ the bound and identifiability
     def information(self, at: NDArray, rel_step: float = 1e-5) -> NDArray:
@@ -242,6 +248,13 @@ class LumpedSystem(System):
                 f"To identify them: {self.remedies(free)}")  # fmt: skip
 
     # ------------------------------------------------------------------ vehid simulate
+    @classmethod
+    def diagnose(cls, config: LumpedConfig, data: tuple[str, ...], validate: tuple[str, ...], log=None):
+        """The rig's loop (`systems.lumped_diagnosis`) on the measured runs (else data.files)."""
+        from .lumped_diagnosis import diagnose_rig  # the loop's machinery only for `vehid diagnose`
+
+        return diagnose_rig(cls, config, data or config.data_runs(), validate, log)
+
     @classmethod
     def write_simulation(cls, config, target: Path, seed: int, road=None, origin: str = "") -> Simulated:
         """The configured rig with run 0's noise of `seed`: CSV with t, every sensor (layout order), the inputs."""

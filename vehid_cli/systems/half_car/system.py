@@ -30,6 +30,10 @@ def _body_x(origin: str | None, x: float | None, a1: NDArray, a2: NDArray) -> ND
 
 class HalfCarSystem(LumpedSystem):
     name: ClassVar[str] = "half_car"
+    groups: ClassVar[tuple[tuple[str, tuple[str, ...]], ...]] = (
+        ("springs", ("kf", "kr")), ("dampers", ("cf", "cr")), ("tyres", ("ktf", "ktr")),
+        ("unsprung masses", ("mf", "mr")), ("body", ("m", "Iy", "a1")),
+    )  # fmt: skip
 
     def matrices(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
         v = {n: np.asarray(p[n], dtype=float) for n in p}

@@ -25,6 +25,9 @@ MASSES = ("ms", "mu")
 
 class QuarterCarSystem(LumpedSystem):
     name: ClassVar[str] = "quarter_car"
+    groups: ClassVar[tuple[tuple[str, tuple[str, ...]], ...]] = (
+        ("dampers", ("cs", "ct")), ("springs", ("ks",)), ("tyres", ("kt",)), ("masses", ("mu", "ms")),
+    )  # fmt: skip
 
     def matrices(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
         ms, mu, ks, kt, cs, ct = (np.asarray(p[n], dtype=float) for n in ("ms", "mu", "ks", "kt", "cs", "ct"))
