@@ -6,6 +6,8 @@ with every scale unknown stops naming the free scale."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import yaml
@@ -157,3 +159,28 @@ def test_bad_sensor_placement_names_the_key(tmp_path):
     bad = dict(CONFIG, layout=[{"name": "w", "kind": "wheel_disp", "x": 0.2}])
     res = CliRunner().invoke(app, ["simulate", str(write_yaml(tmp_path, bad)), "-o", str(tmp_path / "x.csv")])
     assert res.exit_code == 2 and "layout.0" in res.output and "corner" in res.output, res.output
+
+
+def test_diagnose_names_the_rear_damper_off(tmp_path, truth_run):
+    """A run of the car with its rear damper nearly off (the independent simulator's cr 50 N s/m, the config's
+    3500): diagnose frees the known cr (`parameter:cr`), the residual returns to the noise, and cr's interval holds
+    the truth."""
+    tmp, _, _, _, t, u, _ = truth_run
+    broken = dict(CAR, cr=50.0)
+    clean = independent(broken, t, u[:, 0], u[:, 1])
+    rng = np.random.default_rng(5)
+    noisy = {k: v + SIGMA[k] * rng.standard_normal(v.size) for k, v in clean.items()}
+    data = tmp_path / "cr_off.csv"
+    cols = ["t", *SIGMA, "road1", "road2"]
+    np.savetxt(data, np.column_stack([t, *noisy.values(), u]), delimiter=",", header=",".join(cols), comments="")
+    cfg = dict(CONFIG, road={"input": "measured"}, identify=dict(CONFIG["identify"], unknowns=["m", "Iy", "kf", "kr"]))
+    out = tmp_path / "d.json"
+    res = CliRunner().invoke(app, ["diagnose", str(write_yaml(tmp_path, cfg, "d.yaml")), "--data", str(data),
+                                   "--json", str(out)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["selected"] == ["parameter:cr"] and doc["verdict"].startswith("found"), doc["verdict"]
+    lo, hi = doc["after"]["ci95"]["cr"]
+    sd = (hi - lo) / 2 / 1.959964
+    assert abs((lo + hi) / 2 - 50.0) < 4 * sd, (lo, hi)
+    assert doc["after"]["chi2_per_sample"] < doc["chi2_limit"]

@@ -193,3 +193,49 @@ def test_simulate_writes_the_spec_columns(tmp_path):
     assert res.exit_code == 0, res.output
     header = next(line for line in (tmp_path / "s.csv").read_text().splitlines() if not line.startswith("#"))
     assert header == "t,body,wheel,defl,bacc,road1,force"
+
+
+def friction_run(t, u, theta, friction, v0=0.005):
+    """Body and wheel displacement of the quarter car theta with smoothed Coulomb friction friction tanh(v / v0) in
+    the strut (an independent nonlinear simulation: scipy's LSODA on the first-order-hold inputs)."""
+    from scipy.integrate import solve_ivp
+
+    ms, mu, ks, kt, cs, ct = theta
+    dt = t[1] - t[0]
+
+    def rates(time, s):
+        k = min(int(time / dt), t.size - 2)
+        frac = time / dt - k
+        y = u[k, 0] + frac * (u[k + 1, 0] - u[k, 0])
+        yd = (u[k + 1, 0] - u[k, 0]) / dt
+        f = u[k, 1] + frac * (u[k + 1, 1] - u[k, 1])
+        zs, zu, vs, vu = s
+        strut = ks * (zs - zu) + cs * (vs - vu) + friction * np.tanh((vs - vu) / v0)
+        return [vs, vu, (-strut + f) / ms, (strut - kt * (zu - y) - ct * (vu - yd) - f) / mu]
+
+    sol = solve_ivp(rates, (t[0], t[-1]), [0.0, 0.0, 0.0, 0.0], t_eval=t, method="LSODA", rtol=1e-8, atol=1e-10,
+                    max_step=dt)  # fmt: skip
+    return sol.y[0], sol.y[1]
+
+
+def test_diagnose_a_rig_with_friction_says_incomplete_not_a_tight_wrong_answer(tmp_path, truth_run):
+    """Friction the linear quarter car cannot represent (no effect candidates on a rig yet): diagnose must not end
+    with a verdict that the residual is explained; it says incomplete."""
+    _, _, _, _, t, u, _ = truth_run
+    theta = np.array([CONFIG["quarter_car"][n] for n in NAMES])
+    body, wheel = friction_run(t, u, theta, friction=0.6)
+    rng = np.random.default_rng(11)
+    body = body + SIGMA["body"] * rng.standard_normal(t.size)
+    wheel = wheel + SIGMA["wheel"] * rng.standard_normal(t.size)
+    data = tmp_path / "friction.csv"
+    np.savetxt(data, np.column_stack([t, body, wheel, u]), delimiter=",", header="t,body,wheel,road1,force",
+               comments="")  # fmt: skip
+    cfg = dict(CONFIG, road={"input": "measured", "actuator_force": "measured"},
+               layout=[{"name": "body", "kind": "body_disp"}, {"name": "wheel", "kind": "wheel_disp"}],
+               identify=dict(CONFIG["identify"], unknowns=["ks", "cs"]))  # fmt: skip
+    out = tmp_path / "d.json"
+    res = CliRunner().invoke(app, ["diagnose", str(write_yaml(tmp_path, cfg, "f.yaml")), "--data", str(data),
+                                   "--json", str(out)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["verdict"].startswith("incomplete"), doc["verdict"]
