@@ -244,7 +244,8 @@ class LumpedSystem(System):
             return None
         parts = [describe_direction(d) for d in found]
         free = tuple(dict.fromkeys(n for d in found for n in d))
-        return (f"the data cannot separate the unknowns: {'; '.join(parts)} leave(s) every channel unchanged. "
+        verb = "leaves" if len(parts) == 1 else "leave"
+        return (f"the data cannot separate the unknowns: {'; '.join(parts)} {verb} every channel unchanged. "
                 f"To identify them: {self.remedies(free)}")  # fmt: skip
 
     # ------------------------------------------------------------------ vehid simulate
