@@ -239,3 +239,37 @@ def test_diagnose_a_rig_with_friction_says_incomplete_not_a_tight_wrong_answer(t
     assert res.exit_code == 0, res.output
     doc = json.loads(out.read_text())
     assert doc["verdict"].startswith("incomplete"), doc["verdict"]
+
+
+def test_a_rig_recording_jitter_offsets_and_the_force_the_other_way(tmp_path, truth_run):
+    """What a lab rig records: steps between stamps off by up to about half a step, an offset on every displacement
+    sensor and the actuator force with the opposite sign. With data.offsets: identify, diagnose frees the force's
+    gain and finds it near -1 (`parameter:force_gain`), and the residual returns to the noise."""
+    from scipy.interpolate import CubicSpline
+
+    _, _, _, _, t, u, _ = truth_run
+    theta = np.array([CONFIG["quarter_car"][n] for n in NAMES])
+    clean = independent(theta, t, u[:, 0], u[:, 1])
+    rng = np.random.default_rng(3)
+    dt = t[1] - t[0]
+    stamps = t + rng.uniform(-0.24, 0.24, t.size) * dt  # steps vary by up to about half a step
+    stamps[0], stamps[-1] = t[0], t[-1]
+
+    def at(v):
+        return CubicSpline(t, v)(stamps)
+
+    body = at(clean["body"]) + 0.004 + SIGMA["body"] * rng.standard_normal(t.size)
+    wheel = at(clean["wheel"]) - 0.002 + SIGMA["wheel"] * rng.standard_normal(t.size)
+    table = np.column_stack([stamps, body, wheel, at(u[:, 0]) + 0.01, -at(u[:, 1])])
+    data = tmp_path / "rig.csv"
+    np.savetxt(data, table, delimiter=",", header="t,body,wheel,road1,force", comments="")
+    cfg = dict(CONFIG, road={"input": "measured", "actuator_force": "measured"},
+               layout=[{"name": "body", "kind": "body_disp"}, {"name": "wheel", "kind": "wheel_disp"}],
+               data={"offsets": "identify"}, identify=dict(CONFIG["identify"], unknowns=["ks", "cs"]))  # fmt: skip
+    out = tmp_path / "d.json"
+    res = CliRunner().invoke(app, ["diagnose", str(write_yaml(tmp_path, cfg, "rig.yaml")), "--data", str(data),
+                                   "--json", str(out)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["selected"] == ["parameter:force_gain"] and doc["verdict"].startswith("found"), doc["verdict"]
+    assert abs(doc["after"]["estimates"]["force_gain"] + 1.0) < 0.02

@@ -140,6 +140,11 @@ class RigData(_Section):
     time_unit: str = Field("s", description="unit of a numeric time column")
     window: tuple[NonNeg, Pos] | None = Field(None, description="use only start <= t < stop [s]")
     rate: Pos | None = Field(None, description="rate of the common grid [Hz] (default: the fastest channel's)")
+    offsets: Literal["none", "identify"] = Field(
+        "none",
+        description="sensor offsets (a potentiometer's zero, an accelerometer's bias): none; identify (one nuisance "
+        "offset per channel and run, profiled out of the fit and the bound)",
+    )
 
     @model_validator(mode="after")
     def _checks(self) -> RigData:

@@ -18,6 +18,7 @@ RANGES = {
     "kt": (1e-2, 1e10),
     "cs": (0.0, 1e7),
     "ct": (0.0, 1e7),
+    "force_gain": (-1e3, 1e3),
 }  # fmt: skip
 PARAMETERS = tuple(RANGES)
 
@@ -31,6 +32,9 @@ class QuarterCar(_Section):
     kt: within(*RANGES["kt"]) = Field(description="tyre stiffness [N/m]")
     cs: within(*RANGES["cs"]) = Field(description="suspension damping [N s/m]")
     ct: within(*RANGES["ct"]) = Field(0.0, description="tyre damping [N s/m]")
+    force_gain: within(*RANGES["force_gain"]) = Field(
+        1.0, description="the actuator's force per unit of the recorded force (-1: the rig's sign is opposite ours)"
+    )
 
     def values(self) -> dict[str, float]:
         return {n: float(getattr(self, n)) for n in PARAMETERS}

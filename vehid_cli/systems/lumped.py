@@ -163,7 +163,9 @@ class LumpedSystem(System):
         return tuple(s.name for f in self.families for s in self.config.layout if s.family == f)
 
     def objectives(self, references: tuple[dict[str, NDArray], ...]) -> list[Objective]:
-        return [Objective(name="wls", reference=r, sigma=w) for r, w in zip(references, self.weights, strict=True)]
+        offsets = self.config.data.offsets == "identify"
+        return [Objective(name="wls", reference=r, sigma=w, offsets=offsets)
+                for r, w in zip(references, self.weights, strict=True)]  # fmt: skip
 
     def residual_channels(self, reference) -> NDArray:
         return np.concatenate([o.entry_channels() for o in self.objectives(reference)])
@@ -208,6 +210,8 @@ class LumpedSystem(System):
         for run, w in enumerate(self.weights):
             for f, z in self.outputs(X, run).items():
                 S = (z[:D] - z[D:]) / (2 * h[:, None, None]) * np.abs(at)[:, None, None] / w[f][None, None, :]
+                if self.config.data.offsets == "identify":  # what the profiled offsets leave (the Schur complement)
+                    S = S - S.mean(axis=1, keepdims=True)
                 S = S.reshape(D, -1)
                 F += S @ S.T
         return F

@@ -32,7 +32,7 @@ from ..diagnose.quality import MAX_NOISE_RATIO, MIN_SAMPLES, Quality
 from ..identify.source import DataSource
 from ..optimizers import get_optimizer
 from .base import Box
-from .lumped import LumpedSystem
+from .base import System as LumpedSystem  # a systems.lumped.LumpedSystem (which imports this module)
 
 DAMPING_SPAN = 3.0  # a damping candidate ranges over [0, 3x configured]: a damper off is 0
 OTHER_SPAN = (0.2, 5.0)  # masses, stiffnesses: factors of the configured value
@@ -46,9 +46,11 @@ def parameter_specs(system: LumpedSystem) -> dict[str, Candidate]:
     for group, names in system.groups:
         for n in names:
             v = values[n]
-            if n in system.names or v == 0.0:
+            if n in system.names or v == 0.0 or (group == "actuator" and "force" not in system.config.input_names):
                 continue
             lo, hi = (0.0, DAMPING_SPAN * v) if group == "dampers" else (OTHER_SPAN[0] * v, OTHER_SPAN[1] * v)
+            if group == "actuator":  # the recorded force's gain, its sign included
+                lo, hi = -OTHER_SPAN[1] * abs(v), OTHER_SPAN[1] * abs(v)
             low, high = ranges.get(n, (lo, hi))
             c = parameter_candidate(n, v, group, {n: (max(lo, low), min(hi, high))})
             out[c.effect] = c

@@ -27,6 +27,7 @@ class QuarterCarSystem(LumpedSystem):
     name: ClassVar[str] = "quarter_car"
     groups: ClassVar[tuple[tuple[str, tuple[str, ...]], ...]] = (
         ("dampers", ("cs", "ct")), ("springs", ("ks",)), ("tyres", ("kt",)), ("masses", ("mu", "ms")),
+        ("actuator", ("force_gain",)),
     )  # fmt: skip
 
     def matrices(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
@@ -39,8 +40,9 @@ class QuarterCarSystem(LumpedSystem):
         B0 = np.zeros((P, 2, len(self.config.input_names)))
         B1 = np.zeros_like(B0)
         B0[:, 1, 0], B1[:, 1, 0] = kt, ct  # the road through the tyre spring and damper
-        if B0.shape[-1] > 1:  # the actuator: body up, wheel down
-            B0[:, 0, 1], B0[:, 1, 1] = 1.0, -1.0
+        if B0.shape[-1] > 1:  # the actuator: body up, wheel down, by its gain
+            gain = np.asarray(p["force_gain"], dtype=float)
+            B0[:, 0, 1], B0[:, 1, 1] = gain, -gain
         return M, C, K, B0, B1
 
     def sensor_rows(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray]:
