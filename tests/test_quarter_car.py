@@ -273,3 +273,23 @@ def test_a_rig_recording_jitter_offsets_and_the_force_the_other_way(tmp_path, tr
     doc = json.loads(out.read_text())
     assert doc["selected"] == ["parameter:force_gain"] and doc["verdict"].startswith("found"), doc["verdict"]
     assert abs(doc["after"]["estimates"]["force_gain"] + 1.0) < 0.02
+
+
+def test_wheel_acceleration_is_newtons_second_law_on_the_independent_motion(truth_run):
+    """The wheel accelerometer, whose tyre damper sees the road's velocity directly: vehid's wheel_acc equals
+    (forces on the wheel) / mu computed from the independent simulator's body and wheel motion (their velocities by
+    lsim of s times the transfer functions), with the road's velocity at a sample the mean of the hold's slopes on
+    either side."""
+    tmp, truth, _, _, t, u, clean = truth_run
+    cfg = dict(CONFIG, layout=[{"name": "wacc", "kind": "wheel_acc"}])
+    system = build_system(load_config(write_yaml(tmp, cfg, "wacc.yaml")))
+    ours = system.outputs(truth[None, :])["acc"][0, :, 0]
+    ms, mu, ks, kt, cs, ct = truth
+    num, den = transfer_functions(*truth)
+    s = np.poly1d([1.0, 0.0])
+    vel = {k: sum(signal.lsim(((n * s).coeffs, den.coeffs), x, t)[1] for n, x in zip(pair, u.T, strict=True))
+           for k, pair in num.items()}  # fmt: skip
+    yd = np.gradient(u[:, 0], t)
+    force = (ks * (clean["body"] - clean["wheel"]) + cs * (vel["body"] - vel["wheel"])
+             - kt * (clean["wheel"] - u[:, 0]) - ct * (vel["wheel"] - yd) - u[:, 1])  # fmt: skip
+    assert np.max(np.abs(ours - force / mu)) < 1e-5 * np.max(np.abs(force / mu))
