@@ -195,9 +195,10 @@ def test_simulate_writes_the_spec_columns(tmp_path):
     assert header == "t,body,wheel,defl,bacc,road1,force"
 
 
-def friction_run(t, u, theta, friction, v0=0.005):
-    """Body and wheel displacement of the quarter car theta with smoothed Coulomb friction friction tanh(v / v0) in
-    the strut (an independent nonlinear simulation: scipy's LSODA on the first-order-hold inputs)."""
+def friction_run(t, u, theta, friction, v0=0.005, quadratic=0.0):
+    """Body and wheel displacement of the quarter car theta with smoothed Coulomb friction friction tanh(v / v0) and
+    a quadratic damper quadratic v |v| in the strut (an independent nonlinear simulation: scipy's LSODA on the
+    first-order-hold inputs)."""
     from scipy.integrate import solve_ivp
 
     ms, mu, ks, kt, cs, ct = theta
@@ -210,7 +211,8 @@ def friction_run(t, u, theta, friction, v0=0.005):
         yd = (u[k + 1, 0] - u[k, 0]) / dt
         f = u[k, 1] + frac * (u[k + 1, 1] - u[k, 1])
         zs, zu, vs, vu = s
-        strut = ks * (zs - zu) + cs * (vs - vu) + friction * np.tanh((vs - vu) / v0)
+        v = vs - vu
+        strut = ks * (zs - zu) + cs * v + friction * np.tanh(v / v0) + quadratic * v * abs(v)
         return [vs, vu, (-strut + f) / ms, (strut - kt * (zu - y) - ct * (vu - yd) - f) / mu]
 
     sol = solve_ivp(rates, (t[0], t[-1]), [0.0, 0.0, 0.0, 0.0], t_eval=t, method="LSODA", rtol=1e-8, atol=1e-10,
@@ -218,26 +220,41 @@ def friction_run(t, u, theta, friction, v0=0.005):
     return sol.y[0], sol.y[1]
 
 
-def test_diagnose_a_rig_with_friction_says_incomplete_not_a_tight_wrong_answer(tmp_path, truth_run):
-    """Friction the linear quarter car cannot represent (no effect candidates on a rig yet): diagnose must not end
-    with a verdict that the residual is explained; it says incomplete."""
-    _, _, _, _, t, u, _ = truth_run
-    theta = np.array([CONFIG["quarter_car"][n] for n in NAMES])
-    body, wheel = friction_run(t, u, theta, friction=0.6)
+def diagnose_run(tmp_path, t, u, body, wheel, name):
+    """`vehid diagnose --json` of a measured run (body and wheel displacement, road and force) of the config's car."""
     rng = np.random.default_rng(11)
     body = body + SIGMA["body"] * rng.standard_normal(t.size)
     wheel = wheel + SIGMA["wheel"] * rng.standard_normal(t.size)
-    data = tmp_path / "friction.csv"
+    data = tmp_path / f"{name}.csv"
     np.savetxt(data, np.column_stack([t, body, wheel, u]), delimiter=",", header="t,body,wheel,road1,force",
                comments="")  # fmt: skip
     cfg = dict(CONFIG, road={"input": "measured", "actuator_force": "measured"},
                layout=[{"name": "body", "kind": "body_disp"}, {"name": "wheel", "kind": "wheel_disp"}],
                identify=dict(CONFIG["identify"], unknowns=["ks", "cs"]))  # fmt: skip
-    out = tmp_path / "d.json"
-    res = CliRunner().invoke(app, ["diagnose", str(write_yaml(tmp_path, cfg, "f.yaml")), "--data", str(data),
+    out = tmp_path / f"{name}.json"
+    res = CliRunner().invoke(app, ["diagnose", str(write_yaml(tmp_path, cfg, f"{name}.yaml")), "--data", str(data),
                                    "--json", str(out)])  # fmt: skip
     assert res.exit_code == 0, res.output
-    doc = json.loads(out.read_text())
+    return json.loads(out.read_text())
+
+
+def test_diagnose_names_hidden_friction(tmp_path, truth_run):
+    """Strut friction (0.6 N, smoothed over 5 mm/s) in an independent simulation: diagnose names coulomb_friction,
+    its force within 4 sd of the truth, and the residual returns to the noise."""
+    _, _, _, _, t, u, _ = truth_run
+    theta = np.array([CONFIG["quarter_car"][n] for n in NAMES])
+    doc = diagnose_run(tmp_path, t, u, *friction_run(t, u, theta, friction=0.6), "friction")
+    assert doc["selected"] == ["coulomb_friction"] and doc["verdict"].startswith("found"), doc["verdict"]
+    lo, hi = doc["after"]["ci95"]["coulomb_friction.Fc_f"]
+    assert abs((lo + hi) / 2 - 0.6) < 4 * (hi - lo) / 2 / 1.959964, (lo, hi)
+
+
+def test_diagnose_a_force_outside_the_library_is_incomplete_not_a_tight_wrong_answer(tmp_path, truth_run):
+    """A quadratic damper (c2 v|v|, no effect of the library) beside friction: whatever the library approximates it
+    with, the verdict is not that the residual is explained."""
+    _, _, _, _, t, u, _ = truth_run
+    theta = np.array([CONFIG["quarter_car"][n] for n in NAMES])
+    doc = diagnose_run(tmp_path, t, u, *friction_run(t, u, theta, friction=0.3, quadratic=40.0), "quadratic")
     assert doc["verdict"].startswith("incomplete"), doc["verdict"]
 
 

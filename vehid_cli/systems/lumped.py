@@ -63,6 +63,10 @@ class LumpedSystem(System):
     simulation_suffixes: ClassVar[tuple[str, ...]] = (".csv",)
     diagnosis_defaults: ClassVar[tuple[str, ...]] = ("noise.level=0",)  # the noise estimated from the data
     groups: ClassVar[tuple[tuple[str, tuple[str, ...]], ...]] = ()  # known parameters a diagnosis may free, grouped
+    axles: ClassVar[tuple[str, ...]] = ("f", "r")  # the car's axles the rig's struts stand for (effects' _f, _r)
+    companion_names: ClassVar[dict[str, str]] = {}  # the car's parameter names -> the rig's (an effect's companions)
+    excluded_effects: ClassVar[tuple[str, ...]] = ()  # library effects the rig's linear model already has
+    kernel: bool = False  # simulate by RK4 on the compiled kernel even without effects (a diagnosis: one scheme)
     config: LumpedConfig
 
     # ------------------------------------------------------------------ what a rig defines
@@ -77,6 +81,15 @@ class LumpedSystem(System):
     @classmethod
     def configured_inputs(cls, config: LumpedConfig, t: NDArray) -> NDArray:
         """(n, nu) the configured inputs of `config` on the grid t, in `config.input_names` order."""
+        raise NotImplementedError
+
+    def struts(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray, NDArray, NDArray | None]:
+        """The rig's struts in the car's corner slots: suspension rows D (P, 4, d), tyre rows T (P, 4, d) and their
+        road inputs ET (4, nu) (tyre deflection T q + ET u), and the linear model's tyre damping (P, 4) or None."""
+        raise NotImplementedError
+
+    def strut_damping(self, p: dict[str, NDArray]) -> NDArray:
+        """(P, 2) the linear damping of the front and rear struts [N s/m]."""
         raise NotImplementedError
 
     def remedies(self, free: tuple[str, ...]) -> str:
@@ -132,7 +145,7 @@ class LumpedSystem(System):
         P = X.shape[0]
         values = self.config.parameter_values()
         out = {n: np.full(P, float(v)) for n, v in values.items()}
-        out.update({n: np.asarray(X[:, j], dtype=float) for j, n in enumerate(names or self.names)})
+        out.update({n: np.asarray(X[:, j], dtype=float) for j, n in enumerate(self.names if names is None else names)})
         return out
 
     def check_time_step(self, dt: float, key: str) -> None:
@@ -149,12 +162,20 @@ class LumpedSystem(System):
     def outputs(self, X: NDArray, run: int = 0, names: tuple[str, ...] | None = None) -> dict[str, NDArray]:
         """The layout's channels (family -> (P, n, k)) of a batch of values X (P, D) of `names` (default the
         unknowns) on run `run`."""
-        p = self.parameters(X, names)
-        M, C, K, B0, B1 = self.matrices(p)
-        Sq, Sa = self.sensor_rows(p)
+        names = names or self.names
+        effects = {n: np.asarray(X[:, j], dtype=float) for j, n in enumerate(names) if "." in n}
+        own = [j for j, n in enumerate(names) if "." not in n]
+        p = self.parameters(X[:, own], tuple(names[j] for j in own))
         rig = self.rigs[run]
         with np.errstate(all="ignore"):
-            disp, acc = lumped_outputs(M, C, K, B0, B1, rig.u, rig.dt, Sq, Sa)
+            if effects or self.kernel:
+                from .lumped_effects import kernel_outputs  # the kernel and the effect laws only where used
+
+                disp, acc = kernel_outputs(self, p, effects, run)
+            else:
+                M, C, K, B0, B1 = self.matrices(p)
+                Sq, Sa = self.sensor_rows(p)
+                disp, acc = lumped_outputs(M, C, K, B0, B1, rig.u, rig.dt, Sq, Sa)
         out = {"acc": acc, "disp": disp}
         return {f: out[f] for f in self.families}
 

@@ -1,5 +1,6 @@
 """Close the loop for a linear rig (`vehid diagnose` on a quarter or half car): the declared model fitted by wls on
-the measured runs (jointly), the rig's known parameters as candidates (`parameter:<name>`: a damper off, a spring
+the measured runs (jointly), by RK4 on the compiled kernel (`systems.lumped_effects`), the effect library's car
+forms on the rig's struts and the rig's known parameters as candidates (`parameter:<name>`: a damper off, a spring
 not what the config says), held-out blocks (or --validate runs) for the validation J, and the verdict of
 `diagnose.loop.close`: a residual the candidates do not explain is `incomplete`, never a tight wrong answer."""
 
@@ -21,6 +22,7 @@ from ..diagnose.attribution import (
     Z95,
     Candidate,
     Fit,
+    candidate_ranges,
     chi2_statistic,
     fit_intervals,
     lsq_fit,
@@ -30,9 +32,11 @@ from ..diagnose.holdout import HOLDOUT_EVERY, holdout_blocks, masked
 from ..diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Diagnosis, ModelReport, Subject, chi2_limit, close
 from ..diagnose.quality import MAX_NOISE_RATIO, MIN_SAMPLES, Quality
 from ..identify.source import DataSource
+from ..models.effects import LIBRARY
 from ..optimizers import get_optimizer
 from .base import Box
 from .base import System as LumpedSystem  # a systems.lumped.LumpedSystem (which imports this module)
+from .lumped_effects import rig_candidates
 
 DAMPING_SPAN = 3.0  # a damping candidate ranges over [0, 3x configured]: a damper off is 0
 OTHER_SPAN = (0.2, 5.0)  # masses, stiffnesses: factors of the configured value
@@ -71,11 +75,19 @@ class RigLoop:
         own = system.box
         lo, hi, x0 = list(own.lower), list(own.upper), list(own.nominal)
         values = system.config.parameter_values()
+        limits, starts = candidate_ranges(self.specs)
         for n in names[len(own.names) :]:
-            (a, b), v = self.specs[f"parameter:{n}"].limits[n], values[n]
+            a, b = limits[n]
+            if "." in n:  # an effect's parameter: its candidate's start, else the library's default
+                effect, _, param = n.partition(".")
+                base = param[:-2] if param[-2:] in ("_f", "_r") else param
+                default = LIBRARY[effect].defaults().get(param, LIBRARY[effect].defaults().get(base, 0.0))
+                v = starts.get(n, default)
+            else:
+                v = values[n]
             lo.append(a)
             hi.append(b)
-            x0.append(v)
+            x0.append(float(np.clip(v, a, b)))
         return Box(tuple(names), np.array(lo), np.array(hi), np.array(x0), None)
 
     def problem_for(self, names: tuple[str, ...]):
@@ -154,9 +166,11 @@ def diagnose_rig(
     if not files:
         raise InputError("diagnose needs --data FILE (the measured run to fit) or data.files", source=config.source)
     system = cls(config, DataSource(tuple(map(str, files))))
+    system.kernel = True  # every fit by one scheme, with effects or without
     ref = system.reference(0)
     if validate:
         other = cls(config, DataSource(tuple(map(str, validate))))
+        other.kernel = True
         keep, validation, source = None, (other, other.reference(0), None), "--validate " + " + ".join(validate)
     else:
         held = held_out(system, ref)
@@ -164,7 +178,7 @@ def diagnose_rig(
         source = f"held-out blocks of {' + '.join(files)} (every {HOLDOUT_EVERY}th block)"
     R_total = system.residual_samples
     R_train = int(R_total if keep is None else keep.sum())
-    specs = parameter_specs(system)
+    specs = {**rig_candidates(system), **parameter_specs(system)}
     rig = RigLoop(system, ref, keep, validation, specs)
     fit = fit_declared(system, rig.problem_for(system.names)[0], REFIT_BUDGET, say)
     before = rig.report(fit, ())

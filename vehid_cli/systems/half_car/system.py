@@ -57,6 +57,20 @@ class HalfCarSystem(LumpedSystem):
         B0 = E.T * kt[:, None, :]
         return M, C, K, B0, np.zeros_like(B0)
 
+    def struts(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray, NDArray, NDArray | None]:
+        a1 = np.asarray(p["a1"], dtype=float)
+        a2 = np.asarray(p["wheelbase"], dtype=float) - a1
+        P = a1.shape[0]
+        D, T, ET = np.zeros((P, 4, 4)), np.zeros((P, 4, 4)), np.zeros((4, 2))
+        D[:, 0, 0], D[:, 0, 1], D[:, 0, 2] = 1.0, -a1, -1.0  # front: the body above the axle minus the wheel
+        D[:, 2, 0], D[:, 2, 1], D[:, 2, 3] = 1.0, a2, -1.0  # rear (corner slot 2: the rear axle)
+        T[:, 0, 2], T[:, 2, 3] = 1.0, 1.0
+        ET[0, 0], ET[2, 1] = -1.0, -1.0
+        return D, T, ET, None
+
+    def strut_damping(self, p: dict[str, NDArray]) -> NDArray:
+        return np.stack([p["cf"], p["cr"]], axis=-1)
+
     def sensor_rows(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray]:
         a1 = np.asarray(p["a1"], dtype=float)
         a2 = np.asarray(p["wheelbase"], dtype=float) - a1

@@ -29,6 +29,23 @@ class QuarterCarSystem(LumpedSystem):
         ("dampers", ("cs", "ct")), ("springs", ("ks",)), ("tyres", ("kt",)), ("masses", ("mu", "ms")),
         ("actuator", ("force_gain",)),
     )  # fmt: skip
+    axles: ClassVar[tuple[str, ...]] = ("f",)  # one strut: the effects' front-axle parameters
+    companion_names: ClassVar[dict[str, str]] = {"cf": "cs", "kf": "ks", "ktf": "kt", "mf": "mu"}
+    excluded_effects: ClassVar[tuple[str, ...]] = ("tyre_damping",)  # ct is the model's own: parameter:ct
+
+    def struts(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray, NDArray, NDArray | None]:
+        P = len(p["ms"])
+        nu = len(self.config.input_names)
+        D, T, ET = np.zeros((P, 4, 2)), np.zeros((P, 4, 2)), np.zeros((4, nu))
+        D[:, 0] = (1.0, -1.0)  # body minus wheel
+        T[:, 0] = (0.0, 1.0)  # wheel minus road
+        ET[0, 0] = -1.0
+        ct = np.zeros((P, 4))
+        ct[:, 0] = p["ct"]
+        return D, T, ET, ct
+
+    def strut_damping(self, p: dict[str, NDArray]) -> NDArray:
+        return np.stack([p["cs"], p["cs"]], axis=-1)
 
     def matrices(self, p: dict[str, NDArray]) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
         ms, mu, ks, kt, cs, ct = (np.asarray(p[n], dtype=float) for n in ("ms", "mu", "ks", "kt", "cs", "ct"))
