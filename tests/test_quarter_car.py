@@ -249,6 +249,7 @@ def test_diagnose_names_hidden_friction(tmp_path, truth_run):
     assert abs((lo + hi) / 2 - 0.6) < 4 * (hi - lo) / 2 / 1.959964, (lo, hi)
 
 
+@pytest.mark.slow  # about 2 min: every candidate of the library is fitted, twice
 def test_diagnose_a_force_outside_the_library_is_incomplete_not_a_tight_wrong_answer(tmp_path, truth_run):
     """A quadratic damper (c2 v|v|, no effect of the library) beside friction: whatever the library approximates it
     with, the verdict is not that the residual is explained."""
