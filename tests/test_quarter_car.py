@@ -311,3 +311,18 @@ def test_wheel_acceleration_is_newtons_second_law_on_the_independent_motion(trut
     force = (ks * (clean["body"] - clean["wheel"]) + cs * (vel["body"] - vel["wheel"])
              - kt * (clean["wheel"] - u[:, 0]) - ct * (vel["wheel"] - yd) - u[:, 1])  # fmt: skip
     assert np.max(np.abs(ours - force / mu)) < 1e-5 * np.max(np.abs(force / mu))
+
+
+def test_simulate_on_a_recorded_road(tmp_path, truth_run):
+    """`vehid simulate --road FILE` drives the rig with the file's road and force on its time grid (its other
+    columns ignored) and writes the config's sensors: without noise, the independent simulator's channels."""
+    tmp, _, data, _, t, u, _ = truth_run
+    cfg = dict(CONFIG, noise={"level": 0.0}, road=dict(CONFIG["road"], actuator_force="measured"))
+    target = tmp_path / "on_road.csv"
+    res = CliRunner().invoke(app, ["simulate", str(write_yaml(tmp_path, cfg)), "-o", str(target), "--road", str(data)])
+    assert res.exit_code == 0, res.output
+    table = np.genfromtxt(target, delimiter=",", names=True, comments="#")
+    theta = np.array([CONFIG["quarter_car"][n] for n in NAMES])
+    ref = independent(theta, t, u[:, 0], u[:, 1])
+    assert np.allclose(table["road1"], u[:, 0]) and np.allclose(table["force"], u[:, 1])
+    assert np.max(np.abs(table["body"] - ref["body"])) < 1e-6 * np.max(np.abs(ref["body"]))

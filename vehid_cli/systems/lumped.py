@@ -283,10 +283,14 @@ class LumpedSystem(System):
 
     @classmethod
     def write_simulation(cls, config, target: Path, seed: int, road=None, origin: str = "") -> Simulated:
-        """The configured rig with run 0's noise of `seed`: CSV with t, every sensor (layout order), the inputs."""
+        """The configured rig with run 0's noise of `seed` (on the inputs and time grid of the file `road`, when given:
+        its road columns, and its force with a measured actuator): CSV with t, every sensor (layout order), the
+        inputs."""
+        system = cls(config, DataSource())
         if road is not None:
-            config = config._relocated({"road": config.road.model_copy(update={"input": "measured"})})
-        system = cls(config, DataSource((str(road),)) if road is not None else DataSource())
+            measured = config._relocated({"road": config.road.model_copy(update={"input": "measured"})})
+            system.rigs = (read_rig_run(measured, road, (), cls.configured_inputs),)
+            system.check_time_step(system.rigs[0].dt, f"{road}: time step")
         rig = system.rigs[0]
         clean = system.outputs(system.box.nominal[None, :], 0)
         clean = {f: v[0] for f, v in clean.items()}
@@ -329,7 +333,7 @@ def read_rig_run(config: LumpedConfig, path: str | Path, families: tuple[str, ..
                          window=data.window, rate=data.rate, time_unit=data.time_unit)  # fmt: skip
     sign = {n: (-1.0 if n in data.invert else 1.0) for n in ours}
     outputs = {}
-    for f in families:
+    for f in families:  # none: the inputs alone (vehid simulate --road)
         names = [s.name for s in config.layout if s.family == f]
         outputs[f] = np.column_stack([sign[n] * record.channel(n) for n in names])
     t = record.t - record.t[0]
