@@ -184,3 +184,14 @@ def test_diagnose_names_the_rear_damper_off(tmp_path, truth_run):
     sd = (hi - lo) / 2 / 1.959964
     assert abs((lo + hi) / 2 - 50.0) < 4 * sd, (lo, hi)
     assert doc["after"]["chi2_per_sample"] < doc["chi2_limit"]
+
+
+def test_thirty_runs_reach_the_bound(tmp_path):
+    """A 30-run campaign on simulated data (bump and ISO road, the rear wheel wheelbase/speed later): NRE/CRLB <= 1.2
+    and the mean within 4 standard errors of the truth."""
+    cfg = load_config(write_yaml(tmp_path, dict(CONFIG, identify=dict(CONFIG["identify"], runs=30))))
+    doc = run_campaign(cfg, jobs=1).to_json()
+    assert doc["nre_over_crlb"] <= 1.2, doc["nre_over_crlb"]
+    sd = np.array([doc["crlb"]["re_sd_percent"][n] for n in NAMES])
+    re = np.array([doc["re_percent"][n] for n in NAMES])
+    assert np.all(np.abs(re) < 4 * sd / np.sqrt(30) + 1e-9), (re, sd)
