@@ -176,6 +176,23 @@ def test_the_cli_writes_the_config_json_and_figures(tmp_path):
         read_png(figs / name)
 
 
+def test_the_cli_designs_sensors_end_to_end(tmp_path):
+    """Issue 23: a config with `design.sensors` ran into a TypeError in the report; the command now prints the
+    sensor row (configured layout beside the chosen subset) and writes a config whose layout is the chosen one."""
+    args = [x for s in SMALL for x in ("--set", s)]
+    sensors = json.dumps({"count": 3, "candidates": CANDIDATES})
+    best, doc = tmp_path / "best.yaml", tmp_path / "design.json"
+    fixed = ["design.speed_kmh=null", "design.length=null", "design.duration=null", "design.shapes=null"]
+    code, out, err = invoke("design", DESIGN, *args, "--set", f"design.sensors={sensors}",
+                            *[x for s in fixed for x in ("--set", s)], "-o", best, "--json", doc, "--jobs", "1")  # fmt: skip
+    assert code == 0, err
+    chosen = tuple(json.loads(doc.read_text())["designed"]["test"]["sensors"])
+    assert len(chosen) == 3 and set(chosen) <= {c["name"] for c in CANDIDATES}
+    row = next(line for line in out.splitlines() if "sensors" in line and "3 of 6" in line)
+    assert "acc1" in row and all(name in row for name in chosen)
+    assert tuple(s.name for s in load_config(best).layout) == chosen
+
+
 @pytest.mark.slow
 def test_acceptance_the_designed_test_beats_the_papers_and_campaigns_confirm_both_bounds():
     """Issue 14 acceptance 1: on the paper's car (hybrid, wls, accelerations, Np 10 %) the designed test's NRE bound
