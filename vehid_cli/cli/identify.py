@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -26,11 +28,23 @@ from .common import (
 )
 
 
-def _results_target(config: Path, cfg, output: Path | None, json_out: Path | None) -> Path:
-    """The results file (default runs/<config>-<hash>.h5), checked writable with the --json file before any work."""
+def default_output(config: Path, cfg, data: Sequence[Path] | None) -> Path:
+    """The default results file: runs/<config>-<hash>.h5 for the config's own data, runs/<config>-<data>-<hash>.h5
+    with --data (each data file's stem, joined by '+'; the hash then also covers the data files' absolute paths), so
+    identifying the same config from another file never meets the earlier campaign's file."""
+    if not data:
+        return Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+    paths = "\n".join(str(Path(d).resolve()) for d in data)
+    digest = hashlib.sha256(f"{cfg.digest()}\n{paths}".encode()).hexdigest()
+    stems = "+".join(Path(d).stem for d in data)
+    return Path("runs") / f"{Path(config).stem}-{stems}-{digest[:8]}.h5"
+
+
+def _results_target(config: Path, cfg, data: Sequence[Path] | None, output: Path | None, json_out: Path | None) -> Path:
+    """The results file (default: `default_output`), checked writable with the --json file before any work."""
     if output is None:
         check_output_dir(Path("runs"), "the default output directory").mkdir(exist_ok=True)
-        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+        output = default_output(config, cfg, data)
     target = check_writable(output, (".h5", ".hdf5"))
     if json_out is not None:
         check_writable(json_out, (".json",))
@@ -54,7 +68,12 @@ def identify(
     jobs: JobsOption = None,
     output: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("-o", "--output", metavar="FILE", help="Campaign file (.h5); default runs/<config>-<hash>.h5."),
+        typer.Option(
+            "-o",
+            "--output",
+            metavar="FILE",
+            help="Campaign file (.h5); default runs/<config>-<hash>.h5 (with --data: runs/<config>-<data>-<hash>.h5).",
+        ),
     ] = None,
     json_out: Annotated[
         Optional[Path],  # noqa: UP045
@@ -89,7 +108,7 @@ def identify(
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, campaign_overrides(set_, runs, seed, jobs))
-    target = _results_target(config, cfg, output, json_out)
+    target = _results_target(config, cfg, data, output, json_out)
     with (
         interruptible(lambda: saved_runs_note(target), warn),
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
