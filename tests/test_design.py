@@ -183,8 +183,8 @@ def test_the_cli_designs_sensors_end_to_end(tmp_path):
     sensors = json.dumps({"count": 3, "candidates": CANDIDATES})
     best, doc = tmp_path / "best.yaml", tmp_path / "design.json"
     fixed = ["design.speed_kmh=null", "design.length=null", "design.duration=null", "design.shapes=null"]
-    code, out, err = invoke("design", DESIGN, *args, "--set", f"design.sensors={sensors}",
-                            *[x for s in fixed for x in ("--set", s)], "-o", best, "--json", doc, "--jobs", "1")  # fmt: skip
+    args += ["--set", f"design.sensors={sensors}", *[x for s in fixed for x in ("--set", s)]]
+    code, out, err = invoke("design", DESIGN, *args, "-o", best, "--json", doc, "--jobs", "1")
     assert code == 0, err
     chosen = tuple(json.loads(doc.read_text())["designed"]["test"]["sensors"])
     assert len(chosen) == 3 and set(chosen) <= {c["name"] for c in CANDIDATES}
