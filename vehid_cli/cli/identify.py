@@ -14,6 +14,7 @@ from .common import (
     ExecutorOption,
     JobsOption,
     RunsOption,
+    SaveConfigOption,
     SchedulerOption,
     SeedOption,
     SetOption,
@@ -40,14 +41,19 @@ def default_output(config: Path, cfg, data: Sequence[Path] | None) -> Path:
     return Path("runs") / f"{Path(config).stem}-{stems}-{digest[:8]}.h5"
 
 
-def _results_target(config: Path, cfg, data: Sequence[Path] | None, output: Path | None, json_out: Path | None) -> Path:
-    """The results file (default: `default_output`), checked writable with the --json file before any work."""
+def _results_target(
+    config: Path, cfg, data: Sequence[Path] | None, output: Path | None, json_out: Path | None, save: Path | None
+) -> Path:
+    """The results file (default: `default_output`), checked writable with the --json and --save-config files before
+    any work."""
     if output is None:
         check_output_dir(Path("runs"), "the default output directory").mkdir(exist_ok=True)
         output = default_output(config, cfg, data)
     target = check_writable(output, (".h5", ".hdf5"))
     if json_out is not None:
         check_writable(json_out, (".json",))
+    if save is not None:
+        check_writable(save, (".yaml", ".yml"))
     return target
 
 
@@ -80,6 +86,7 @@ def identify(
         typer.Option("--json", metavar="FILE", help="Also write the SPEC JSON summary here."),
     ] = None,
     set_: SetOption = None,
+    save_config: SaveConfigOption = None,
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
     force: Annotated[
@@ -108,7 +115,7 @@ def identify(
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, campaign_overrides(set_, runs, seed, jobs))
-    target = _results_target(config, cfg, data, output, json_out)
+    target = _results_target(config, cfg, data, output, json_out, save_config)
     with (
         interruptible(lambda: saved_runs_note(target), warn),
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
@@ -127,3 +134,10 @@ def identify(
     for note in campaign_notes(campaign):
         out.print(note)
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
+    if save_config is not None:
+        from ..config.save import save_config as write_saved
+        from ..report.saved_config import campaign_found
+
+        found = campaign_found(campaign, target)
+        overrides = campaign_overrides(set_, runs, seed, jobs)
+        out.print(f"wrote {write_saved(config, overrides, found, save_config, command='vehid identify')}")
