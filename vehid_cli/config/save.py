@@ -87,7 +87,7 @@ def _comment(edit: ConfigEdit, found: Identified) -> str:
         pair = found.ci95.get(edit.name)
         ok = pair is not None and all(math.isfinite(v) for v in pair)
         ci = f"95 % interval [{pair[0]:.6g}, {pair[1]:.6g}]" if ok else "95 % interval unknown"
-    value = f"{edit.name} = {found.values[edit.name]:.6g}, " if edit.key.rpartition(".")[2] != edit.name else ""
+    value = "" if edit.key.endswith(edit.name) else f"{edit.name} = {found.values[edit.name]:.6g}, "
     run = f" ({found.label})" if found.label else ""
     return f"identified{run}: {value}{ci}" + (f"; {edit.note}" if edit.note else "")
 
