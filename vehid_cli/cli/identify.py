@@ -57,6 +57,16 @@ def _results_target(
     return target
 
 
+def _save_config(config: Path, overrides: list[str], campaign, results: Path, target: Path) -> None:
+    """--save-config: the input config with the campaign's estimates in place."""
+    from ..config.save import save_config
+    from ..report.saved_config import campaign_found
+
+    out.print(
+        f"wrote {save_config(config, overrides, campaign_found(campaign, results), target, command='vehid identify')}"
+    )
+
+
 @guarded
 def identify(
     config: Annotated[Path, typer.Argument(metavar="CONFIG", help="Experiment config (YAML).", show_default=False)],
@@ -135,9 +145,4 @@ def identify(
         out.print(note)
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
     if save_config is not None:
-        from ..config.save import save_config as write_saved
-        from ..report.saved_config import campaign_found
-
-        found = campaign_found(campaign, target)
-        overrides = campaign_overrides(set_, runs, seed, jobs)
-        out.print(f"wrote {write_saved(config, overrides, found, save_config, command='vehid identify')}")
+        _save_config(config, campaign_overrides(set_, runs, seed, jobs), campaign, target, save_config)
