@@ -25,6 +25,7 @@ import yaml
 
 from ..core.errors import InputError
 from ..core.files import atomic_path, read_text
+from . import apply_overrides, config_from_dict, load_config
 from .common import ConfigEdit, SystemConfig
 from .safe_yaml import load_yaml
 
@@ -46,8 +47,6 @@ def save_config(
 ) -> Path:
     """Write `source` (with `overrides`) and the identified values in place to `target` (YAML, atomically); the
     result is validated before it is written. Returns the target."""
-    from . import apply_overrides, config_from_dict, load_config
-
     source, target = Path(source), Path(target)
     resolved = load_config(source, overrides)  # every error of the input config, as `identify` reports it
     text = read_text(source, "config file", "a YAML config file")
@@ -58,9 +57,8 @@ def save_config(
     for edit in cfg.edits_for(found.values):
         _put(raw, edit.key, edit.value)
         comments[tuple(edit.key.split("."))] = _comment(edit, found)
-    ident = raw.setdefault("identify", {})
     if cfg.identify.start == "random":
-        ident["start"] = "auto"
+        _put(raw, "identify.start", "auto")
         comments[("identify", "start")] = "was random: on measured data the fit now starts at the values above"
     try:
         config_from_dict(copy.deepcopy(raw), source=str(target))
