@@ -285,6 +285,23 @@ def test_identify_default_output_directory_is_checked(tmp_path):
         assert "the default output directory runs" in res.stderr and "Permission denied" in res.stderr
 
 
+def test_identify_default_output_names_the_data_file_so_campaigns_never_clash(tmp_path):
+    """Issue 23 (README "Effects"): `identify CONFIG` then `identify CONFIG --data RUN.csv` in one directory: the
+    second default name holds the data file's stem and differs from the first, so it is not refused (exit 2) as
+    another campaign's file; the same data file again resumes into the same name."""
+    damper = ROOT / "configs" / "dampers" / "synthetic_bingham.yaml"
+    small = ["--set", "identify.budget=60", "--runs", "1", "--jobs", "1"]
+    assert cli("simulate", damper, "-o", tmp_path / "bench.csv", cwd=tmp_path).exit_code == 0
+    first = cli("identify", damper, *small, cwd=tmp_path)
+    assert first.exit_code == 0, first.output
+    for _ in range(2):
+        res = cli("identify", damper, "--data", "bench.csv", *small, cwd=tmp_path)
+        assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in (tmp_path / "runs").glob("*.h5"))
+    assert len(names) == 2, names
+    assert names[0].startswith("synthetic_bingham-bench-") and not names[1].startswith("synthetic_bingham-bench")
+
+
 # ------------------------------------------------------------------------------------------ hostile options (issue 22)
 
 

@@ -114,6 +114,11 @@ def test_bump_run_A_acceptance(tmp_path):
     assert after["nre_percent"] * 10 <= before["nre_percent"]
     assert after["chi2_per_sample"] <= 1.1
     assert after["validation_J"] < before["validation_J"]
+    # issue 23: cf, cr land about 7 % above the configured values with tight intervals; the output says why
+    cf, cr = after["estimates"]["cf"], after["estimates"]["cr"]
+    note = next(n for n in doc["notes"] if n.startswith("cf, cr were re-fitted with asymmetric_damping"))
+    assert f"cf = {cf:.4g}" in note and f"cr = {cr:.4g}" in note and "compression c - dc/2" in note
+    assert note in result.output
 
 
 def test_diagnose_bad_input_exits_2(tmp_path):

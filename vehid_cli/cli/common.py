@@ -33,6 +33,15 @@ SetOption = Annotated[
         "--set", metavar="KEY=VALUE", help="Override a config value: dotted.key=value (repeatable).", show_default=False
     ),
 ]
+SaveConfigOption = Annotated[
+    Optional[Path],  # noqa: UP045 - typer needs Optional here
+    typer.Option(
+        "--save-config",
+        metavar="FILE.yaml",
+        help="Write the input config with the identified values in place (each with its 95 % interval and the run "
+        "it came from): vehid simulate / identify FILE.yaml continue from it.",
+    ),
+]
 RunsOption = Annotated[
     Optional[int],  # noqa: UP045 - typer needs Optional here
     typer.Option("--runs", metavar="N", help="Runs per campaign (identify.runs)."),

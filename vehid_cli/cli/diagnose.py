@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .common import SetOption, check_output_dir, check_writable, guarded, out, warn
+from .common import SaveConfigOption, SetOption, check_output_dir, check_writable, guarded, out, warn
 
 
 def _print_diagnosis(result) -> None:
@@ -57,6 +57,7 @@ def diagnose(
         ),
     ] = None,
     set_: SetOption = None,
+    save_config: SaveConfigOption = None,
 ) -> None:
     """Close the loop: fit, analyse the residual, rank candidates (missing effects, mis-set known parameters),
     add the best, re-fit; say whether the residual is now at the noise.
@@ -79,6 +80,8 @@ def diagnose(
         check_writable(json_out, (".json",))
     if plots is not None:
         check_output_dir(plots, "--plots")
+    if save_config is not None:
+        check_writable(save_config, (".yaml", ".yml"))
     result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn)
     doc = result.to_json()
     _print_diagnosis(result)
@@ -88,3 +91,9 @@ def diagnose(
     if json_out is not None:
         write_json(json_out, doc)
         out.print(f"wrote {json_out}")
+    if save_config is not None:
+        from ..config.save import save_config as write_saved
+        from ..report.saved_config import diagnosis_found
+
+        found = diagnosis_found(result, data or ())
+        out.print(f"wrote {write_saved(config, set_ or (), found, save_config, command='vehid diagnose')}")

@@ -8,12 +8,14 @@ import hashlib
 import json
 import typing
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
+from ..core.errors import InputError
 from ..core.hints import closest
 from ..optimizers import ALGORITHMS, algorithm_class
 
@@ -157,6 +159,18 @@ class IdentifyCommon(_Section):
                 )
 
 
+@dataclass(frozen=True)
+class ConfigEdit:
+    """One change `--save-config` makes to a config: the dotted key, its new value, the identified parameter it
+    carries (its interval goes in the key's comment; None: a consequence of one, e.g. a2 when the wheelbase is kept)
+    and a note saying why."""
+
+    key: str
+    value: Any
+    name: str | None = None
+    note: str = ""
+
+
 class SystemConfig(_Section):
     """Base of a whole config (a car, a damper): where it was read from, its YAML and its digest."""
 
@@ -189,6 +203,11 @@ class SystemConfig(_Section):
         """Other files a campaign's results depend on (held-out runs, a stage's own run); `measured`: the campaign
         identifies from measured runs."""
         return ()
+
+    def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
+        """The config keys that hold identified `values` (by parameter name, SI units), for `--save-config`; a
+        system whose config can carry them overrides this."""
+        raise InputError(f"--save-config: a {type(self).__name__} cannot hold identified values", source=self.source)
 
     def _relocated(self, update: dict[str, Any]) -> SystemConfig:
         """A copy with some sections replaced, keeping the source it was read from."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -15,6 +16,7 @@ from ..models.effects import LIBRARY, bench_names, bound_violation
 from .common import (
     PARAMETER_MAX,
     Algorithm,
+    ConfigEdit,
     Factor,
     Finite,
     IdentifyCommon,
@@ -218,6 +220,14 @@ class DamperConfig(SystemConfig):
     data: DamperData | None = None
     noise: DamperNoise = DamperNoise()
     identify: DamperIdentify
+
+    def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
+        """`damper.parameters.<name>` for the model's parameters, `damper.effects.<effect>.<param>` for an effect's
+        around it."""
+        return [
+            ConfigEdit(f"damper.effects.{n}" if "." in n else f"damper.parameters.{n}", float(v), n)
+            for n, v in values.items()
+        ]
 
     @model_validator(mode="after")
     def _consistent(self) -> DamperConfig:

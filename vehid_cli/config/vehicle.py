@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -14,6 +15,7 @@ from ..models.fullcar import VEHICLE_PARAMETERS
 from ..models.sensors import FAMILY, Layout, corner_layout
 from .common import (
     BumpShape,
+    ConfigEdit,
     Finite,
     IdentifyCommon,
     NonNeg,
@@ -510,6 +512,28 @@ class Config(SystemConfig):
         lo_f, hi_f = ident.bounds
         box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
         return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
+
+    def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
+        """`vehicle.<name>` for the car's parameters, `vehicle.effects.<effect>.<param>` for an effect's (an effect
+        the config lacks makes the integrator rk4, as `diagnose` fitted it); a1 (b1) keeps the wheelbase (track):
+        a2 (b2), where the config gives it, becomes the rest (SPEC section 1)."""
+        v, out = self.vehicle, []
+        spans = {"a1": ("a2", v.L, "wheelbase"), "a2": ("a1", v.L, "wheelbase"),
+                 "b1": ("b2", v.w, "track"), "b2": ("b1", v.w, "track")}  # fmt: skip
+        for name, value in values.items():
+            if "." in name:
+                out.append(ConfigEdit(f"vehicle.effects.{name}", float(value), name))
+                continue
+            out.append(ConfigEdit(f"vehicle.{name}", float(value), name))
+            if name in spans and getattr(v, spans[name][0]) is not None:
+                other, span, what = spans[name]
+                note = f"{what} {span:g} m kept: {span:g} - {name}"
+                out.append(ConfigEdit(f"vehicle.{other}", span - float(value), None, note))
+        new = {n.partition(".")[0] for n in values if "." in n} - set(v.effects or {})
+        if new and self.simulation.integrator not in ("rk4", "newmark"):
+            note = f"{', '.join(sorted(new))} make the car nonlinear: rk4, as vehid diagnose fitted it"
+            out.append(ConfigEdit("simulation.integrator", "rk4", None, note))
+        return out
 
     def resolved(self, path: Path) -> Config:
         """The road file and the data runs named relative to the config file, resolved against its directory."""

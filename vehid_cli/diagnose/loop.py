@@ -460,6 +460,21 @@ class _Augmentation:
                     f"{n}, freed with a dropped effect, is back at its configured value (p = {p_keep:.2g})"
                 )
             self.say(self.notes[-1])
+        self.note_companions()
+
+    def note_companions(self) -> None:
+        """Say that a claimed effect's companions (asymmetric damping's cf, cr) were re-fitted with it: their
+        meaning changed, so their distance from the configured values is no error of the fit."""
+        for effect in self.claimed:
+            names = [n for n in self.subject.specs[effect].companions if n in self.current.names]
+            if not names:
+                continue
+            values = ", ".join(f"{n} = {self.current.x[self.current.names.index(n)]:.4g}" for n in names)
+            self.notes.append(
+                f"{', '.join(names)} were re-fitted with {effect}, which splits them ({values}): with it they are the "
+                "centre its own parameters spread around (asymmetric damping: rebound c + dc/2, compression c - dc/2), "
+                "not the configured values, and may sit far from them"
+            )
 
 
 def augment(

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import warnings
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -267,7 +268,9 @@ class Campaign(Result):
         rows = [r.channel_chi2 for r in self.records if r.channel_chi2.size == len(self.channels)]
         if not rows or not self.channels:
             return {}
-        med = np.nanmedian(np.array(rows), axis=0)
+        with warnings.catch_warnings():  # a channel with no entries in any run: NaN, quietly
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(np.array(rows), axis=0)
         return {n: {"chi2_per_sample": float(v)} for n, v in zip(self.channels, med, strict=True)}
 
     def worst_channels(self, low: bool = False, count: int = 3) -> list[tuple[str, float]]:
