@@ -45,7 +45,8 @@ def write_campaign_h5(path: str | Path, campaign, attrs: Mapping[str, str] | Non
     attrs: kind, system (vehicle, damper), config_yaml, config_sha256, seed, runs, objective (f1, f2, wls; J for
     a damper), algorithm, data_file, data_sha256, sigma_source, provenance, `attrs` (e.g. a sweep's varied keys);
     the user block holds the file's checksum
-    /parameters (D,) names (attribute units: a JSON list, the SI unit of each); /truth (D,) (NaN when unknown; attr known); /nominal, /bounds (D, 2)
+    /parameters (D,) names (attribute units: a JSON list, the SI unit of each)
+    /truth (D,) (NaN when unknown; attr known); /nominal, /bounds (D, 2)
     /runs/{estimate (N, D), cost, evaluations, penalised, wall_s (N,), history_evals, history_cost (N, H)}
     /summary/{mean, sd, re_percent, per_run_nre_percent, ...} with scalar figures as attributes
     /crlb/{re_sd_percent (D,), fisher (D, D), identifiable (D,)} with nre_rms_percent, condition attributes
