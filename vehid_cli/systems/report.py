@@ -193,7 +193,7 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]], left: i
     def line(cells: Sequence[str]) -> str:
         return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
 
-    return [line(header), line(align), *(line(r) for r in rows)]
+    return [line(header), "|" + "|".join(align) + "|", *(line(r) for r in rows)]
 
 
 def latex_text(text: str) -> str:

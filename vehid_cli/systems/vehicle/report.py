@@ -172,7 +172,8 @@ def markdown(campaigns: list[Campaign], published: dict | None = None) -> str:
     parts = []
     for group in grouped(campaigns):
         header, rows = _grid(group, published)
-        parts.append(f"**{group_title(group[0])}** ({interval_note(group[0])})\n")
+        parts.append(f"**{group_title(group[0])}**\n")
+        parts.append(f"_{interval_note(group[0])}_\n")
         parts.extend(markdown_table(header, rows, left=2))
         parts.append("")
     return "\n".join(parts)
