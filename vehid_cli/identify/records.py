@@ -321,9 +321,11 @@ class Campaign(Result):
         runs = len(self.records)
         for name, hits in self.at_bound.items():
             where = "" if runs == 1 else f" in {hits} of {runs} runs"
+            j = self.names.index(name)
+            box = f"[{self.lower[j]:.4g}, {self.upper[j]:.4g}] {self.units[name]}".rstrip()
             out.append(
-                f"{name} sits on a bound of its search box{where}: the optimum lies beyond it and no interval means "
-                "anything there; widen identify.bounds or identify.limits, or check the data (vehid check)"
+                f"{name} sits on a bound of its search box {box}{where}: the optimum lies beyond it and no interval "
+                "means anything there; widen identify.bounds or identify.limits, or check the data (vehid check)"
             )
         low_limit = 1.0 - 5.0 * np.sqrt(2.0 / max(s.residual_samples, 1))
         if s.model_inadequate:

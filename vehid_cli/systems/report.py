@@ -85,14 +85,17 @@ class ParameterRow:
 
     @property
     def with_interval(self) -> str:
-        """'1235 ± 12'; one fit on a bound: 'AT BOUND [lo, hi]' (the box), no interval."""
+        """'1235 ± 12'; one fit on a bound: '4550 AT BOUND' (no interval: the optimum lies beyond the box)."""
         if self.runs == 1 and self.at_bound:
-            return f"{significant(self.estimate)} AT BOUND [{significant(self.lower, 4)}, {significant(self.upper, 4)}]"
+            return f"{significant(self.estimate)} AT BOUND"
         v, u = rounded(self.estimate, self.half95)
         return v if u == DASH else f"{v} ± {u}"
 
     @property
     def interval_text(self) -> str:
+        """'[1223, 1247]'; one fit on a bound: the search box, 'box [lo, hi]'."""
+        if self.runs == 1 and self.at_bound:
+            return f"box [{significant(self.lower, 4)}, {significant(self.upper, 4)}]"
         return interval(self.low, self.high) if np.isfinite(self.half95) else DASH
 
     @property
@@ -160,9 +163,10 @@ def parameter_tables(campaigns: Sequence[Campaign], files: Sequence[str]) -> lis
     for c, f in zip(campaigns, files, strict=True):
         t = Table(title=f"{Path(f).stem} · {c.system} · {c.objective} · {len(c.records)} run(s)", title_justify="left")
         for col in TEXT_COLUMNS:
-            add_column(t, col)
+            if col != "95 % interval":  # the terminal's 80 columns: the estimate ± 95 % says it
+                add_column(t, col)
         for row in parameter_rows(c):
-            t.add_row(*text_cells(row))
+            t.add_row(*(cell for col, cell in zip(TEXT_COLUMNS, text_cells(row), strict=True) if col != "95 % interval"))
         t.caption = interval_note(c)
         t.caption_justify = "left"
         out.append(t)
@@ -172,8 +176,10 @@ def parameter_tables(campaigns: Sequence[Campaign], files: Sequence[str]) -> lis
 def add_column(table: Table, header: str) -> None:
     """A column of a parameter table: names and units left-aligned, numbers right; a name, a unit and an estimate
     with its interval never wrap (the headers and the other columns give way in a narrow terminal)."""
-    keep = header in ("parameter", "unit") or "±" in header or "interval" in header
-    table.add_column(header, justify="left" if header in ("parameter", "unit") else "right", no_wrap=keep)
+    keep = header in ("parameter", "unit") or "±" in header
+    widest = max(len(word) for word in header.split())  # a narrow terminal wraps a header, never hides it
+    justify = "left" if header in ("parameter", "unit") else "right"
+    table.add_column(header, justify=justify, no_wrap=keep, min_width=widest)
 
 
 def interval_note(c: Campaign) -> str:

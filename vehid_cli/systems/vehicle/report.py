@@ -66,17 +66,16 @@ def summary_table(c: Campaign) -> Table:
 
 def single_fit_table(c: Campaign) -> Table:
     """One fit: per parameter its unit, the estimate ± its 95 % interval (1.96 x the bound's sd at the estimate, for
-    the noise the data imply), the interval, the bound relative to the estimate, and RE when the truth is declared;
-    an estimate on a bound of its box is marked AT BOUND, with the box and no interval."""
+    the noise the data imply), the bound relative to the estimate, and RE when the truth is declared; an estimate
+    on a bound of its box is marked AT BOUND, with no interval (the notes name the box)."""
     s, r = c.summary, c.records[0]
     table = Table(title=campaign_title(c), title_justify="left")
-    for col in ("parameter", "unit", "truth", "estimate ± 95 %", "95 % interval", "CRLB sd %", "RE %"):
+    for col in ("parameter", "unit", "truth", "estimate ± 95 %", "CRLB sd %", "RE %"):
         add_column(table, col)
     for row in parameter_rows(c):
         table.add_row(
-            row.label, row.unit, row.truth_text, row.with_interval, row.interval_text, fixed(row.crlb_sd_percent),
-            fixed(row.re_percent),
-        )  # fmt: skip
+            row.label, row.unit, row.truth_text, row.with_interval, fixed(row.crlb_sd_percent), fixed(row.re_percent)
+        )
     table.caption = (
         f"{interval_note(c)}\none fit (every run would fit the same data) · χ²/sample {_f(s.chi2_median, 2)} · "
         f"evaluations {r.evaluations} · penalised {s.penalised} · wall {s.wall_s:.1f} s"
