@@ -162,11 +162,12 @@ def parameter_tables(campaigns: Sequence[Campaign], files: Sequence[str]) -> lis
     out = []
     for c, f in zip(campaigns, files, strict=True):
         t = Table(title=f"{Path(f).stem} · {c.system} · {c.objective} · {len(c.records)} run(s)", title_justify="left")
-        for col in TEXT_COLUMNS:
-            if col != "95 % interval":  # the terminal's 80 columns: the estimate ± 95 % says it
-                add_column(t, col)
+        shown = [i for i, col in enumerate(TEXT_COLUMNS) if col != "95 % interval"]  # 80 columns: ± says it
+        for i in shown:
+            add_column(t, TEXT_COLUMNS[i])
         for row in parameter_rows(c):
-            t.add_row(*(cell for col, cell in zip(TEXT_COLUMNS, text_cells(row), strict=True) if col != "95 % interval"))
+            cells = text_cells(row)
+            t.add_row(*(cells[i] for i in shown))
         t.caption = interval_note(c)
         t.caption_justify = "left"
         out.append(t)
