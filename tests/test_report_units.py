@@ -179,3 +179,32 @@ def test_a_damper_campaign_shows_its_model_units_in_every_format(files):
         check_interval(md[p][4], low, high)
         check_rounded(tex[p][3].replace(r" $\pm$ ", " ± "), (low + high) / 2, (high - low) / 2)
         assert [float(rows[p]["ci95_low"]), float(rows[p]["ci95_high"])] == doc["ci95"][p]
+
+
+def test_a_file_written_before_units_were_recorded_reads_with_the_configs_units(files, tmp_path):
+    """Older campaign files have no /parameters attribute `units`: the config's declarations give them; a file's own
+    record wins over them; a record that does not name one unit per unknown is a damaged file (exit 2)."""
+    import shutil
+
+    import h5py
+
+    from vehid_cli.campaign.results import read_campaign_h5
+    from vehid_cli.core.store import stamp_checksum
+
+    def edited(name: str, units: list[str] | None):
+        path = tmp_path / f"{name}.h5"
+        shutil.copy(files / "sim.h5", path)
+        with h5py.File(path, "r+") as h5:
+            del h5["parameters"].attrs["units"]
+            if units is not None:
+                h5["parameters"].attrs["units"] = json.dumps(units)
+        stamp_checksum(path)
+        return path
+
+    old = read_campaign_h5(edited("old", None))
+    assert old.stored_units == () and old.units == CAR_UNITS
+    assert json.loads(report(tmp_path / "old.h5", "json"))[0]["units"] == CAR_UNITS
+    own = read_campaign_h5(edited("own", ["t", "t m²", "t m²", "mm", "mm"]))  # made up, to tell them apart
+    assert own.units["m"] == "t" and own.units["a1"] == "mm"
+    code, _, err = invoke("report", edited("short", ["kg"]), "--format", "json")
+    assert code == 2 and "attribute 'units' of /parameters names 1 units for 5 unknowns" in err
