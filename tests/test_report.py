@@ -42,9 +42,9 @@ def test_markdown_puts_algorithms_side_by_side_with_published_values(campaign_di
     campaigns, files = read_all(campaign_dir)
     text = render(campaigns, files, "md", load_published(PAPER))
     assert text.count("**objective f1") == 1  # one group: same objective and noise
-    header = next(line for line in text.splitlines() if line.startswith("|  | true"))
-    assert "abc est" in header and "cpso RE %" in header and "abc paper RE %" in header
-    assert "| Ix | 500 |" in text
+    header = next(line for line in text.splitlines() if line.startswith("| parameter | unit | true"))
+    assert "abc est ± 95 %" in header and "cpso RE %" in header and "abc paper RE %" in header
+    assert "| Ix | kg m² | 500 |" in text
     nre_row = next(line for line in text.splitlines() if line.startswith("| NRE of mean %"))
     cells = [c.strip() for c in nre_row.strip("|").split("|")]
     assert cells[header.strip("|").split("|").index(" abc paper RE % ")] == "0.729"  # the paper's ABC, f1, 10 %

@@ -17,6 +17,8 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
 from ..core.errors import InputError
 from ..core.hints import closest
+from ..core.units import declared_unit
+from ..models.effects import parameter_unit
 from ..optimizers import ALGORITHMS, algorithm_class
 
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -189,6 +191,25 @@ class SystemConfig(_Section):
         """SHA-256 of the resolved config, independent of key order and formatting."""
         canonical = json.dumps(self.model_dump(mode="json", exclude_none=True, by_alias=True), sort_keys=True)
         return hashlib.sha256(canonical.encode()).hexdigest()
+
+    def unit(self, name: str) -> str:
+        """The SI unit of the identifiable parameter `name`, read where the parameter is declared: an effect's own
+        declaration (``<effect>.<param>``), else the type of the field of that name in one of the config's sections
+        (core.units.Unit); '' when none is declared. A system whose parameters are declared elsewhere (the damper's
+        model rows) extends this."""
+        if "." in name:
+            return parameter_unit(*name.split(".", 1))
+        for key in type(self).model_fields:
+            section = getattr(self, key)
+            field = type(section).model_fields.get(name) if isinstance(section, BaseModel) else None
+            unit = None if field is None else declared_unit(field.metadata)
+            if unit is not None:
+                return unit
+        return ""
+
+    def units(self, names: typing.Iterable[str]) -> dict[str, str]:
+        """{name: SI unit} of parameters (`unit`): the one lookup tables, JSON and results files use."""
+        return {n: self.unit(n) for n in names}
 
     def resolved(self, path: Path) -> SystemConfig:
         """The config with the files it names relative to its own file (`path`) resolved against that file's

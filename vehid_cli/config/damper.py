@@ -316,6 +316,10 @@ class DamperConfig(SystemConfig):
                 if why:  # one damper: the per-axle name reads as the plain one
                     raise _KeyedError(f"damper.effects.{name}.{key}", why.replace(f"{name}.{key}_f", f"{name}.{key}"))
 
+    def unit(self, name: str) -> str:
+        """The SI unit of a parameter of the damper's model row (models.damper.UNITS) or of a bench effect."""
+        return super().unit(name) if "." in name else MODELS[self.damper.model].unit(name)
+
     def effect_parameters(self) -> tuple[str, ...]:
         """The declared bench effects' parameters, as identify.unknowns names them (<effect>.<param>)."""
         return tuple(f"{e}.{p.name}" for e in self.damper.effects for p in LIBRARY[e].params)

@@ -9,7 +9,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from ..core.errors import InputError
-from ..core.units import SI_FACTORS, UNITS
+from ..core.units import SI_FACTORS, UNITS, Unit
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
 from ..models.sensors import FAMILY, Layout, corner_layout
@@ -42,13 +42,14 @@ RANGES = {
 }  # fmt: skip  (kg, kg m², m, N/m, N m/rad, N s/m)
 RANGES.update(mr=RANGES["mf"], Iy=RANGES["Ix"], kr=RANGES["kf"], ktf=RANGES["kf"], ktr=RANGES["kf"], cr=RANGES["cf"])
 RANGES.update({n: RANGES["a1"] for n in ("a2", "b1", "b2", "wheelbase", "track")})
-Mass = within(*RANGES["m"])
-Unsprung = within(*RANGES["mf"])
-Inertia = within(*RANGES["Ix"])
-Length = within(*RANGES["a1"])
-Stiffness = within(*RANGES["kf"])
-RollStiffness = within(*RANGES["kR"])
-Damping = within(*RANGES["cf"])
+# Each parameter's type carries its SI unit (core.units.Unit): tables, JSON and results files read it from here.
+Mass = Annotated[within(*RANGES["m"]), Unit("kg")]
+Unsprung = Annotated[within(*RANGES["mf"]), Unit("kg")]
+Inertia = Annotated[within(*RANGES["Ix"]), Unit("kg m²")]
+Length = Annotated[within(*RANGES["a1"]), Unit("m")]
+Stiffness = Annotated[within(*RANGES["kf"]), Unit("N/m")]
+RollStiffness = Annotated[within(*RANGES["kR"]), Unit("N m/rad")]
+Damping = Annotated[within(*RANGES["cf"]), Unit("N s/m")]
 Height = within(-1, 1)  # m, a bump under one corner
 SIMULATION_SAMPLES = 1_000_000  # samples of a simulated record at most (1000 s at 1 kHz)
 SIMULATION_STEPS = 20_000_000  # integration steps (samples x substeps) of one simulation at most

@@ -141,6 +141,7 @@ class Diagnosis(Result):
     unexplained: Unexplained | None = None  # the non-parametric strut force left unexplained (car, incomplete)
     data_files: tuple[str, ...] = ()  # several runs fitted jointly (empty: one run)
     checks: tuple[dict, ...] = ()  # the pre-fit checks of the measurement chain (SPEC section 6)
+    units: dict[str, str] = field(default_factory=dict)  # SI unit of each estimate before and after ('' unknown)
 
     @property
     def residual_ratio(self) -> float | None:
@@ -197,6 +198,7 @@ class Diagnosis(Result):
             "wall_s": self.wall_s,
             "notes": list(self.notes),
             "checks": [dict(c) for c in self.checks],
+            "units": dict(self.units),
         } | ({"data_files": list(self.data_files)} if self.data_files else {})
 
 
@@ -526,13 +528,15 @@ def close(
     order: tuple[str, ...] = (),
     unexplained: Unexplained | None = None,
     extra_notes: tuple[str, ...] = (),
+    unit: Callable[[str], str] = lambda _name: "",
     **fields,
 ) -> Diagnosis:
     """Run the loop from the declared fit (no claims when the data fail `quality`) and report the outcome;
     `chi2_residuals` is how many residuals the final chi² per sample averages (its noise limit);
     `unexplained`: the strut force the declared model misses, reported when the residual stays above the noise
     (against the declared model: what the library added did not explain it);
-    `fields` are the Diagnosis's descriptive fields (validation and noise sources, system, J definition)."""
+    `unit` gives a parameter's SI unit (the config's `unit`); `fields` are the Diagnosis's descriptive fields
+    (validation and noise sources, system, J definition)."""
     rounds = max_rounds if quality.ok else (0 if quality.before_fit else 1)  # a failed pre-check: no fits at all
     loop = augment(
         subject, fit, alpha=alpha, max_rounds=rounds, candidate_budget=candidate_budget,
@@ -554,5 +558,6 @@ def close(
         notes=loop.notes + extra_notes,
         chi2_limit=limit,
         unexplained=left,
+        units={n: unit(n) for n in dict.fromkeys(before.names + after.names)},
         **fields,
     )

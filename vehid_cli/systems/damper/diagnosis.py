@@ -278,7 +278,7 @@ def diagnose_damper(
         candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start,
         chi2_residuals=runs.train.t.size, validation_source=runs.validation_source,
         sigma_source=f"force noise sigma {bench.sigma:.4g} N estimated from the training run (third differences)",
-        system="damper", validation_from_file=bool(runs.held_out),
+        system="damper", validation_from_file=bool(runs.held_out), unit=config.unit,
         J_definition="Fleps-Dezasse Eq. 7: mean squared force error over the variance of the measured force",
     )  # fmt: skip
 

@@ -213,11 +213,9 @@ class DamperSystem(System):
 
     @classmethod
     def render(cls, campaigns: Sequence[Campaign], files: Sequence[str], fmt: str, published: dict | None) -> str:
-        from .report import csv_text, markdown
+        from .report import csv_text, latex, markdown
 
-        if fmt == "latex":
-            raise InputError("--format latex is not available for damper campaigns; use table, md, csv or json")
-        return (markdown if fmt == "md" else csv_text)(list(campaigns), list(files))
+        return {"md": markdown, "latex": latex}.get(fmt, csv_text)(list(campaigns), list(files))
 
     @classmethod
     def figures(cls, campaigns: Sequence[Campaign], files: Sequence[str], out_dir: Path) -> list[Path]:

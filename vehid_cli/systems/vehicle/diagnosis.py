@@ -257,7 +257,7 @@ def diagnose(
         candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start, order=order,
         unexplained=missing, chi2_residuals=R_total, validation_source=split.source, sigma_source=task.sigma_source,
         validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if car.joint else (),
-        extra_notes=notes, checks=tuple(found.to_json()),
+        extra_notes=notes, checks=tuple(found.to_json()), unit=config.unit,
     )  # fmt: skip
 
 

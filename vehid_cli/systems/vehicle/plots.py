@@ -101,7 +101,8 @@ def plot_convergence(group, path: str | Path) -> None:
 
 
 def plot_re_boxes(group, path: str | Path) -> None:
-    """Per-run RE of each parameter, a box per algorithm, with the Cramér–Rao ±1 sd band shaded."""
+    """Per-run RE of each parameter, a box per algorithm, with the Cramér–Rao ±1 sd band shaded; each panel's title
+    gives the truth in the parameter's unit."""
     names = group[0].names
     fig, axes = plt.subplots(1, len(names), figsize=(3 * len(names), 4), constrained_layout=True, squeeze=False)
     for j, name in enumerate(names):
@@ -112,7 +113,8 @@ def plot_re_boxes(group, path: str | Path) -> None:
         if bound < 1e3:
             ax.axhspan(-bound, bound, color="C2", alpha=0.2, lw=0, label="CRLB ±1 sd")
         ax.axhline(0, color="0.3", lw=0.8)
-        ax.set_title(name)
+        unit = group[0].units[name]
+        ax.set_title(f"{name}, truth {group[0].truth[j]:g} {unit}".rstrip(), fontsize=10)
         ax.set_ylabel("RE per run [%]")
         ax.tick_params(axis="x", rotation=45)
     axes[0, 0].legend(fontsize=8)
