@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .common import SetOption, check_output_dir, check_writable, guarded, out, warn
+from .common import SetOption, check_output_dir, check_writable, guarded, out, progress_bar, stage_hook, warn
 
 
 def _print_diagnosis(result) -> None:
@@ -79,7 +79,9 @@ def diagnose(
         check_writable(json_out, (".json",))
     if plots is not None:
         check_output_dir(plots, "--plots")
-    result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn)
+    with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left
+        progress = stage_hook(bar, {"candidates": "candidate", "fit": "fit"})
+        result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn, progress=progress)
     doc = result.to_json()
     _print_diagnosis(result)
     if plots is not None:
