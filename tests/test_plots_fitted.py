@@ -86,3 +86,64 @@ def test_measured_data_campaigns_get_a_fitted_figure_worst_channel_first(measure
     assert "fitted_fit.png" in names, names
     image = read_png(tmp_path / "fitted_fit.png")
     assert image.shape[0] > 1000  # a row per channel
+
+
+# ------------------------------------------------------------------------------------------ diagnose: before / after
+
+
+@pytest.fixture(scope="module")
+def diagnosed(tmp_path_factory):
+    """A diagnosis of a car whose kf and cr are off their configured values (the loop frees them), with the steps
+    its progress hook heard."""
+    from vehid_cli.systems import diagnose_config
+
+    d = tmp_path_factory.mktemp("diagnosed")
+    truth = load_config(BASE_CONFIG, SHORT + ["vehicle.kf=54000", "vehicle.cr=2975", "noise.level=0.05"])
+    VehicleSystem.write_simulation(truth, d / "kfcr.csv", seed=3)
+    steps: list[tuple[str, int, int | None]] = []
+    result = diagnose_config(BASE_CONFIG, SHORT, d / "kfcr.csv", progress=lambda *a: steps.append(a))
+    return result, d, steps
+
+
+def test_the_diagnosis_keeps_the_data_and_its_fits_are_the_models_at_the_estimates(diagnosed):
+    from vehid_cli.identify.task import build_task
+    from vehid_cli.io.measurement import read_measurement
+
+    result, d, _ = diagnosed
+    assert {"parameter:kf", "parameter:cr"} <= set(result.selected)
+    data = read_measurement(d / "kfcr.csv")
+    cfg = load_config(BASE_CONFIG, SHORT + ["identify.objective=wls", "noise.level=0", "simulation.integrator=rk4"])
+    task = build_task(cfg, d / "kfcr.csv")  # the loop integrates by RK4
+    exp = task.experiment
+    for report in (result.before, result.after):
+        an = report.analysis
+        values = {n: [v] for n, v in zip(report.names, report.x, strict=True)}
+        model = exp.read(exp.simulate(values))  # the car at this fit's estimates, simulated apart from the loop
+        for j, name in enumerate(an.channels):
+            family, k = name[:-1], int(name[-1]) - 1
+            np.testing.assert_allclose(an.measured[:, j], getattr(data, family)[:, k])
+            np.testing.assert_allclose(an.fitted[:, j], model[family][0, :, k], rtol=1e-6, atol=1e-9)
+        assert an.units == tuple("m/s^2" if n.startswith("acc") else "m" for n in an.channels)
+
+
+def test_the_diagnosis_figure_orders_channels_worst_first(diagnosed, tmp_path):
+    from vehid_cli.report.diagnose_plots import channel_order, plot_diagnosis
+
+    result, _, _ = diagnosed
+    an = result.before.analysis
+    order = channel_order(an)
+    assert sorted(order) == list(range(len(an.channels)))
+    assert list(an.chi2_channel[order]) == sorted(an.chi2_channel, reverse=True)
+    paths = plot_diagnosis(result, tmp_path, "kfcr")
+    assert tmp_path / "kfcr-channels.png" in paths
+    read_png(tmp_path / "kfcr-channels.png")
+
+
+def test_the_loop_reports_its_steps_through_the_hook(diagnosed):
+    result, _, steps = diagnosed
+    assert steps[:2] == [("declared fit", 0, 1), ("declared fit", 1, 1)]
+    first = [s for s in steps if s[0] == "round 1 candidates"]
+    n = len(result.rounds[0])
+    assert first == [("round 1 candidates", k, n) for k in range(n + 1)]
+    refits = [s for s in steps if "re-fit" in s[0]]
+    assert len(refits) >= 2 * len(result.steps) and refits[::2] == [(s, 0, 1) for s, _, _ in refits[1::2]]
