@@ -10,10 +10,11 @@ from tests.conftest import BASE_CONFIG, read_png
 from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
 from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
+from vehid_cli.diagnose.residuals import residual_spectrum
 from vehid_cli.identify.records import worst_first
 from vehid_cli.report.figures import write_plots
 from vehid_cli.systems import VehicleSystem
-from vehid_cli.systems.vehicle.fitted import campaign_fits, fitted_channels, residual_spectrum
+from vehid_cli.systems.vehicle.fitted import campaign_fits, fitted_channels
 from vehid_cli.systems.vehicle.plots import first_task
 
 SHORT = ["simulation.duration=1.5", "simulation.dt=0.002"]

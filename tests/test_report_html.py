@@ -11,14 +11,15 @@ from html.parser import HTMLParser
 
 import pytest
 
-from tests.conftest import BASE_CONFIG, cli
+from tests.conftest import BASE_CONFIG, ROOT, cli
 from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
 from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.report.html import Section, page, table_html
-from vehid_cli.systems import VehicleSystem
+from vehid_cli.systems import VehicleSystem, system_class
 
 SHORT = ["simulation.duration=1.5", "simulation.dt=0.002"]
+DAMPER = ROOT / "configs" / "dampers" / "synthetic_bingham.yaml"
 FIT = SHORT + [
     "identify.algorithm.name=lsq", "identify.objective=wls", "noise.level=0", "identify.start=config",
     "identify.unknowns=[m, Iy, a1]",
@@ -29,14 +30,18 @@ SIMULATED = SHORT + ["identify.runs=3", "identify.algorithm.name=de", "identify.
 
 @pytest.fixture(scope="module")
 def pages(tmp_path_factory):
-    """A measured-data campaign (one fit) and a simulated one (3 runs), each reported as a page by the CLI."""
+    """A measured-data campaign of the car (one fit), a simulated one (3 runs) and a damper's fit on a bench run,
+    each reported as a page by the CLI."""
     d = tmp_path_factory.mktemp("html")
     truth = load_config(BASE_CONFIG, SHORT + ["vehicle.m=1450", "noise.level=0.02"])
     VehicleSystem.write_simulation(truth, d / "run.csv", seed=5)
     write_campaign_h5(d / "fit.h5", run_campaign(load_config(BASE_CONFIG, FIT), d / "run.csv", jobs=1))
     write_campaign_h5(d / "sim.h5", run_campaign(load_config(BASE_CONFIG, SIMULATED), jobs=1))
+    bench = load_config(DAMPER)
+    system_class(bench).write_simulation(bench, d / "bench.csv", seed=1)
+    write_campaign_h5(d / "damper.h5", run_campaign(bench, d / "bench.csv", jobs=1))
     out = {}
-    for stem in ("fit", "sim"):
+    for stem in ("fit", "sim", "damper"):
         res = cli("report", d / f"{stem}.h5", "--html", d / f"{stem}.html")
         assert res.exit_code == 0, res.output
         assert res.stdout.strip() == f"wrote {d / f'{stem}.html'}"  # the page only: no tables on the terminal
@@ -150,7 +155,7 @@ def browser():
     b.quit()
 
 
-@pytest.mark.parametrize("stem", ["fit", "sim"])
+@pytest.mark.parametrize("stem", ["fit", "sim", "damper"])
 def test_the_page_renders_in_a_headless_browser(pages, browser, stem):
     from selenium.webdriver.common.by import By
 
@@ -169,5 +174,7 @@ def test_the_page_renders_in_a_headless_browser(pages, browser, stem):
         natural = browser.execute_script("return [arguments[0].complete, arguments[0].naturalWidth]", img)
         assert natural[0] and natural[1] > 0, img.get_attribute("alt")
         assert img.size["width"] > 0 and img.size["height"] > 0
+    alts = [img.get_attribute("alt") for img in images]
+    assert any(a.startswith("fitted") for a in alts) == (stem != "sim"), alts  # measured data: against the fit
     errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not errors, errors

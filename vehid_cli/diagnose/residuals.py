@@ -25,6 +25,7 @@ from ..identify.corrections import corrected, is_sensor_unknown
 from ..models.sensors import UNIT
 
 BAND_Z = 1.959963984540054  # two-sided 95 %
+WELCH_SEGMENT_S = 1.0  # residual_spectrum's Welch segment [s] (shorter for records under 8 s: 8 segments)
 
 
 @dataclass(frozen=True)
@@ -173,6 +174,15 @@ def spectrum(residual: NDArray, dt: float) -> tuple[NDArray, NDArray]:
         fj, pj = welch(residual[at, j], fs=1.0 / dt_j, nperseg=min(256, at.size))
         out[j] = np.where(f <= fj[-1], np.interp(f, fj, pj / (2.0 * dt_j)), np.nan)
     return f, out
+
+
+def residual_spectrum(residual: NDArray, fs: float) -> tuple[NDArray, NDArray]:
+    """Welch's one-sided amplitude spectral density of a residual sampled at `fs` [Hz]: (freq [Hz], ASD [unit/√Hz])."""
+    from scipy.signal import welch
+
+    nper = int(min(residual.size, max(16, min(WELCH_SEGMENT_S * fs, residual.size // 8))))
+    freq, psd = welch(residual, fs=fs, nperseg=nper, detrend="constant", scaling="density")
+    return freq, np.sqrt(psd)
 
 
 def fingerprint_channels(layout, p: dict[str, float], names: tuple[str, ...]) -> tuple[int, ...]:

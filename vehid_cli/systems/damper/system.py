@@ -200,9 +200,12 @@ class DamperSystem(System):
 
     @classmethod
     def figures(cls, campaigns: Sequence[Campaign], files: Sequence[str], out_dir: Path) -> list[Path]:
-        from .plots import write_damper_plots
+        from .plots import write_damper_plots, write_fitted_force_plots
 
-        return write_damper_plots([c.findings for c in campaigns], [Path(f).stem for f in files], out_dir)
+        stems = [Path(f).stem for f in files]
+        return write_damper_plots([c.findings for c in campaigns], stems, out_dir) + write_fitted_force_plots(
+            campaigns, stems, out_dir
+        )
 
     @classmethod
     def plot_simulation(cls, simulated: Simulated, path: Path) -> None:

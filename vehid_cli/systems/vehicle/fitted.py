@@ -9,11 +9,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ...diagnose.residuals import residual_spectrum
 from ...identify.records import worst_first
 from ...identify.task import JointTask, Task, build_tasks
 from ...models.sensors import UNIT
-
-WELCH_SEGMENT_S = 1.0  # Welch segment length [s] (at least 8 segments when the record is shorter than 8 s)
 
 
 @dataclass(frozen=True)
@@ -37,15 +36,6 @@ class ChannelFit:
     def chi2_per_sample(self) -> float:
         """Mean squared residual over sigma² (about 1 for a model that fits to the noise)."""
         return float(np.mean((self.residual / self.sigma) ** 2)) if self.sigma > 0 else float("inf")
-
-
-def residual_spectrum(residual: NDArray, fs: float) -> tuple[NDArray, NDArray]:
-    """Welch's one-sided amplitude spectral density of a residual sampled at `fs` [Hz]: (freq [Hz], ASD [unit/√Hz])."""
-    from scipy.signal import welch  # scipy only when figures are drawn
-
-    nper = int(min(residual.size, max(16, min(WELCH_SEGMENT_S * fs, residual.size // 8))))
-    freq, psd = welch(residual, fs=fs, nperseg=nper, detrend="constant", scaling="density")
-    return freq, np.sqrt(psd)
 
 
 def fitted_channels(task: Task, estimate: NDArray) -> list[ChannelFit]:
