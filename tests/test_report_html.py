@@ -4,6 +4,7 @@ names, every figure decodes, nothing is fetched from outside and the console sta
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -46,7 +47,19 @@ def pages(tmp_path_factory):
         assert res.exit_code == 0, res.output
         assert res.stdout.strip() == f"wrote {d / f'{stem}.html'}"  # the page only: no tables on the terminal
         out[stem] = d / f"{stem}.html"
+    sets = [x for s in SHORT for x in ("--set", s)]
+    res = cli("diagnose", BASE_CONFIG, "--data", d / "run.csv", *sets, "--json", d / "diagnose.json",
+              "--html", d / "diagnose.html")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    out["diagnose"] = d / "diagnose.html"
     return d, out
+
+
+def names_of(d, stem) -> tuple[str, ...]:
+    """The parameter names a page must show in its tables."""
+    if stem == "diagnose":
+        return tuple(json.loads((d / "diagnose.json").read_text())["after"]["estimates"])
+    return read_campaign_h5(d / f"{stem}.h5").names
 
 
 class _Elements(HTMLParser):
@@ -155,17 +168,28 @@ def browser():
     b.quit()
 
 
-@pytest.mark.parametrize("stem", ["fit", "sim", "damper"])
+def test_the_diagnosis_page_has_the_verdict_checks_and_the_channels_before_and_after(pages):
+    d, out = pages
+    doc = json.loads((d / "diagnose.json").read_text())
+    text = out["diagnose"].read_text(encoding="utf-8")
+    assert f"verdict: {doc['verdict']}" in text and "before / after" in text
+    p = parse(out["diagnose"])
+    alts = [a["alt"] for tag, a in p.tags if tag == "img"]
+    assert "run-channels.png" in alts and "run-residual.png" in alts
+    assert str(d / "run.csv") in text and "data sha256" in text
+    assert not re.search(r"(src|href)=\"(?!data:)", text) and "<script" not in text
+
+
+@pytest.mark.parametrize("stem", ["fit", "sim", "damper", "diagnose"])
 def test_the_page_renders_in_a_headless_browser(pages, browser, stem):
     from selenium.webdriver.common.by import By
 
     d, out = pages
-    campaign = read_campaign_h5(d / f"{stem}.h5")
     browser.get(out[stem].resolve().as_uri())
-    assert browser.title.startswith("vehid report")
+    assert browser.title.startswith("vehid diagnose" if stem == "diagnose" else "vehid report")
     rows = browser.find_elements(By.CSS_SELECTOR, "table tbody tr")
     first = [r.find_element(By.CSS_SELECTOR, "td").text for r in rows]
-    for name in campaign.names:  # a row per parameter, its name visible
+    for name in names_of(d, stem):  # a row per parameter, its name visible
         row = next(r for r, n in zip(rows, first, strict=True) if n.split()[0] == name)
         assert row.is_displayed() and row.size["height"] > 0
     images = browser.find_elements(By.TAG_NAME, "img")
@@ -175,6 +199,7 @@ def test_the_page_renders_in_a_headless_browser(pages, browser, stem):
         assert natural[0] and natural[1] > 0, img.get_attribute("alt")
         assert img.size["width"] > 0 and img.size["height"] > 0
     alts = [img.get_attribute("alt") for img in images]
-    assert any(a.startswith("fitted") for a in alts) == (stem != "sim"), alts  # measured data: against the fit
+    fitted = any(a.startswith("fitted") or a.endswith("-channels.png") for a in alts)
+    assert fitted == (stem != "sim"), alts  # measured data: against the fit
     errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not errors, errors

@@ -56,6 +56,12 @@ def diagnose(
             "--plots", metavar="DIR", help="Write figures here: residual before/after, fingerprint, spectrum."
         ),
     ] = None,
+    html: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option(
+            "--html", metavar="FILE", help="Write one self-contained page (verdict, tables, figures, provenance)."
+        ),
+    ] = None,
     set_: SetOption = None,
 ) -> None:
     """Close the loop: fit, analyse the residual, rank candidates (missing effects, mis-set known parameters),
@@ -79,6 +85,8 @@ def diagnose(
         check_writable(json_out, (".json",))
     if plots is not None:
         check_output_dir(plots, "--plots")
+    if html is not None:
+        check_writable(html, (".html", ".htm"))
     with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left
         progress = stage_hook(bar, {"candidates": "candidate", "fit": "fit"})
         result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn, progress=progress)
@@ -90,3 +98,9 @@ def diagnose(
     if json_out is not None:
         write_json(json_out, doc)
         out.print(f"wrote {json_out}")
+    if html is not None:
+        from ..report.html import diagnosis_facts, diagnosis_page, write_page
+
+        facts = diagnosis_facts(config, set_ or (), data or (), validate or ())
+        write_page(html, diagnosis_page(result, facts, (data[0] if data else config).stem))
+        out.print(f"wrote {html}")

@@ -6,6 +6,7 @@ No script, no external URL: the page reads offline and prints as it shows."""
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
 import tempfile
 from collections.abc import Iterable, Sequence
@@ -23,6 +24,8 @@ from ..core.files import atomic_path
 from ..core.provenance import provenance
 from ..identify.records import Campaign
 from . import campaign_notes, file_provenance, rich_tables
+from .diagnose_plots import plot_diagnosis
+from .diagnosis import diagnosis_tables
 from .figures import write_plots
 
 STYLE = """
@@ -154,12 +157,13 @@ def page(title: str, sections: Sequence[Section]) -> str:
     )
 
 
-def checks_table(c: Campaign) -> Table | None:
-    """The pre-fit checks of a measured-data campaign that found something (status other than ok), else None."""
-    found = [ch for ch in c.checks if ch.get("status") != "ok"]
+def checks_table(checks: Sequence[dict]) -> Table | None:
+    """The pre-fit checks of the measurement chain (SPEC section 6) that found something (status other than ok), as
+    a table; None when every check passed or none ran."""
+    found = [ch for ch in checks if ch.get("status") != "ok"]
     if not found:
         return None
-    table = Table(title=f"checks of the measurement chain: {len(found)} finding(s) of {len(c.checks)} checks")
+    table = Table(title=f"checks of the measurement chain: {len(found)} finding(s) of {len(checks)} checks")
     for col in ("channel", "check", "status", "value", "message"):
         table.add_column(col)
     for ch in found:
@@ -197,7 +201,7 @@ def campaign_sections(campaigns: Sequence[Campaign], files: Sequence[str], figur
     for i, (c, f) in enumerate(zip(campaigns, files, strict=True)):
         verdict = fit_verdict(c)
         own = [tables[i]] if per_file else (tables if i == 0 else [])
-        checks = checks_table(c)
+        checks = checks_table(c.checks)
         out.append(Section(
             title=f"{Path(f).name}: {c.system}, {c.objective or 'cost'}, "
             f"{'data ' + c.data_file if c.data_file else 'simulated data'}",
@@ -241,6 +245,55 @@ def campaign_page(
                                     figures=shared))  # fmt: skip
         title = "vehid report: " + ", ".join(Path(f).name for f in files[:4]) + (" ..." if len(files) > 4 else "")
         return page(title, sections)
+
+
+def sha256_file(path: str | Path) -> str:
+    """SHA-256 of a file's bytes ('unreadable: ...' when it cannot be read: the page still says which file)."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError as exc:
+        return f"unreadable: {exc.strerror}"
+    return h.hexdigest()
+
+
+def diagnosis_facts(config: str | Path, overrides: Sequence[str], data: Sequence[str | Path],
+                    validate: Sequence[str | Path]) -> dict[str, object]:  # fmt: skip
+    """Where a diagnosis came from: the config and every run read (with the SHA-256 of their bytes), the overrides,
+    vehid's version and commit, the host and the time."""
+    facts: dict[str, object] = {"config": str(config), "config_file_sha256": sha256_file(config)}
+    if overrides:
+        facts["--set"] = " ".join(overrides)
+    for kind, files in (("data", data), ("validate", validate)):
+        for i, f in enumerate(files, start=1):
+            key = kind if len(files) == 1 else f"{kind} {i}"
+            facts[key] = str(f)
+            facts[f"{key} sha256"] = sha256_file(f)
+    return facts | provenance()
+
+
+def diagnosis_page(result, facts: dict[str, object], stem: str = "diagnose", figures: bool = True) -> str:
+    """The page of `vehid diagnose --html`: the verdict, the candidate and before/after tables, what was added, the
+    notes and the checks of the measurement chain, the figures of --plots (the channels before and after the loop
+    among them) and where it came from."""
+    with tempfile.TemporaryDirectory(prefix="vehid-html-") as tmp:
+        paths = plot_diagnosis(result, tmp, stem) if figures else []
+        steps = [
+            f"added {s.effect}: J {s.J_before:.4g} -> {s.J_after:.4g}, validation J {s.validation_J_before:.4g} -> "
+            f"{s.validation_J_after:.4g}" for s in result.steps
+        ]  # fmt: skip
+        checks = checks_table(result.checks)
+        section = Section(
+            title=f"diagnosis ({result.system}), {result.wall_s:.1f} s", verdict="verdict: " + result.verdict,
+            verdict_ok=result.verdict.startswith(("adequate", "found")),
+            tables=[diagnosis_tables(result)] + ([checks] if checks is not None else []),
+            notes=steps + [f"note: {n}" for n in result.notes] + [f"noise: {result.sigma_source}",
+                                                                   f"validation: {result.validation_source}"],
+            figures=[Path(p) for p in paths], facts=facts,
+        )  # fmt: skip
+        return page(f"vehid diagnose: {stem}", [section])
 
 
 def write_page(path: str | Path, text: str) -> Path:
