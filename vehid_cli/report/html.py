@@ -220,7 +220,9 @@ def assign_figures(paths: Sequence[Path], files: Sequence[str]) -> tuple[dict[st
     own: dict[str, list[Path]] = {f: [] for f in files}
     shared = []
     for p in paths:
-        match = [f for f, s in stems.items() if p.stem.endswith("_" + s) or ("_" + s + "_run") in p.stem]
+        match = [
+            f for f, s in stems.items() if p.stem.endswith("_" + s) or f"_{s}_run" in p.stem or f"-{s}-" in p.stem
+        ]  # fmt: skip
         if len(match) == 1:
             own[match[0]].append(p)
         else:
