@@ -148,3 +148,20 @@ def test_the_loop_reports_its_steps_through_the_hook(diagnosed):
     assert first == [("round 1 candidates", k, n) for k in range(n + 1)]
     refits = [s for s in steps if "re-fit" in s[0]]
     assert len(refits) >= 2 * len(result.steps) and refits[::2] == [(s, 0, 1) for s, _, _ in refits[1::2]]
+
+
+def test_a_data_file_changed_since_the_fit_is_named_not_drawn_against(measured, tmp_path):
+    from tests.conftest import cli
+
+    _, d = measured
+    data = tmp_path / "run.csv"
+    data.write_bytes((d / "run.csv").read_bytes())
+    write_campaign_h5(tmp_path / "fit.h5", run_campaign(load_config(BASE_CONFIG, FIT), data, jobs=1))
+    with data.open("a") as fh:
+        fh.write("# edited after the fit\n")
+    res = cli("report", tmp_path / "fit.h5", "--plots", tmp_path / "figs")
+    assert res.exit_code == 2 and f"{data}: has changed since the campaign was fitted" in res.stderr, res.output
+    res = cli("report", tmp_path / "fit.h5", "--html", tmp_path / "page.html")  # the page still goes out
+    assert res.exit_code == 0, res.output
+    page = (tmp_path / "page.html").read_text(encoding="utf-8")
+    assert "no figures: " in page and "has changed since the campaign was fitted" in page and "<table" in page

@@ -20,6 +20,7 @@ from rich.table import Table
 from rich.text import Text
 
 from .. import __version__
+from ..core.errors import InputError
 from ..core.files import atomic_path
 from ..core.provenance import provenance
 from ..identify.records import Campaign
@@ -235,8 +236,13 @@ def campaign_page(
 ) -> str:
     """The page of `vehid report --html` for campaign files of one system (figures drawn into a temporary
     directory and embedded)."""
+    notes = list(notes)
     with tempfile.TemporaryDirectory(prefix="vehid-html-") as tmp:
-        paths = write_plots(list(campaigns), list(files), tmp) if figures else []
+        try:
+            paths = write_plots(list(campaigns), list(files), tmp) if figures else []
+        except InputError as exc:  # e.g. a data file moved or changed since the fit: the tables still go out
+            paths = []
+            notes.append(f"no figures: {exc}")
         own, shared = assign_figures(paths, files)
         sections = campaign_sections(campaigns, files, own)
         if len(sections) == 1:  # one campaign: its group's figures are its own

@@ -9,8 +9,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ...core.errors import InputError
 from ...diagnose.residuals import residual_spectrum
 from ...identify.records import worst_first
+from ...identify.source import DataSource
 from ...identify.task import JointTask, Task, build_tasks
 from ...models.sensors import UNIT
 
@@ -68,6 +70,12 @@ def campaign_fits(campaign) -> list[tuple[str, list[ChannelFit]]]:
     """A measured-data campaign's channels against its (first run's) estimate, per measured run (label, channels),
     each run's channels worst first (chi² per sample of the fit)."""
     files = campaign.data_files or (() if campaign.data_file is None else (campaign.data_file,))
+    digest = DataSource.resolve(campaign.config, files).digest
+    if campaign.data_sha256 and digest != campaign.data_sha256:
+        raise InputError(
+            "has changed since the campaign was fitted to it (SHA-256 differs): measured against fitted would compare "
+            "other data; restore the file or identify again", source=" + ".join(files),
+        )  # fmt: skip
     built = build_tasks(campaign.config, files)
     tasks = built.tasks if isinstance(built, JointTask) else (built,)
     estimate = campaign.records[0].estimate
