@@ -179,7 +179,7 @@ def test_every_command_runs_as_written(tmp_path):
             assert res.stdout.strip(), f"nothing printed by: {line}"  # e.g. the report's tables
         words = shlex.split(line)
         for k, word in enumerate(words[:-1]):
-            if word in (*WRITES, "--plot", "--plots"):
+            if word in (*WRITES, "--plot", "--plots", "--html"):
                 check_output(work / words[k + 1], line)
 
 
@@ -196,6 +196,9 @@ def check_output(path: Path, line: str) -> None:
         read_png(path)
     elif path.suffix == ".json":
         assert json.loads(path.read_text()), line
+    elif path.suffix == ".html":  # one self-contained page: tables and embedded figures
+        page = path.read_text(encoding="utf-8")
+        assert "<table" in page and 'src="data:image/png;base64,' in page, line
     elif path.suffix == ".h5":
         with h5py.File(path, "r") as h5:
             assert "config_yaml" in h5.attrs and len(h5) > 0, line

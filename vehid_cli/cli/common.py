@@ -149,10 +149,31 @@ def progress_bar(verb: str):
     if not err.is_terminal:
         from ..core.progress import PlainProgress
 
-        return PlainProgress(verb, {"sweep": "campaign", "design": "step"}.get(verb, "run"), warn)
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        return PlainProgress(verb, {"sweep": "campaign", "design": "step", "diagnose": "step"}.get(verb, "run"), warn)
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )  # fmt: skip
 
     return Progress(
         TextColumn(f"[bold]{verb}[/] {{task.description}}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err, transient=True,
+        TextColumn("ETA"), TimeRemainingColumn(), console=err, transient=True,
     )  # fmt: skip
+
+
+def stage_hook(bar, units: dict[str, str] | None = None):
+    """A library loop's progress hook (stage, done, total) shown on `bar`: a task per stage, made at its first call;
+    `units` names what a stage's steps are (by the stage's last word: 'candidates' -> 'candidate')."""
+    tasks: dict[str, int] = {}
+
+    def progress(stage: str, done: int, total: int | None) -> None:
+        if stage not in tasks:
+            unit = (units or {}).get(stage.rsplit(" ", 1)[-1])
+            tasks[stage] = bar.add_task(stage, total=total, **({"unit": unit} if unit else {}))
+        bar.update(tasks[stage], completed=done, total=total)
+
+    return progress

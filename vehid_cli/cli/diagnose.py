@@ -7,7 +7,17 @@ from typing import Annotated, Optional
 
 import typer
 
-from .common import SaveConfigOption, SetOption, check_output_dir, check_writable, guarded, out, warn
+from .common import (
+    SaveConfigOption,
+    SetOption,
+    check_output_dir,
+    check_writable,
+    guarded,
+    out,
+    progress_bar,
+    stage_hook,
+    warn,
+)
 
 
 def _print_diagnosis(result) -> None:
@@ -56,6 +66,12 @@ def diagnose(
             "--plots", metavar="DIR", help="Write figures here: residual before/after, fingerprint, spectrum."
         ),
     ] = None,
+    html: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option(
+            "--html", metavar="FILE", help="Write one self-contained page (verdict, tables, figures, provenance)."
+        ),
+    ] = None,
     set_: SetOption = None,
     save_config: SaveConfigOption = None,
 ) -> None:
@@ -82,7 +98,11 @@ def diagnose(
         check_output_dir(plots, "--plots")
     if save_config is not None:
         check_writable(save_config, (".yaml", ".yml"))
-    result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn)
+    if html is not None:
+        check_writable(html, (".html", ".htm"))
+    with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left
+        progress = stage_hook(bar, {"candidates": "candidate", "fit": "fit"})
+        result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn, progress=progress)
     doc = result.to_json()
     _print_diagnosis(result)
     if plots is not None:
@@ -97,3 +117,9 @@ def diagnose(
 
         found = diagnosis_found(result, data or ())
         out.print(f"wrote {write_saved(config, set_ or (), found, save_config, command='vehid diagnose')}")
+    if html is not None:
+        from ..report.html import diagnosis_facts, diagnosis_page, write_page
+
+        facts = diagnosis_facts(config, set_ or (), data or (), validate or ())
+        write_page(html, diagnosis_page(result, facts, (data[0] if data else config).stem))
+        out.print(f"wrote {html}")

@@ -29,6 +29,13 @@ BOUND_TOL = 1e-6  # an estimate within this fraction of its box's width of a bou
 PENALTY = Problem.__dataclass_fields__["penalty"].default  # the cost of a NaN/Inf evaluation (optimizers/base.py)
 
 
+def worst_first(chi2: dict[str, float]) -> list[str]:
+    """Channel names by their chi² per sample, largest (the worst fitted) first; NaN (no samples) last, ties in the
+    given order."""
+    known = [n for n, v in chi2.items() if not np.isnan(v)]
+    return sorted(known, key=lambda n: -chi2[n]) + [n for n in chi2 if n not in known]
+
+
 def _digest(arrays: dict[str, np.ndarray]) -> str:
     """SHA-256 of named arrays (names, dtypes, shapes and bytes, in name order)."""
     h = hashlib.sha256()

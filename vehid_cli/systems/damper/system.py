@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from ... import __version__
 from ...config import DamperConfig
 from ...core.errors import InputError
+from ...core.progress import ProgressHook
 from ...core.streams import run_streams
 from ...identify.crlb import CramerRao, cramer_rao_outputs
 from ...identify.records import Campaign, RunRecord
@@ -194,8 +195,9 @@ class DamperSystem(System):
 
     @classmethod
     def diagnose(
-        cls, config: DamperConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None
-    ) -> Diagnosis:
+        cls, config: DamperConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None,
+        progress: ProgressHook | None = None,
+    ) -> Diagnosis:  # fmt: skip
         """The bench's loop (`diagnosis.diagnose_damper`) on one run (else data.file), judged on `validate` (else
         data.validate)."""
         if len(data) > 1:
@@ -203,7 +205,7 @@ class DamperSystem(System):
                              source=config.source)  # fmt: skip
         from .diagnosis import diagnose_damper  # the loop's machinery only for `vehid diagnose`
 
-        return diagnose_damper(config, data[0] if data else None, validate or None, log=log)
+        return diagnose_damper(config, data[0] if data else None, validate or None, log=log, progress=progress)
 
     @classmethod
     def tables(cls, campaigns: Sequence[Campaign], files: Sequence[str]) -> list:
@@ -219,9 +221,12 @@ class DamperSystem(System):
 
     @classmethod
     def figures(cls, campaigns: Sequence[Campaign], files: Sequence[str], out_dir: Path) -> list[Path]:
-        from .plots import write_damper_plots
+        from .plots import write_damper_plots, write_fitted_force_plots
 
-        return write_damper_plots([c.findings for c in campaigns], [Path(f).stem for f in files], out_dir)
+        stems = [Path(f).stem for f in files]
+        return write_damper_plots([c.findings for c in campaigns], stems, out_dir) + write_fitted_force_plots(
+            campaigns, stems, out_dir
+        )
 
     @classmethod
     def plot_simulation(cls, simulated: Simulated, path: Path) -> None:
