@@ -88,8 +88,6 @@ def diagnose(
     The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
-    from ..core.jsonio import write_json
-    from ..report.diagnosis import plot_diagnosis_files
     from ..systems import diagnose_config
 
     if json_out is not None:
@@ -103,23 +101,32 @@ def diagnose(
     with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left
         progress = stage_hook(bar, {"candidates": "candidate", "fit": "fit"})
         result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn, progress=progress)
-    doc = result.to_json()
     _print_diagnosis(result)
+    _write_outputs(result, config, data or [], validate or [], set_ or (), json_out, plots, save_config, html)
+
+
+def _write_outputs(result, config: Path, data: list[Path], validate: list[Path], sets, json_out, plots, save_config,
+                   html) -> None:  # fmt: skip
+    """The files a diagnosis was asked for: figures, JSON, the diagnosed config, the HTML page."""
+    from ..core.jsonio import write_json
+    from ..report.diagnosis import plot_diagnosis_files
+
+    stem = (data[0] if data else config).stem
     if plots is not None:
-        for path in plot_diagnosis_files(result, plots, (data[0] if data else config).stem):
+        for path in plot_diagnosis_files(result, plots, stem):
             out.print(f"wrote {path}")
     if json_out is not None:
-        write_json(json_out, doc)
+        write_json(json_out, result.to_json())
         out.print(f"wrote {json_out}")
     if save_config is not None:
         from ..config.save import save_config as write_saved
         from ..report.saved_config import diagnosis_found
 
-        found = diagnosis_found(result, data or ())
-        out.print(f"wrote {write_saved(config, set_ or (), found, save_config, command='vehid diagnose')}")
+        found = diagnosis_found(result, data)
+        out.print(f"wrote {write_saved(config, sets, found, save_config, command='vehid diagnose')}")
     if html is not None:
         from ..report.html import diagnosis_facts, diagnosis_page, write_page
 
-        facts = diagnosis_facts(config, set_ or (), data or (), validate or ())
-        write_page(html, diagnosis_page(result, facts, (data[0] if data else config).stem))
+        facts = diagnosis_facts(config, sets, data, validate)
+        write_page(html, diagnosis_page(result, facts, stem))
         out.print(f"wrote {html}")
