@@ -169,6 +169,7 @@ def test_a_damper_campaign_shows_its_model_units_in_every_format(files):
     doc = json.loads((files / "damper.json").read_text())
     units = {"k1": "N/m", "c0": "N s/m", "fc": "N"}
     assert doc["units"] == units
+    assert set(doc["model_row_units"]) == set(doc["model_row"]) and doc["model_row_units"]["v_eps"] == "m/s"
     md = md_rows(report(files / "damper.h5", "md"))
     tex = latex_rows(report(files / "damper.h5", "latex"))
     rows = {r["parameter"]: r for r in csv.DictReader(io.StringIO(report(files / "damper.h5", "csv")))}
