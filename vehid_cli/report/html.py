@@ -10,7 +10,7 @@ import hashlib
 import html
 import tempfile
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,7 @@ ul.notes li { margin: .3em 0; }
 """
 
 
-@dataclass
+@dataclass(frozen=True)
 class Section:
     """A part of the page: a heading, a verdict line, tables (rich), notes, figures (PNG files) and facts."""
 
@@ -246,8 +246,8 @@ def campaign_page(
         own, shared = assign_figures(paths, files)
         sections = campaign_sections(campaigns, files, own)
         if len(sections) == 1:  # one campaign: its group's figures are its own
-            sections[0].figures = shared + sections[0].figures
-            sections[0].notes = list(notes) + sections[0].notes
+            one = sections[0]
+            sections = [replace(one, figures=shared + one.figures, notes=notes + one.notes)]
         elif shared or notes:
             sections.append(Section(title="figures and notes of the campaigns together", notes=list(notes),
                                     figures=shared))  # fmt: skip
