@@ -63,3 +63,15 @@ def test_a_plug_in_effect_brings_its_units_along():
     finally:
         unregister(toy_effect.EFFECT.name)
     assert tuple(LIBRARY) == before
+
+
+def test_a_correction_of_the_measurement_chain_has_its_faults_unit_in_the_channels_unit():
+    """sensor:<channel>:<param>: a gain, sign or weight is dimensionless, a delay in s, an offset in the channel's
+    own unit and a drift in it per second (the channel from the config's layout: acc in m/s², disp in m)."""
+    from vehid_cli.models.faults import FAULTS
+
+    cfg = load_config(BASE_CONFIG)
+    assert cfg.unit("sensor:acc1:offset") == "m/s^2" and cfg.unit("sensor:disp3:offset") == "m"
+    assert cfg.unit("sensor:disp2:drift") == "m/s" and cfg.unit("sensor:acc4:delay") == "s"
+    assert cfg.unit("sensor:acc1:swap:acc2") == "-" and cfg.unit("sensor:acc1:gain") == "-"
+    assert all(f.unit for f in FAULTS.values())  # every fault declares one

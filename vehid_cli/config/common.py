@@ -19,6 +19,7 @@ from ..core.errors import InputError
 from ..core.hints import closest
 from ..core.units import declared_unit
 from ..models.effects import parameter_unit
+from ..models.faults import correction_unit
 from ..optimizers import ALGORITHMS, algorithm_class
 
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -193,10 +194,14 @@ class SystemConfig(_Section):
         return hashlib.sha256(canonical.encode()).hexdigest()
 
     def unit(self, name: str) -> str:
-        """The SI unit of the identifiable parameter `name`, read where the parameter is declared: an effect's own
-        declaration (``<effect>.<param>``), else the type of the field of that name in one of the config's sections
+        """The SI unit of the identifiable parameter `name`, read where the parameter is declared: a correction of
+        the measurement chain (``sensor:<channel>:<param>``: its fault's `unit`), an effect's own declaration
+        (``<effect>.<param>``), else the type of the field of that name in one of the config's sections
         (core.units.Unit); '' when none is declared. A system whose parameters are declared elsewhere (the damper's
         model rows) extends this."""
+        sensor = correction_unit(name, self.channel_unit)
+        if sensor is not None:
+            return sensor
         if "." in name:
             return parameter_unit(*name.split(".", 1))
         for key in type(self).model_fields:
@@ -205,6 +210,10 @@ class SystemConfig(_Section):
             unit = None if field is None else declared_unit(field.metadata)
             if unit is not None:
                 return unit
+        return ""
+
+    def channel_unit(self, channel: str) -> str:
+        """The SI unit of a measured channel (for the corrections of the measurement chain); '' when unknown."""
         return ""
 
     def units(self, names: typing.Iterable[str]) -> dict[str, str]:

@@ -12,7 +12,7 @@ from ..core.errors import InputError
 from ..core.units import SI_FACTORS, UNITS, Unit
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
-from ..models.sensors import FAMILY, Layout, corner_layout
+from ..models.sensors import FAMILY, UNIT, Layout, corner_layout
 from .common import (
     BumpShape,
     ConfigEdit,
@@ -390,6 +390,11 @@ class Config(SystemConfig):
     data: VehicleData = VehicleData()
     identify: Identify = Identify()
     design: Design | None = Field(None, description="limits of the test `vehid design` plans (config/design.py)")
+
+    def channel_unit(self, channel: str) -> str:
+        """The SI unit of a sensor of the layout (models.sensors.UNIT of its family); '' for another name."""
+        kind = next((s.kind for s in self.sensor_layout().sensors if s.name == channel), None)
+        return "" if kind is None else UNIT[FAMILY[kind]]
 
     def sensor_layout(self) -> Layout:
         """The configured sensors (models.sensors.Layout), the paper's corner layout when none is given."""
