@@ -62,7 +62,7 @@ def test_identify_save_config_round_trip(tmp_path, system):
         lo, hi = (float(v) for v in line.split("95 % interval [")[1].split("]")[0].split(","))
         mean = first["mean"][name]
         assert lo == pytest.approx(mean - half[name], rel=1e-5) and hi == pytest.approx(mean + half[name], rel=1e-5)
-        assert "run.csv" in line
+        assert "run.csv" in line and line.split("]")[1].strip().split()[0] == first["units"][name].split()[0]
 
     assert cli("simulate", saved, "-o", tmp_path / "again.csv").exit_code == 0
     second, _, _ = identify(tmp_path, saved, run, "second")
@@ -94,7 +94,7 @@ def test_the_saved_config_keeps_the_wheelbase_and_takes_a_diagnosed_effect(tmp_p
     assert cfg.simulation.integrator == "rk4" and cfg.noise.level == 0
     text = target.read_text()
     assert "# my car" in text and "sensor:" not in text.split("selected")[1].split("\n", 1)[1]
-    assert "95 % interval [1308, 1312]" in text and "beta: 200000.0  # identified (run.csv" in text
+    assert "95 % interval [1308, 1312] kg" in text and "beta: 200000.0  # identified (run.csv" in text
     assert "interval unknown" in text
 
 

@@ -56,7 +56,7 @@ def save_config(
     comments: dict[tuple[str, ...], str] = {}
     for edit in cfg.edits_for(found.values):
         _put(raw, edit.key, edit.value)
-        comments[tuple(edit.key.split("."))] = _comment(edit, found)
+        comments[tuple(edit.key.split("."))] = _comment(edit, found, cfg.unit(edit.name) if edit.name else "")
     if cfg.identify.start == "random":
         _put(raw, "identify.start", "auto")
         comments[("identify", "start")] = "was random: on measured data the fit now starts at the values above"
@@ -76,7 +76,8 @@ def save_config(
     return target
 
 
-def _comment(edit: ConfigEdit, found: Identified) -> str:
+def _comment(edit: ConfigEdit, found: Identified, unit: str = "") -> str:
+    """The comment on an identified value: where it came from and its 95 % interval, in the parameter's unit."""
     if edit.name is None:
         return edit.note
     if edit.name in found.at_bound:
@@ -84,7 +85,8 @@ def _comment(edit: ConfigEdit, found: Identified) -> str:
     else:
         pair = found.ci95.get(edit.name)
         ok = pair is not None and all(math.isfinite(v) for v in pair)
-        ci = f"95 % interval [{pair[0]:.6g}, {pair[1]:.6g}]" if ok else "95 % interval unknown"
+        unit_text = f" {unit}" if unit and unit != "-" else ""
+        ci = f"95 % interval [{pair[0]:.6g}, {pair[1]:.6g}]{unit_text}" if ok else "95 % interval unknown"
     value = "" if edit.key.endswith(edit.name) else f"{edit.name} = {found.values[edit.name]:.6g}, "
     run = f" ({found.label})" if found.label else ""
     return f"identified{run}: {value}{ci}" + (f"; {edit.note}" if edit.note else "")
