@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-all lint bench bench-sweep paper close-the-loop design clean
+.PHONY: demo test test-all lint bench bench-sweep paper close-the-loop design clean browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,13 +21,28 @@ demo: $(STAMP)
 	    --set identify.algorithm.name=hybrid --set identify.objective=wls --set sensors=acc --json runs/demo/hybrid.json
 	$(BIN)/vehid report runs/demo --plots runs/demo/figures
 
+## browser: Debian's chromium and chromium-driver, for the browser test of `vehid report --html`: installed with
+## apt-get when missing and possible (root or password-less sudo; apt-get update only when the install fails)
+APT_BROWSER := DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver >/dev/null
+browser:
+	@if command -v chromedriver >/dev/null 2>&1 && { command -v chromium >/dev/null 2>&1 || \
+	        command -v chromium-browser >/dev/null 2>&1; }; then exit 0; fi; \
+	if ! command -v apt-get >/dev/null 2>&1; then \
+	    echo "note: no apt-get here: install chromium and chromedriver, else the browser test is skipped"; exit 0; fi; \
+	if [ "$$(id -u)" = 0 ]; then SUDO=; elif sudo -n true 2>/dev/null; then SUDO="sudo -n"; else \
+	    echo "note: not root and no sudo: the browser test is skipped (apt-get install chromium chromium-driver)"; \
+	    exit 0; fi; \
+	echo "installing chromium and chromium-driver (apt-get) for the browser test"; \
+	$$SUDO $(APT_BROWSER) 2>&1 || { $$SUDO apt-get update -q >/dev/null && $$SUDO $(APT_BROWSER); } || \
+	    echo "note: chromium could not be installed: the browser test is skipped"
+
 ## test: lint and the fast test suite (what CI runs)
-test: $(STAMP)
+test: $(STAMP) browser
 	$(BIN)/ruff check vehid_cli tests benchmarks examples
 	$(BIN)/python -m pytest -q -m "not slow"
 
 ## test-all: the whole suite, long checks included
-test-all: $(STAMP)
+test-all: $(STAMP) browser
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)

@@ -215,7 +215,7 @@ def test_without_a_terminal_identify_and_sweep_print_a_line_per_finished_step(tm
     assert res.exit_code == 0, res.output
     lines = [ln for ln in res.stderr.splitlines() if ln.startswith("identify de/f2: run ")]
     assert [ln.split(" done")[0] for ln in lines] == [f"identify de/f2: run {i}/3" for i in (1, 2, 3)], res.stderr
-    assert all(ln.endswith(" s elapsed)") for ln in lines)
+    assert all(ln.endswith((" s elapsed)", " s left)")) for ln in lines) and lines[-1].endswith(" s elapsed)")
     assert "run 3/3" not in res.stdout  # progress goes to stderr, results to stdout
     res = cli(
         "sweep", BASE_CONFIG, *sets, "--runs", "2", "--jobs", "1", "--vary", "noise.level=0.1,0.2", "-o", tmp_path
@@ -283,6 +283,23 @@ def test_identify_default_output_directory_is_checked(tmp_path):
         res = cli("identify", BASE_CONFIG, "--runs", "1", cwd=ro)
         assert res.exit_code == 2, res.output
         assert "the default output directory runs" in res.stderr and "Permission denied" in res.stderr
+
+
+def test_identify_default_output_names_the_data_file_so_campaigns_never_clash(tmp_path):
+    """Issue 23 (README "Effects"): `identify CONFIG` then `identify CONFIG --data RUN.csv` in one directory: the
+    second default name holds the data file's stem and differs from the first, so it is not refused (exit 2) as
+    another campaign's file; the same data file again resumes into the same name."""
+    damper = ROOT / "configs" / "dampers" / "synthetic_bingham.yaml"
+    small = ["--set", "identify.budget=60", "--runs", "1", "--jobs", "1"]
+    assert cli("simulate", damper, "-o", tmp_path / "bench.csv", cwd=tmp_path).exit_code == 0
+    first = cli("identify", damper, *small, cwd=tmp_path)
+    assert first.exit_code == 0, first.output
+    for _ in range(2):
+        res = cli("identify", damper, "--data", "bench.csv", *small, cwd=tmp_path)
+        assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in (tmp_path / "runs").glob("*.h5"))
+    assert len(names) == 2, names
+    assert names[0].startswith("synthetic_bingham-bench-") and not names[1].startswith("synthetic_bingham-bench")
 
 
 # ------------------------------------------------------------------------------------------ hostile options (issue 22)

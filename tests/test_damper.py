@@ -261,6 +261,39 @@ def test_step_by_step_identifies_a_force_map_with_lag_and_delays():
         assert tr.J < 1.2e-4, tr.name
 
 
+def test_a_staged_fit_of_the_very_model_that_made_the_data_is_not_called_inadequate():
+    """Issue 23: a staged run's chi2 took the last stage's J over the noise of the config's own bench run, so a fit
+    at the noise floor read 2.7x the noise and warned that the model lacks something. The residual power is now
+    over the last stage's own noise: about 1 for the model that made the data (within 5 sd of a chi2 mean over the
+    last stage's R samples)."""
+    from vehid_cli.campaign.runner import run_campaign
+    from vehid_cli.config import load_config
+
+    cfg = load_config(ROOT / "configs" / "dampers" / "synthetic_force_map_steps.yaml", ["identify.runs=1"])
+    campaign = run_campaign(cfg, jobs=1)
+    s = campaign.summary
+    assert not s.model_inadequate and not [w for w in campaign.advice() if "lacks something" in w]
+    assert s.chi2_median == pytest.approx(1.0, abs=5 * np.sqrt(2 / s.residual_samples))
+
+
+@pytest.mark.parametrize("effect, inadequate", [(None, False), ("{hysteresis: {alpha: 5.0e4, beta: 2.0e5}}", True)])
+def test_a_staged_fit_on_measured_data_is_flagged_only_when_the_model_lacks_something(tmp_path, effect, inadequate):
+    """The staged path on a measured run (the noise estimated from its force): a Bingham damper's own bench run fits
+    at the noise; the same run with a Bouc-Wen loop the Bingham model lacks is flagged."""
+    from vehid_cli.campaign.runner import run_campaign
+    from vehid_cli.config import load_config
+    from vehid_cli.systems import write_simulation
+
+    config = ROOT / "configs" / "dampers" / "synthetic_bingham.yaml"
+    run = tmp_path / "bench.csv"
+    truth = load_config(config, [] if effect is None else [f"damper.effects={effect}"])
+    write_simulation(truth, run, truth.identify.seed)
+    stages = "identify.stages=[{name: gas, unknowns: [k1]}, {name: rest, unknowns: [c0, fc]}]"
+    campaign = run_campaign(load_config(config, [stages, "identify.runs=1"]), run, jobs=1)
+    assert campaign.summary.model_inadequate is inadequate
+    assert bool([w for w in campaign.advice() if "lacks something" in w]) is inadequate
+
+
 @pytest.mark.slow
 def test_generalized_bouc_wen_round_trip_with_compression_and_rebound_sets():
     sets = {"comp": BW, "reb": dict(BW, c0=2600.0, alpha=1400.0, c1=30000.0)}

@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from tests.conftest import ROOT, invoke, read_png
+from vehid_cli.campaign.executor import LocalExecutor
 from vehid_cli.config import load_config
 from vehid_cli.design import (
     apply_plan,
@@ -133,6 +134,38 @@ def test_the_design_is_the_same_for_any_number_of_jobs(result):
     np.testing.assert_array_equal(other.designed.bound.re_sd_percent, result.designed.bound.re_sd_percent)
 
 
+@pytest.mark.parametrize("b1", [0.75, 0.6])
+def test_mirror_image_tests_are_a_tie_broken_toward_side_b1(result, b1):
+    """Issue 23 (`make design` gave the mirror image of docs/results/design.md): on a car symmetric left/right the
+    test with the sides' heights swapped has the same bound to rounding, so the design is the one with side b1
+    (corners 1 and 4) at the higher bump, whichever the search met first; on a car whose CG is off the centre line
+    the mirror is no tie and the better of the two stays."""
+    from vehid_cli.design.scoring import Scorer
+    from vehid_cli.design.search import MIRROR_TIE, prefer_side_b1
+    from vehid_cli.design.space import design_space
+
+    cfg = small(f"vehicle.b1={b1}")
+    space = design_space(cfg.design)
+    base = configured_plan(cfg)
+    x = space.vector(result.designed.plan)
+    k = space.free.index("side")
+    assert x[k] > 0
+    mirror = x.copy()
+    mirror[k] = -x[k]
+    with LocalExecutor(1) as pool:
+        scorer = Scorer(cfg, pool, 1)
+        picked = prefer_side_b1(scorer, space, base, mirror)
+        plans = {s: space.plan(v, base) for s, v in (("b1", x), ("b2", mirror))}
+    crit = {s: evaluate(cfg, p).criterion for s, p in plans.items()}
+    tie = abs(crit["b1"] - crit["b2"]) <= MIRROR_TIE * crit["b2"]
+    assert tie is (b1 == 0.75)
+    expect = "b1" if crit["b1"] <= crit["b2"] * (1 + MIRROR_TIE) else "b2"
+    assert space.plan(picked, base) == plans[expect]
+    if tie:
+        assert plans[expect].heights[0] > plans[expect].heights[1]  # corner 1 (side b1) high
+    assert result.designed.plan.heights[0] >= result.designed.plan.heights[1]
+
+
 def test_corner_heights():
     assert corner_heights(0.08, 0.25, 0.0) == pytest.approx((0.08, 0.06, 0.06, 0.08))
     assert corner_heights(0.08, -0.5, 0.5, 0.01) == pytest.approx((0.04, 0.08, 0.04, 0.02))
@@ -174,6 +207,23 @@ def test_the_cli_writes_the_config_json_and_figures(tmp_path):
     assert yaml.safe_load(best.read_text())["road"]["bump"]["heights"] == d["designed"]["test"]["heights"]
     for name in ("design_speed.png", "design_ratio.png"):
         read_png(figs / name)
+
+
+def test_the_cli_designs_sensors_end_to_end(tmp_path):
+    """Issue 23: a config with `design.sensors` ran into a TypeError in the report; the command now prints the
+    sensor row (configured layout beside the chosen subset) and writes a config whose layout is the chosen one."""
+    args = [x for s in SMALL for x in ("--set", s)]
+    sensors = json.dumps({"count": 3, "candidates": CANDIDATES})
+    best, doc = tmp_path / "best.yaml", tmp_path / "design.json"
+    fixed = ["design.speed_kmh=null", "design.length=null", "design.duration=null", "design.shapes=null"]
+    args += ["--set", f"design.sensors={sensors}", *[x for s in fixed for x in ("--set", s)]]
+    code, out, err = invoke("design", DESIGN, *args, "-o", best, "--json", doc, "--jobs", "1")
+    assert code == 0, err
+    chosen = tuple(json.loads(doc.read_text())["designed"]["test"]["sensors"])
+    assert len(chosen) == 3 and set(chosen) <= {c["name"] for c in CANDIDATES}
+    row = next(line for line in out.splitlines() if "sensors" in line and "3 of 6" in line)
+    assert "acc1" in row and all(name in row for name in chosen)
+    assert tuple(s.name for s in load_config(best).layout) == chosen
 
 
 @pytest.mark.slow

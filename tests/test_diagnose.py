@@ -14,6 +14,8 @@ from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
 from vehid_cli.diagnose.residuals import autocorrelation, bin_residual, ljung_box
 from vehid_cli.identify.task import build_task
+from vehid_cli.report import plain_text
+from vehid_cli.report.diagnosis import diagnosis_tables
 from vehid_cli.systems.vehicle.diagnosis import diagnose
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,6 +88,15 @@ def test_linear_run_selects_nothing():
     assert d.selected == ()
     assert d.before.chi2_per_sample < 1.05
     assert all(not r.accepted for r in d.rounds[0])
+    # issue 23: the before/after table gives each estimate's unit and rounds it to its 95 % interval
+    text = plain_text([diagnosis_tables(d)])
+    for j, name in enumerate(d.after.names):
+        row = next(line.split() for line in text.splitlines() if line.strip().startswith(f"{name} ["))
+        assert row[1] == f"[{d.units[name]}]" or " ".join(row[1:3]) == f"[{d.units[name]}]"
+        value, half = float(row[-3]), row[-1]  # the after column: "value ± half"
+        last = 10.0 ** (-len(half.partition(".")[2]) if "." in half else np.floor(np.log10(float(half))) - 1)
+        assert abs(value - d.after.x[j]) <= 0.5 * last * (1 + 1e-9) and row[-2] == "±"
+        assert abs(float(half) - d.after.ci[j]) <= 0.5 * last * (1 + 1e-9)
 
 
 def test_bump_run_A_acceptance(tmp_path):
@@ -114,6 +125,15 @@ def test_bump_run_A_acceptance(tmp_path):
     assert after["nre_percent"] * 10 <= before["nre_percent"]
     assert after["chi2_per_sample"] <= 1.1
     assert after["validation_J"] < before["validation_J"]
+    # issue 23: cf, cr land about 7 % above the configured values with tight intervals; the output says why
+    cf, cr = after["estimates"]["cf"], after["estimates"]["cr"]
+    note = next(n for n in doc["notes"] if n.startswith("cf, cr were re-fitted with asymmetric_damping"))
+    assert f"cf = {cf:.4g}" in note and f"cr = {cr:.4g}" in note and "compression c - dc/2" in note
+    assert note in result.output
+    # issue 23: every estimate's unit, where its parameter is declared
+    assert set(doc["units"]) == set(before["estimates"]) | set(after["estimates"])
+    assert doc["units"]["m"] == "kg" and doc["units"]["Ix"] == "kg m²" and doc["units"]["b1"] == "m"
+    assert doc["units"]["asymmetric_damping.dc_f"] == "N s/m"
 
 
 def test_diagnose_bad_input_exits_2(tmp_path):

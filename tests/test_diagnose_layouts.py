@@ -187,7 +187,9 @@ def test_the_config_runs_are_diagnosed_when_no_data_is_given(rig, monkeypatch):
     """data.files names the runs as for identify (--data wins); a run that is not there: exit 2 naming it."""
     code, _, err = invoke("diagnose", RIG, "--data", rig["clean"].with_name("missing.mf4"))
     assert code == 2 and "missing.mf4" in err
-    monkeypatch.setattr("vehid_cli.systems.vehicle.diagnosis.diagnose", lambda cfg, data, validate, log=None: data)
+    monkeypatch.setattr(
+        "vehid_cli.systems.vehicle.diagnosis.diagnose", lambda cfg, data, validate, log=None, progress=None: data
+    )
     files = f"data.files=[{rig['clean']},{rig['spring']}]"
     assert diagnose_config(RIG, [files]) == (str(rig["clean"]), str(rig["spring"]))
     assert diagnose_config(RIG, [files], data=rig["spring"]) == str(rig["spring"])  # --data wins, as a path string

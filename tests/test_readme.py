@@ -57,6 +57,7 @@ SKIPPED = {
 PLACEHOLDERS = ("…", "SCHEDULER", "$SLURM", "OTHER_RUN.csv", "HELD_OUT.csv", " /shared/")  # /shared: a cluster path
 SHELL_SYNTAX = re.compile(r"[|;&<>$`()]")  # a command meant to run as one vehid process has none of these
 READS = {"--data", "--road", "--validate", "--published"}  # options whose value is a file the command reads
+WRITES = ("-o", "--output", "--json", "--save-config")  # options whose value is a file the command writes
 
 
 def sh_lines(text: str) -> list[str]:
@@ -132,7 +133,7 @@ def test_each_command_matches_the_cli_and_its_files_exist(line):
     written_before = set()
     for earlier in COMMANDS[: COMMANDS.index(line)]:
         ew = shlex.split(earlier)
-        written_before |= {ew[k + 1] for k, w in enumerate(ew[:-1]) if w in ("-o", "--output", "--json")}
+        written_before |= {ew[k + 1] for k, w in enumerate(ew[:-1]) if w in WRITES}
     read = positional + [v for opt in READS for v in values.get(opt, [])]
     for path in read:
         if path.startswith("../shared/"):
@@ -144,6 +145,8 @@ def test_each_command_matches_the_cli_and_its_files_exist(line):
             assert path.startswith("runs/") and made, f"{path} is written by no earlier command"
 
     if name == "report":
+        return
+    if positional[0].startswith("runs/"):  # a config an earlier command wrote (--save-config): checked when run
         return
     config = ROOT / positional[0]
     overrides = values.get("--set", [])
@@ -176,7 +179,7 @@ def test_every_command_runs_as_written(tmp_path):
             assert res.stdout.strip(), f"nothing printed by: {line}"  # e.g. the report's tables
         words = shlex.split(line)
         for k, word in enumerate(words[:-1]):
-            if word in ("-o", "--output", "--json", "--plot", "--plots"):
+            if word in (*WRITES, "--plot", "--plots", "--html"):
                 check_output(work / words[k + 1], line)
 
 
@@ -193,6 +196,9 @@ def check_output(path: Path, line: str) -> None:
         read_png(path)
     elif path.suffix == ".json":
         assert json.loads(path.read_text()), line
+    elif path.suffix == ".html":  # one self-contained page: tables and embedded figures
+        page = path.read_text(encoding="utf-8")
+        assert "<table" in page and 'src="data:image/png;base64,' in page, line
     elif path.suffix == ".h5":
         with h5py.File(path, "r") as h5:
             assert "config_yaml" in h5.attrs and len(h5) > 0, line

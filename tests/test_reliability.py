@@ -56,8 +56,9 @@ def test_signalled_campaign_stops_cleanly_and_resumes_to_the_same_file(tmp_path,
     partial = tmp_path / "c.h5.partial"
     cmd = [sys.executable, "-m", "vehid_cli", "identify", str(BASE_CONFIG), *sets(LONG), "--jobs", "2", "-o", target]
     proc = subprocess.Popen(
-        list(map(str, cmd)), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
-    )
+        list(map(str, cmd)), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True, preexec_fn=lambda: os.nice(10),  # loaded machine: see run 3 before run 12 ends
+    )  # fmt: skip
     deadline = time.time() + 120
     while time.time() < deadline and len(list(partial.glob("run-*.npz"))) < 3:
         time.sleep(0.01)

@@ -42,9 +42,9 @@ def test_markdown_puts_algorithms_side_by_side_with_published_values(campaign_di
     campaigns, files = read_all(campaign_dir)
     text = render(campaigns, files, "md", load_published(PAPER))
     assert text.count("**objective f1") == 1  # one group: same objective and noise
-    header = next(line for line in text.splitlines() if line.startswith("|  | true"))
-    assert "abc est" in header and "cpso RE %" in header and "abc paper RE %" in header
-    assert "| Ix | 500 |" in text
+    header = next(line for line in text.splitlines() if line.startswith("| parameter | unit | true"))
+    assert "abc est ± 95 %" in header and "cpso RE %" in header and "abc paper RE %" in header
+    assert "| Ix | kg m² | 500 |" in text
     nre_row = next(line for line in text.splitlines() if line.startswith("| NRE of mean %"))
     cells = [c.strip() for c in nre_row.strip("|").split("|")]
     assert cells[header.strip("|").split("|").index(" abc paper RE % ")] == "0.729"  # the paper's ABC, f1, 10 %
@@ -178,3 +178,24 @@ def test_sweep_notes_tell_a_running_campaign_from_an_interrupted_one(tmp_path):
         notes = sweep_notes([tmp_path])
     assert any("a.h5.partial: a campaign running now (1 finished run(s) so far)" in n for n in notes), notes
     assert any("b.h5.partial: an interrupted campaign (0 finished run(s))" in n for n in notes), notes
+
+
+@pytest.mark.parametrize("width", [80, 60])
+def test_force_map_parameter_names_are_whole_in_a_narrow_terminal(width):
+    """Issue 23: in 80 columns (a pipe, a CI log) the force-map damper's table cut `tau_comp_rise` to `tau_comp_…`
+    and its estimates to `0.00812…`. Names are now never cut, numbers whole where they fit and folded where not: no
+    ellipsis anywhere, every name on a line of its own, and the table no wider than the console."""
+    from rich.console import Console
+
+    from vehid_cli.report import rich_tables
+
+    config = ROOT / "configs" / "dampers" / "synthetic_force_map_steps.yaml"
+    campaign = run_campaign(load_config(config, ["identify.runs=1", "identify.budget=5"]), jobs=1)
+    console = Console(width=width, record=True, file=io.StringIO())
+    for table in rich_tables([campaign], ["fmap.h5"]):
+        console.print(table)
+    text = console.export_text()
+    assert "…" not in text
+    cells = {line.split("│")[1].strip() for line in text.splitlines() if line.startswith("│")}
+    assert set(campaign.names) <= cells
+    assert max(len(line) for line in text.splitlines()) <= width

@@ -30,8 +30,8 @@ def test_shards_into_one_directory_make_one_report(tmp_path):
     code, md, err = invoke("report", tmp_path, "--format", "md")
     assert code == 0 and err == "", err
     assert md.count("**objective f2") == 1  # one table
-    header = next(line for line in md.splitlines() if line.startswith("|  | true"))
-    assert all(f"{a} est" in header for a in ("de", "cpso", "abc", "ga"))
+    header = next(line for line in md.splitlines() if line.startswith("| parameter | unit | true"))
+    assert all(f"{a} est ± 95 %" in header for a in ("de", "cpso", "abc", "ga"))
     code, text, err = invoke("report", tmp_path, "--format", "csv")
     rows = list(csv.DictReader(io.StringIO(text)))
     assert sorted({r["algorithm"] for r in rows}) == ["abc", "cpso", "de", "ga"] and len(rows) == 4 * 5
@@ -76,15 +76,20 @@ def test_method_keys_may_differ(files):
     ):
         table = tables[title]
         algorithm = "cpso" if name == "cpso" else "de"
-        assert table[""] == ["true", f"{algorithm} est", f"{algorithm} RE %"]
-        mean = read_campaign_h5(files / f"{name}.h5").summary.mean
+        assert table["parameter"] == ["unit", "true", f"{algorithm} est ± 95 %", f"{algorithm} RE %"]
+        summary = read_campaign_h5(files / f"{name}.h5").summary
         res = []
         for j, parameter in enumerate(("m", "Ix", "Iy", "a1", "b1")):
-            true, est, re = map(float, table[parameter])
-            assert true == PAPER_CAR[parameter]
-            assert est == pytest.approx(mean[j], rel=1e-5)
-            assert re == pytest.approx(100 * (est - true) / true, abs=2e-3)
-            res.append(re)
+            unit, true, est_pm, re = table[parameter]
+            assert unit == {"m": "kg", "Ix": "kg m²", "Iy": "kg m²", "a1": "m", "b1": "m"}[parameter]
+            est, half = est_pm.split(" ± ")
+            # the last digit printed (rounded to two significant digits of the interval)
+            last = 10.0 ** (-len(half.partition(".")[2]) if "." in half else np.floor(np.log10(float(half))) - 1)
+            assert float(true) == PAPER_CAR[parameter]
+            assert float(est) == pytest.approx(summary.mean[j], abs=0.5 * last * (1 + 1e-9))
+            assert float(half) == pytest.approx(1.959963984540054 * summary.sd[j], abs=0.5 * last * (1 + 1e-9))
+            assert float(re) == pytest.approx(100 * (summary.mean[j] - float(true)) / float(true), abs=2e-3)
+            res.append(float(re))
         assert float(table["NRE of mean %"][-1]) == pytest.approx(np.linalg.norm(res), abs=5e-3)
         assert table["runs"][-1] == "2" and table["evaluations / run"][-1] == "40"
 

@@ -45,7 +45,8 @@ def write_campaign_h5(path: str | Path, campaign, attrs: Mapping[str, str] | Non
     attrs: kind, system (vehicle, damper), config_yaml, config_sha256, seed, runs, objective (f1, f2, wls; J for
     a damper), algorithm, data_file, data_sha256, sigma_source, provenance, `attrs` (e.g. a sweep's varied keys);
     the user block holds the file's checksum
-    /parameters (D,) names; /truth (D,) (NaN when unknown; attr known); /nominal, /bounds (D, 2)
+    /parameters (D,) names (attribute units: a JSON list, the SI unit of each)
+    /truth (D,) (NaN when unknown; attr known); /nominal, /bounds (D, 2)
     /runs/{estimate (N, D), cost, evaluations, penalised, wall_s (N,), history_evals, history_cost (N, H)}
     /summary/{mean, sd, re_percent, per_run_nre_percent, ...} with scalar figures as attributes
     /crlb/{re_sd_percent (D,), fisher (D, D), identifiable (D,)} with nre_rms_percent, condition attributes
@@ -81,7 +82,8 @@ def _write_campaign(h5: h5py.File, campaign, attrs: Mapping[str, str] | None) ->
         h5.attrs[key] = value
     for key, value in (attrs or {}).items():
         h5.attrs[key] = value
-    h5.create_dataset("parameters", data=np.array(campaign.names, dtype=h5py.string_dtype()))
+    parameters = h5.create_dataset("parameters", data=np.array(campaign.names, dtype=h5py.string_dtype()))
+    parameters.attrs["units"] = json.dumps(list(campaign.units.values()))  # SI unit of each, in order
     truth = h5.create_dataset("truth", data=campaign.truth if campaign.truth is not None else np.full(D, np.nan))
     truth.attrs["known"] = campaign.truth is not None
     h5.create_dataset("nominal", data=campaign.nominal)
@@ -307,7 +309,9 @@ def read_campaign_h5(path: str | Path):
         config = config_from_dict(raw, source=f"{source}:config_yaml")
         names, truth, nominal, bounds = _box(r)
         records, channels = _records(r, len(names))
-        bound = _bound(r, names, truth if truth is not None else nominal)
+        # the bound's relative sd is about where it was computed: the truth, else one fit's estimate (runner)
+        at = truth if truth is not None else records[0].estimate if len(records) == 1 else nominal
+        bound = _bound(r, names, at)
         summary_group = h5["summary"] if "summary" in h5 else None
         if summary_group is None or not hasattr(summary_group, "members"):
             raise r.fail("group '/summary'", "is missing")
@@ -329,8 +333,18 @@ def read_campaign_h5(path: str | Path):
             records=records, bound=bound, summary=summary, data_sha256=r.text("data_sha256", "") or None,
             system=system, findings=findings, data_files=tuple(r.json_list("data_files", str)),
             objective=r.text("objective"), channels=channels, checks=tuple(r.json_list("checks", dict)),
-            warnings=tuple(r.json_list("warnings", str)),
+            warnings=tuple(r.json_list("warnings", str)), stored_units=_units(h5, source, len(names)),
         )  # fmt: skip
+
+
+def _units(h5, source: str, D: int) -> tuple[str, ...]:
+    """The unit of each unknown as the file recorded it (/parameters attribute `units`); () for a file written
+    before units were recorded (the config's declarations then give them)."""
+    units = _Reader(h5["parameters"], source).json_list("units", str)
+    if units and len(units) != D:
+        raise InputError(f"campaign file is damaged or was edited: attribute 'units' of /parameters names "
+                         f"{len(units)} units for {D} unknowns", source=source)  # fmt: skip
+    return tuple(units)
 
 
 def campaign_file_digest(path: str | Path) -> str:

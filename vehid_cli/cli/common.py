@@ -33,6 +33,15 @@ SetOption = Annotated[
         "--set", metavar="KEY=VALUE", help="Override a config value: dotted.key=value (repeatable).", show_default=False
     ),
 ]
+SaveConfigOption = Annotated[
+    Optional[Path],  # noqa: UP045 - typer needs Optional here
+    typer.Option(
+        "--save-config",
+        metavar="FILE.yaml",
+        help="Write the input config with the identified values in place (each with its 95 % interval and the run "
+        "it came from): vehid simulate / identify FILE.yaml continue from it.",
+    ),
+]
 RunsOption = Annotated[
     Optional[int],  # noqa: UP045 - typer needs Optional here
     typer.Option("--runs", metavar="N", help="Runs per campaign (identify.runs)."),
@@ -140,10 +149,31 @@ def progress_bar(verb: str):
     if not err.is_terminal:
         from ..core.progress import PlainProgress
 
-        return PlainProgress(verb, {"sweep": "campaign", "design": "step"}.get(verb, "run"), warn)
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        return PlainProgress(verb, {"sweep": "campaign", "design": "step", "diagnose": "step"}.get(verb, "run"), warn)
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )  # fmt: skip
 
     return Progress(
         TextColumn(f"[bold]{verb}[/] {{task.description}}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=err, transient=True,
+        TextColumn("ETA"), TimeRemainingColumn(), console=err, transient=True,
     )  # fmt: skip
+
+
+def stage_hook(bar, units: dict[str, str] | None = None):
+    """A library loop's progress hook (stage, done, total) shown on `bar`: a task per stage, made at its first call;
+    `units` names what a stage's steps are (by the stage's last word: 'candidates' -> 'candidate')."""
+    tasks: dict[str, int] = {}
+
+    def progress(stage: str, done: int, total: int | None) -> None:
+        if stage not in tasks:
+            unit = (units or {}).get(stage.rsplit(" ", 1)[-1])
+            tasks[stage] = bar.add_task(stage, total=total, **({"unit": unit} if unit else {}))
+        bar.update(tasks[stage], completed=done, total=total)
+
+    return progress

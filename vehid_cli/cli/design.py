@@ -19,6 +19,7 @@ from .common import (
     load_config,
     out,
     progress_bar,
+    stage_hook,
     warn,
 )
 
@@ -100,12 +101,6 @@ def design(
     if not system_class(cfg).designable:
         raise InputError("vehid design plans a car's test (system: vehicle)", source=str(config), key="system")
     with interruptible(lambda: "nothing was written", warn), LocalExecutor(jobs) as pool, progress_bar("design") as bar:
-        tasks: dict[str, int] = {}
-
-        def progress(stage: str, done: int, total: int | None) -> None:
-            if stage not in tasks:
-                tasks[stage] = bar.add_task(stage, total=total)
-            bar.update(tasks[stage], completed=done, total=total)
-
+        progress = stage_hook(bar, {"search": "generation"})
         result = design_test(cfg, executor=pool, verify=verify, progress=progress)
     _print_design(result, output, json_out, plots)

@@ -7,7 +7,17 @@ from typing import Annotated, Optional
 
 import typer
 
-from .common import SetOption, check_output_dir, check_writable, guarded, out, warn
+from .common import (
+    SaveConfigOption,
+    SetOption,
+    check_output_dir,
+    check_writable,
+    guarded,
+    out,
+    progress_bar,
+    stage_hook,
+    warn,
+)
 
 
 def _print_diagnosis(result) -> None:
@@ -56,7 +66,14 @@ def diagnose(
             "--plots", metavar="DIR", help="Write figures here: residual before/after, fingerprint, spectrum."
         ),
     ] = None,
+    html: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option(
+            "--html", metavar="FILE", help="Write one self-contained page (verdict, tables, figures, provenance)."
+        ),
+    ] = None,
     set_: SetOption = None,
+    save_config: SaveConfigOption = None,
 ) -> None:
     """Close the loop: fit, analyse the residual, rank candidates (missing effects, mis-set known parameters),
     add the best, re-fit; say whether the residual is now at the noise.
@@ -71,20 +88,45 @@ def diagnose(
     The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
-    from ..core.jsonio import write_json
-    from ..report.diagnosis import plot_diagnosis_files
     from ..systems import diagnose_config
 
     if json_out is not None:
         check_writable(json_out, (".json",))
     if plots is not None:
         check_output_dir(plots, "--plots")
-    result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn)
-    doc = result.to_json()
+    if save_config is not None:
+        check_writable(save_config, (".yaml", ".yml"))
+    if html is not None:
+        check_writable(html, (".html", ".htm"))
+    with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left
+        progress = stage_hook(bar, {"candidates": "candidate", "fit": "fit"})
+        result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn, progress=progress)
     _print_diagnosis(result)
+    _write_outputs(result, config, data or [], validate or [], set_ or (), json_out, plots, save_config, html)
+
+
+def _write_outputs(result, config: Path, data: list[Path], validate: list[Path], sets, json_out, plots, save_config,
+                   html) -> None:  # fmt: skip
+    """The files a diagnosis was asked for: figures, JSON, the diagnosed config, the HTML page."""
+    from ..core.jsonio import write_json
+    from ..report.diagnosis import plot_diagnosis_files
+
+    stem = (data[0] if data else config).stem
     if plots is not None:
-        for path in plot_diagnosis_files(result, plots, (data[0] if data else config).stem):
+        for path in plot_diagnosis_files(result, plots, stem):
             out.print(f"wrote {path}")
     if json_out is not None:
-        write_json(json_out, doc)
+        write_json(json_out, result.to_json())
         out.print(f"wrote {json_out}")
+    if save_config is not None:
+        from ..config.save import save_config as write_saved
+        from ..report.saved_config import diagnosis_found
+
+        found = diagnosis_found(result, data)
+        out.print(f"wrote {write_saved(config, sets, found, save_config, command='vehid diagnose')}")
+    if html is not None:
+        from ..report.html import diagnosis_facts, diagnosis_page, write_page
+
+        facts = diagnosis_facts(config, sets, data, validate)
+        write_page(html, diagnosis_page(result, facts, stem))
+        out.print(f"wrote {html}")

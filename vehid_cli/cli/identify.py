@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -12,6 +14,7 @@ from .common import (
     ExecutorOption,
     JobsOption,
     RunsOption,
+    SaveConfigOption,
     SchedulerOption,
     SeedOption,
     SetOption,
@@ -26,15 +29,47 @@ from .common import (
 )
 
 
-def _results_target(config: Path, cfg, output: Path | None, json_out: Path | None) -> Path:
-    """The results file (default runs/<config>-<hash>.h5), checked writable with the --json file before any work."""
+def default_output(config: Path, cfg, data: Sequence[Path] | None) -> Path:
+    """The default results file: runs/<config>-<hash>.h5 for the config's own data, runs/<config>-<data>-<hash>.h5
+    with --data (each data file's stem, joined by '+'; the hash then also covers the data files' absolute paths), so
+    identifying the same config from another file never meets the earlier campaign's file."""
+    if not data:
+        return Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+    paths = "\n".join(str(Path(d).resolve()) for d in data)
+    digest = hashlib.sha256(f"{cfg.digest()}\n{paths}".encode()).hexdigest()
+    stems = "+".join(Path(d).stem for d in data)
+    return Path("runs") / f"{Path(config).stem}-{stems}-{digest[:8]}.h5"
+
+
+def _results_target(
+    config: Path, cfg, data: Sequence[Path] | None, output: Path | None, json_out: Path | None, save: Path | None
+) -> Path:
+    """The results file (default: `default_output`), checked writable with the --json and --save-config files before
+    any work."""
     if output is None:
         check_output_dir(Path("runs"), "the default output directory").mkdir(exist_ok=True)
-        output = Path("runs") / f"{Path(config).stem}-{cfg.digest()[:8]}.h5"
+        output = default_output(config, cfg, data)
     target = check_writable(output, (".h5", ".hdf5"))
     if json_out is not None:
         check_writable(json_out, (".json",))
+    if save is not None:
+        check_writable(save, (".yaml", ".yml"))
     return target
+
+
+def _save_config(config: Path, overrides: list[str], campaign, results: Path, target: Path) -> None:
+    """--save-config: the input config with the campaign's estimates in place."""
+    from ..config.save import save_config
+    from ..report.saved_config import campaign_found
+
+    out.print(
+        f"wrote {save_config(config, overrides, campaign_found(campaign, results), target, command='vehid identify')}"
+    )
+
+
+FORCE_HELP = (
+    "Overwrite an output file that holds a campaign of another config; run with unknowns the data cannot separate."
+)
 
 
 @guarded
@@ -54,23 +89,22 @@ def identify(
     jobs: JobsOption = None,
     output: Annotated[
         Optional[Path],  # noqa: UP045
-        typer.Option("-o", "--output", metavar="FILE", help="Campaign file (.h5); default runs/<config>-<hash>.h5."),
+        typer.Option(
+            "-o",
+            "--output",
+            metavar="FILE",
+            help="Campaign file (.h5); default runs/<config>-<hash>.h5 (with --data: runs/<config>-<data>-<hash>.h5).",
+        ),
     ] = None,
     json_out: Annotated[
         Optional[Path],  # noqa: UP045
         typer.Option("--json", metavar="FILE", help="Also write the SPEC JSON summary here."),
     ] = None,
     set_: SetOption = None,
+    save_config: SaveConfigOption = None,
     executor: ExecutorOption = "local",
     scheduler: SchedulerOption = None,
-    force: Annotated[
-        bool,
-        typer.Option(
-            "--force",
-            help="Overwrite an output file that holds a campaign of another config; run with unknowns the data cannot "
-            "separate.",
-        ),
-    ] = False,
+    force: Annotated[bool, typer.Option("--force", help=FORCE_HELP)] = False,
     no_checks: Annotated[
         bool,
         typer.Option(
@@ -94,7 +128,7 @@ def identify(
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, campaign_overrides(set_, runs, seed, jobs))
-    target = _results_target(config, cfg, output, json_out)
+    target = _results_target(config, cfg, data, output, json_out, save_config)
     with (
         interruptible(lambda: saved_runs_note(target), warn),
         make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,
@@ -113,3 +147,5 @@ def identify(
     for note in campaign_notes(campaign):
         out.print(note)
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
+    if save_config is not None:
+        _save_config(config, campaign_overrides(set_, runs, seed, jobs), campaign, target, save_config)

@@ -88,6 +88,12 @@ def report(
         Optional[Path],  # noqa: UP045
         typer.Option("--published", metavar="FILE", help="YAML of published values to set beside ours (md, latex)."),
     ] = None,
+    html: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option(
+            "--html", metavar="FILE", help="Write one self-contained page (tables, figures, provenance) to FILE.html."
+        ),
+    ] = None,
     allow_mixed: Annotated[
         bool,
         typer.Option(
@@ -104,19 +110,30 @@ def report(
     from ..report import collect, load_published, render, rich_tables, sweep_notes
     from ..report.compare import check_comparable
 
+    tables = html is None or fmt is not None or output is not None  # --html alone writes the page only
     fmt = _report_format(fmt, output)
     if plots is not None:
         check_output_dir(plots, "--plots")
+    if html is not None:
+        check_writable(html, (".html", ".htm"))
     campaigns, files = collect(paths)
-    for note in sweep_notes(paths):
+    notes = sweep_notes(paths)
+    for note in notes:
         warn(f"warning: {note}")
-    for note in check_comparable(files, allow_mixed):
+    mixed = check_comparable(files, allow_mixed)
+    for note in mixed:
         warn(f"note (--allow-mixed): {note}")
-    if fmt == "table":
-        text = _tables(output, rich_tables(campaigns, files))
-    else:
-        text = render(campaigns, files, fmt, load_published(published) if published else None)
-    _emit(text, output)
+    if html is not None:
+        from ..report.html import campaign_page, write_page
+
+        write_page(html, campaign_page(campaigns, files, [*notes, *(f"--allow-mixed: {n}" for n in mixed)]))
+        out.print(f"wrote {html}")
+    if tables:
+        if fmt == "table":
+            text = _tables(output, rich_tables(campaigns, files))
+        else:
+            text = render(campaigns, files, fmt, load_published(published) if published else None)
+        _emit(text, output)
     if plots is not None:
         from ..report.figures import write_plots
 

@@ -8,13 +8,18 @@ import hashlib
 import json
 import typing
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
+from ..core.errors import InputError
 from ..core.hints import closest
+from ..core.units import declared_unit
+from ..models.effects import parameter_unit
+from ..models.faults import correction_unit
 from ..optimizers import ALGORITHMS, algorithm_class
 
 Pos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -157,6 +162,18 @@ class IdentifyCommon(_Section):
                 )
 
 
+@dataclass(frozen=True)
+class ConfigEdit:
+    """One change `--save-config` makes to a config: the dotted key, its new value, the identified parameter it
+    carries (its interval goes in the key's comment; None: a consequence of one, e.g. a2 when the wheelbase is kept)
+    and a note saying why."""
+
+    key: str
+    value: Any
+    name: str | None = None
+    note: str = ""
+
+
 class SystemConfig(_Section):
     """Base of a whole config (a car, a damper): where it was read from, its YAML and its digest."""
 
@@ -176,6 +193,33 @@ class SystemConfig(_Section):
         canonical = json.dumps(self.model_dump(mode="json", exclude_none=True, by_alias=True), sort_keys=True)
         return hashlib.sha256(canonical.encode()).hexdigest()
 
+    def unit(self, name: str) -> str:
+        """The SI unit of the identifiable parameter `name`, read where the parameter is declared: a correction of
+        the measurement chain (``sensor:<channel>:<param>``: its fault's `unit`), an effect's own declaration
+        (``<effect>.<param>``), else the type of the field of that name in one of the config's sections
+        (core.units.Unit); '' when none is declared. A system whose parameters are declared elsewhere (the damper's
+        model rows) extends this."""
+        sensor = correction_unit(name, self.channel_unit)
+        if sensor is not None:
+            return sensor
+        if "." in name:
+            return parameter_unit(*name.split(".", 1))
+        for key in type(self).model_fields:
+            section = getattr(self, key)
+            field = type(section).model_fields.get(name) if isinstance(section, BaseModel) else None
+            unit = None if field is None else declared_unit(field.metadata)
+            if unit is not None:
+                return unit
+        return ""
+
+    def channel_unit(self, channel: str) -> str:
+        """The SI unit of a measured channel (for the corrections of the measurement chain); '' when unknown."""
+        return ""
+
+    def units(self, names: typing.Iterable[str]) -> dict[str, str]:
+        """{name: SI unit} of parameters (`unit`): the one lookup tables, JSON and results files use."""
+        return {n: self.unit(n) for n in names}
+
     def resolved(self, path: Path) -> SystemConfig:
         """The config with the files it names relative to its own file (`path`) resolved against that file's
         directory (a system with such files overrides this)."""
@@ -189,6 +233,11 @@ class SystemConfig(_Section):
         """Other files a campaign's results depend on (held-out runs, a stage's own run); `measured`: the campaign
         identifies from measured runs."""
         return ()
+
+    def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
+        """The config keys that hold identified `values` (by parameter name, SI units), for `--save-config`; a
+        system whose config can carry them overrides this."""
+        raise InputError(f"--save-config: a {type(self).__name__} cannot hold identified values", source=self.source)
 
     def _relocated(self, update: dict[str, Any]) -> SystemConfig:
         """A copy with some sections replaced, keeping the source it was read from."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -15,6 +16,7 @@ from ..models.effects import LIBRARY, bench_names, bound_violation
 from .common import (
     PARAMETER_MAX,
     Algorithm,
+    ConfigEdit,
     Factor,
     Finite,
     IdentifyCommon,
@@ -219,6 +221,14 @@ class DamperConfig(SystemConfig):
     noise: DamperNoise = DamperNoise()
     identify: DamperIdentify
 
+    def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
+        """`damper.parameters.<name>` for the model's parameters, `damper.effects.<effect>.<param>` for an effect's
+        around it."""
+        return [
+            ConfigEdit(f"damper.effects.{n}" if "." in n else f"damper.parameters.{n}", float(v), n)
+            for n, v in values.items()
+        ]
+
     @model_validator(mode="after")
     def _consistent(self) -> DamperConfig:
         d, ident = self.damper, self.identify
@@ -305,6 +315,10 @@ class DamperConfig(SystemConfig):
                 why = bound_violation(name, f"{key}_f" if per_axle else key, value)
                 if why:  # one damper: the per-axle name reads as the plain one
                     raise _KeyedError(f"damper.effects.{name}.{key}", why.replace(f"{name}.{key}_f", f"{name}.{key}"))
+
+    def unit(self, name: str) -> str:
+        """The SI unit of a parameter of the damper's model row (models.damper.UNITS) or of a bench effect."""
+        return super().unit(name) if "." in name else MODELS[self.damper.model].unit(name)
 
     def effect_parameters(self) -> tuple[str, ...]:
         """The declared bench effects' parameters, as identify.unknowns names them (<effect>.<param>)."""

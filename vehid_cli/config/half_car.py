@@ -4,10 +4,11 @@ wheelbase/speed later."""
 
 from __future__ import annotations
 
-from typing import ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field, model_validator
 
+from ..core.units import Unit
 from .common import _KeyedError, _Section, within
 from .lumped import LumpedConfig, RigIdentify, RigSensor
 from .vehicle import RANGES as CAR_RANGES
@@ -20,18 +21,18 @@ class HalfCar(_Section):
     """The pitch plane [SI]: m [kg], Iy [kg m²], mf, mr [kg], a1, wheelbase [m], kf, kr, ktf, ktr [N/m], cf, cr
     [N s/m]. The wheelbase stays fixed when a1 (the CG) is identified."""
 
-    m: within(*RANGES["m"]) = Field(description="body mass [kg]")
-    Iy: within(*RANGES["Iy"]) = Field(description="pitch moment of inertia [kg m²]")
-    mf: within(*RANGES["mf"]) = Field(description="front unsprung mass [kg]")
-    mr: within(*RANGES["mr"]) = Field(description="rear unsprung mass [kg]")
-    a1: within(*RANGES["a1"]) = Field(description="CG to front axle [m]")
-    wheelbase: within(*RANGES["wheelbase"]) = Field(description="front to rear axle [m]")
-    kf: within(*RANGES["kf"]) = Field(description="front suspension stiffness [N/m]")
-    kr: within(*RANGES["kr"]) = Field(description="rear suspension stiffness [N/m]")
-    ktf: within(*RANGES["ktf"]) = Field(description="front tyre stiffness [N/m]")
-    ktr: within(*RANGES["ktr"]) = Field(description="rear tyre stiffness [N/m]")
-    cf: within(*RANGES["cf"]) = Field(description="front suspension damping [N s/m]")
-    cr: within(*RANGES["cr"]) = Field(description="rear suspension damping [N s/m]")
+    m: Annotated[within(*RANGES["m"]), Unit("kg")] = Field(description="body mass [kg]")
+    Iy: Annotated[within(*RANGES["Iy"]), Unit("kg m²")] = Field(description="pitch moment of inertia [kg m²]")
+    mf: Annotated[within(*RANGES["mf"]), Unit("kg")] = Field(description="front unsprung mass [kg]")
+    mr: Annotated[within(*RANGES["mr"]), Unit("kg")] = Field(description="rear unsprung mass [kg]")
+    a1: Annotated[within(*RANGES["a1"]), Unit("m")] = Field(description="CG to front axle [m]")
+    wheelbase: Annotated[within(*RANGES["wheelbase"]), Unit("m")] = Field(description="front to rear axle [m]")
+    kf: Annotated[within(*RANGES["kf"]), Unit("N/m")] = Field(description="front suspension stiffness [N/m]")
+    kr: Annotated[within(*RANGES["kr"]), Unit("N/m")] = Field(description="rear suspension stiffness [N/m]")
+    ktf: Annotated[within(*RANGES["ktf"]), Unit("N/m")] = Field(description="front tyre stiffness [N/m]")
+    ktr: Annotated[within(*RANGES["ktr"]), Unit("N/m")] = Field(description="rear tyre stiffness [N/m]")
+    cf: Annotated[within(*RANGES["cf"]), Unit("N s/m")] = Field(description="front suspension damping [N s/m]")
+    cr: Annotated[within(*RANGES["cr"]), Unit("N s/m")] = Field(description="rear suspension damping [N s/m]")
 
     @model_validator(mode="after")
     def _cg(self) -> HalfCar:

@@ -5,14 +5,17 @@ parameters, its sensor placement and its input names."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field, model_validator
 
+from ..core.errors import InputError
 from ..core.units import SI_FACTORS, UNITS
 from .common import (
     BumpShape,
+    ConfigEdit,
     IdentifyCommon,
     NonNeg,
     Pos,
@@ -234,6 +237,16 @@ class LumpedConfig(SystemConfig):
         lo_f, hi_f = ident.bounds
         box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
         return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
+
+    def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
+        """`<section>.<name>` for the rig's parameters; an effect's parameter (`vehid diagnose` fitted it to the
+        struts) has no key in a rig's config, which describes a linear rig: InputError naming it."""
+        section = getattr(self, self.section)
+        other = [n for n in values if n not in type(section).model_fields]
+        if other:
+            raise InputError(f"--save-config: a {self.section} config has no key for {', '.join(other)} (its model "
+                             "is linear; the effects stay in the report)", source=self.source)  # fmt: skip
+        return [ConfigEdit(f"{self.section}.{n}", float(v), n) for n, v in values.items()]
 
     def resolved(self, path: Path) -> LumpedConfig:
         if not self.data.files:

@@ -3,10 +3,11 @@ spring and damper, driven by a road plate (column road1) and optionally an actua
 
 from __future__ import annotations
 
-from typing import ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field
 
+from ..core.units import Unit
 from .common import _KeyedError, _Section, within
 from .lumped import LumpedConfig, RigIdentify, RigSensor
 
@@ -26,13 +27,13 @@ PARAMETERS = tuple(RANGES)
 class QuarterCar(_Section):
     """The quarter car [SI]: ms, mu [kg], ks, kt [N/m], cs, ct [N s/m]."""
 
-    ms: within(*RANGES["ms"]) = Field(description="sprung (body) mass [kg]")
-    mu: within(*RANGES["mu"]) = Field(description="unsprung (wheel) mass [kg]")
-    ks: within(*RANGES["ks"]) = Field(description="suspension stiffness [N/m]")
-    kt: within(*RANGES["kt"]) = Field(description="tyre stiffness [N/m]")
-    cs: within(*RANGES["cs"]) = Field(description="suspension damping [N s/m]")
-    ct: within(*RANGES["ct"]) = Field(0.0, description="tyre damping [N s/m]")
-    force_gain: within(*RANGES["force_gain"]) = Field(
+    ms: Annotated[within(*RANGES["ms"]), Unit("kg")] = Field(description="sprung (body) mass [kg]")
+    mu: Annotated[within(*RANGES["mu"]), Unit("kg")] = Field(description="unsprung (wheel) mass [kg]")
+    ks: Annotated[within(*RANGES["ks"]), Unit("N/m")] = Field(description="suspension stiffness [N/m]")
+    kt: Annotated[within(*RANGES["kt"]), Unit("N/m")] = Field(description="tyre stiffness [N/m]")
+    cs: Annotated[within(*RANGES["cs"]), Unit("N s/m")] = Field(description="suspension damping [N s/m]")
+    ct: Annotated[within(*RANGES["ct"]), Unit("N s/m")] = Field(0.0, description="tyre damping [N s/m]")
+    force_gain: Annotated[within(*RANGES["force_gain"]), Unit("-")] = Field(
         1.0, description="the actuator's force per unit of the recorded force (-1: the rig's sign is opposite ours)"
     )
 

@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
 from ..core.errors import InputError
-from ..core.units import SI_FACTORS, UNITS
+from ..core.units import SI_FACTORS, UNITS, Unit
 from ..models.effects import LIBRARY, bound_violation
 from ..models.fullcar import VEHICLE_PARAMETERS
-from ..models.sensors import FAMILY, Layout, corner_layout
+from ..models.sensors import FAMILY, UNIT, Layout, corner_layout
 from .common import (
     BumpShape,
+    ConfigEdit,
     Finite,
     IdentifyCommon,
     NonNeg,
@@ -40,13 +42,14 @@ RANGES = {
 }  # fmt: skip  (kg, kg m², m, N/m, N m/rad, N s/m)
 RANGES.update(mr=RANGES["mf"], Iy=RANGES["Ix"], kr=RANGES["kf"], ktf=RANGES["kf"], ktr=RANGES["kf"], cr=RANGES["cf"])
 RANGES.update({n: RANGES["a1"] for n in ("a2", "b1", "b2", "wheelbase", "track")})
-Mass = within(*RANGES["m"])
-Unsprung = within(*RANGES["mf"])
-Inertia = within(*RANGES["Ix"])
-Length = within(*RANGES["a1"])
-Stiffness = within(*RANGES["kf"])
-RollStiffness = within(*RANGES["kR"])
-Damping = within(*RANGES["cf"])
+# Each parameter's type carries its SI unit (core.units.Unit): tables, JSON and results files read it from here.
+Mass = Annotated[within(*RANGES["m"]), Unit("kg")]
+Unsprung = Annotated[within(*RANGES["mf"]), Unit("kg")]
+Inertia = Annotated[within(*RANGES["Ix"]), Unit("kg m²")]
+Length = Annotated[within(*RANGES["a1"]), Unit("m")]
+Stiffness = Annotated[within(*RANGES["kf"]), Unit("N/m")]
+RollStiffness = Annotated[within(*RANGES["kR"]), Unit("N m/rad")]
+Damping = Annotated[within(*RANGES["cf"]), Unit("N s/m")]
 Height = within(-1, 1)  # m, a bump under one corner
 SIMULATION_SAMPLES = 1_000_000  # samples of a simulated record at most (1000 s at 1 kHz)
 SIMULATION_STEPS = 20_000_000  # integration steps (samples x substeps) of one simulation at most
@@ -388,6 +391,11 @@ class Config(SystemConfig):
     identify: Identify = Identify()
     design: Design | None = Field(None, description="limits of the test `vehid design` plans (config/design.py)")
 
+    def channel_unit(self, channel: str) -> str:
+        """The SI unit of a sensor of the layout (models.sensors.UNIT of its family); '' for another name."""
+        kind = next((s.kind for s in self.sensor_layout().sensors if s.name == channel), None)
+        return "" if kind is None else UNIT[FAMILY[kind]]
+
     def sensor_layout(self) -> Layout:
         """The configured sensors (models.sensors.Layout), the paper's corner layout when none is given."""
         return corner_layout() if self.layout is None else Layout(tuple(s.sensor() for s in self.layout))
@@ -510,6 +518,28 @@ class Config(SystemConfig):
         lo_f, hi_f = ident.bounds
         box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
         return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
+
+    def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
+        """`vehicle.<name>` for the car's parameters, `vehicle.effects.<effect>.<param>` for an effect's (an effect
+        the config lacks makes the integrator rk4, as `diagnose` fitted it); a1 (b1) keeps the wheelbase (track):
+        a2 (b2), where the config gives it, becomes the rest (SPEC section 1)."""
+        v, out = self.vehicle, []
+        spans = {"a1": ("a2", v.L, "wheelbase"), "a2": ("a1", v.L, "wheelbase"),
+                 "b1": ("b2", v.w, "track"), "b2": ("b1", v.w, "track")}  # fmt: skip
+        for name, value in values.items():
+            if "." in name:
+                out.append(ConfigEdit(f"vehicle.effects.{name}", float(value), name))
+                continue
+            out.append(ConfigEdit(f"vehicle.{name}", float(value), name))
+            if name in spans and getattr(v, spans[name][0]) is not None:
+                other, span, what = spans[name]
+                note = f"{what} {span:g} m kept: {span:g} - {name}"
+                out.append(ConfigEdit(f"vehicle.{other}", span - float(value), None, note))
+        new = {n.partition(".")[0] for n in values if "." in n} - set(v.effects or {})
+        if new and self.simulation.integrator not in ("rk4", "newmark"):
+            note = f"{', '.join(sorted(new))} make the car nonlinear: rk4, as vehid diagnose fitted it"
+            out.append(ConfigEdit("simulation.integrator", "rk4", None, note))
+        return out
 
     def resolved(self, path: Path) -> Config:
         """The road file and the data runs named relative to the config file, resolved against its directory."""

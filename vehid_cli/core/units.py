@@ -1,9 +1,12 @@
 """The package's one unit table: for each quantity, the unit names a file or a config may give and their factors to
-SI (g is standard gravity, ISO 80000-3). Logger files, bench files and configs all read units through it."""
+SI (g is standard gravity, ISO 80000-3). Logger files, bench files and configs all read units through it; `Unit` marks
+the SI unit of a parameter where it is declared."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
+from dataclasses import dataclass
 
 from .errors import InputError
 from .hints import did_you_mean
@@ -36,3 +39,19 @@ def unit_factor(unit: str, source: str, channel: str) -> float:
         f"{channel}: unknown unit '{unit}'{did_you_mean(unit, SI_FACTORS)}; known units: {', '.join(SI_FACTORS)}",
         source=source,
     )
+
+
+# ------------------------------------------------------------------------------------------ units of parameters
+
+
+@dataclass(frozen=True)
+class Unit:
+    """The SI unit of a config value, declared beside its type (``Annotated[float, Unit("kg")]``), so that every
+    table, JSON and results file reads a parameter's unit from where the parameter is declared."""
+
+    name: str
+
+
+def declared_unit(metadata: Iterable[object]) -> str | None:
+    """The unit a field's metadata declares (a pydantic FieldInfo's `metadata`), None when it declares none."""
+    return next((m.name for m in metadata if isinstance(m, Unit)), None)

@@ -13,6 +13,8 @@ import contextlib
 import dataclasses
 import time
 
+import numpy as np
+
 from ..campaign.executor import Executor, LocalExecutor
 from ..config import Config
 from .checks import check_design, noise_note
@@ -28,6 +30,7 @@ from .space import Space, design_space
 from .verification import verification_campaigns
 
 MAX_ROUNDS = 3  # sensor choice / road design alternations
+MIRROR_TIE = 1e-6  # relative: mirror-image tests whose criteria differ by less are a tie (rounding, not physics)
 
 
 def design_test(
@@ -87,6 +90,22 @@ def best_plan(scorer: Scorer, config: Config, space: Space, base: Plan, progress
             x = evolve(scorer, space, base, design, progress)
             best = penalised(scorer(space, base, x[None])[0].criterion)
             x, _ = polish(scorer, space, base, x, best, design.search.grid)
+            x = prefer_side_b1(scorer, space, base, x)
         if design.sensors is None:
             break
     return space.plan(x, base) if space.free else base
+
+
+def prefer_side_b1(scorer: Scorer, space: Space, base: Plan, x):
+    """The tie-break between mirror-image tests: a car symmetric left/right gives the test with the sides' heights
+    swapped the same bound (to rounding, which differs between machines and BLAS builds); of two such tests within
+    MIRROR_TIE of each other the one with side b1 (corners 1 and 4, the left) at the higher bump is the design."""
+    if "side" not in space.free:
+        return x
+    k = space.free.index("side")
+    if x[k] >= 0:
+        return x
+    mirror = x.copy()
+    mirror[k] = -x[k]
+    here, there = (penalised(r.criterion) for r in scorer(space, base, np.stack([x, mirror])))
+    return mirror if there <= here * (1 + MIRROR_TIE) else x

@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -371,6 +371,7 @@ def rank_candidates(
     claim: bool = True,
     scale: float = 1.0,
     prior: dict[str, Ranked] | None = None,
+    on_done: Callable[[int], None] | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -380,7 +381,8 @@ def rank_candidates(
     a candidate must also lower the validation J by the fraction `min_gain` (on every held-out run);
     `scale` is the variance of one residual entry (for the shape parameters' intervals); with claim=False
     nothing is accepted (the data cannot tell); `prior`: each candidate's test of an earlier round, whose
-    estimates of its own unknowns are one more start (warm start). Candidate fits run in parallel threads."""
+    estimates of its own unknowns are one more start (warm start); `on_done(n)`: n candidates tested so far (called
+    from this thread). Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(len(candidates), 1)
     base_vJ, base_per = base_validation
@@ -408,12 +410,21 @@ def rank_candidates(
             kind=cand.kind, validation_per_file=per, fixed=fit.fixed,
         )  # fmt: skip
 
+    done = on_done or (lambda _n: None)
     n = min(available_cores(), len(candidates))
     if n > 1:
         with ThreadPoolExecutor(n) as pool:
-            out = list(pool.map(one, candidates))
+            futures = {pool.submit(one, c): i for i, c in enumerate(candidates)}
+            results: list[Ranked | None] = [None] * len(candidates)
+            for k, future in enumerate(as_completed(futures), start=1):
+                results[futures[future]] = future.result()
+                done(k)
+            out = [r for r in results if r is not None]
     else:
-        out = [one(c) for c in candidates]
+        out = []
+        for c in candidates:
+            out.append(one(c))
+            done(len(out))
     out.sort(key=lambda r: -r.statistic)
     return out
 

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from ..core.progress import ProgressHook
 from ..core.result import Result
 from ..optimizers.base import Problem
 from .attribution import (
@@ -141,6 +142,7 @@ class Diagnosis(Result):
     unexplained: Unexplained | None = None  # the non-parametric strut force left unexplained (car, incomplete)
     data_files: tuple[str, ...] = ()  # several runs fitted jointly (empty: one run)
     checks: tuple[dict, ...] = ()  # the pre-fit checks of the measurement chain (SPEC section 6)
+    units: dict[str, str] = field(default_factory=dict)  # SI unit of each estimate before and after ('' unknown)
 
     @property
     def residual_ratio(self) -> float | None:
@@ -197,6 +199,7 @@ class Diagnosis(Result):
             "wall_s": self.wall_s,
             "notes": list(self.notes),
             "checks": [dict(c) for c in self.checks],
+            "units": dict(self.units),
         } | ({"data_files": list(self.data_files)} if self.data_files else {})
 
 
@@ -274,6 +277,7 @@ class _Augmentation:
     steps: list[Step] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     dropped: set[str] = field(default_factory=set)
+    progress: ProgressHook = field(default=lambda _stage, _done, _total: None)  # the steps, for a bar or log lines
 
     def note(self, text: str) -> None:
         """Record a note and say it."""
@@ -331,11 +335,14 @@ class _Augmentation:
     def rank(self, todo: list[Candidate]) -> list[Ranked]:
         """The candidates `todo` ranked against the current fit (the round recorded and said)."""
         subject, current = self.subject, self.current
+        stage = f"round {len(self.rounds) + 1} candidates"
+        self.progress(stage, 0, len(todo))
         ranked = rank_candidates(
             todo, current, self.current_v, self.make_problem, subject.validation_J, subject.residual_count,
             self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
             claim=self.claim, scale=subject.scale(current),
             prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
+            on_done=lambda n: self.progress(stage, n, len(todo)),
         )  # fmt: skip
         self.rounds.append(tuple(ranked))
         self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
@@ -383,7 +390,10 @@ class _Augmentation:
         """Re-fit with `best` (one of `candidates` tested) and claim it if its strength interval excludes its null,
         it is still needed after the re-fit and it lowers the validation J; else it is dropped."""
         cand = self.subject.specs[best.effect]
+        stage = f"round {len(self.rounds)} re-fit with {best.effect}"
+        self.progress(stage, 0, 1)
         problem, names, refit = self.refit(best)
+        self.progress(stage, 1, 1)
         ci = self.subject.intervals(refit)
         if not strength_excludes_null(cand, refit, ci):
             shown = ", ".join(
@@ -460,6 +470,21 @@ class _Augmentation:
                     f"{n}, freed with a dropped effect, is back at its configured value (p = {p_keep:.2g})"
                 )
             self.say(self.notes[-1])
+        self.note_companions()
+
+    def note_companions(self) -> None:
+        """Say that a claimed effect's companions (asymmetric damping's cf, cr) were re-fitted with it: their
+        meaning changed, so their distance from the configured values is no error of the fit."""
+        for effect in self.claimed:
+            names = [n for n in self.subject.specs[effect].companions if n in self.current.names]
+            if not names:
+                continue
+            values = ", ".join(f"{n} = {self.current.x[self.current.names.index(n)]:.4g}" for n in names)
+            self.notes.append(
+                f"{', '.join(names)} were re-fitted with {effect}, which splits them ({values}): with it they are the "
+                "centre its own parameters spread around (asymmetric damping: rebound c + dc/2, compression c - dc/2), "
+                "not the configured values, and may sit far from them"
+            )
 
 
 def augment(
@@ -473,18 +498,20 @@ def augment(
     claim: bool = True,
     order: tuple[str, ...] = (),
     say: Callable[[str], None] = lambda _m: None,
+    progress: ProgressHook | None = None,
 ) -> Loop:
     """Rank the candidates against `fit`, add the best accepted one (a known parameter before an effect that
     explains no more), re-fit everything (identifiable shape parameters freed), keep it only if its strength
     interval excludes its null and it is still needed; repeat until none is accepted or max_rounds; then
     drop whatever the final model no longer needs. With claim=False only rank once. `order`: candidates to fit
-    first (the non-parametric estimate's resemblance)."""
+    first (the non-parametric estimate's resemblance); `progress` hears of each candidate tested and each re-fit."""
     specs = subject.specs
     run = _Augmentation(
         subject, alpha, candidate_budget, refit_budget, claim, say,
         ordered=[e for e in order if e in specs] + [e for e in specs if e not in order],
         current=fit, current_v=subject.validation_J(fit.names, fit.x),
     )  # fmt: skip
+    run.progress = progress or run.progress
     for _ in range(max_rounds if claim else min(max_rounds, 1)):
         if not run.round():
             break
@@ -511,17 +538,20 @@ def close(
     order: tuple[str, ...] = (),
     unexplained: Unexplained | None = None,
     extra_notes: tuple[str, ...] = (),
+    unit: Callable[[str], str] = lambda _name: "",
+    progress: ProgressHook | None = None,
     **fields,
 ) -> Diagnosis:
     """Run the loop from the declared fit (no claims when the data fail `quality`) and report the outcome;
     `chi2_residuals` is how many residuals the final chi² per sample averages (its noise limit);
     `unexplained`: the strut force the declared model misses, reported when the residual stays above the noise
-    (against the declared model: what the library added did not explain it);
-    `fields` are the Diagnosis's descriptive fields (validation and noise sources, system, J definition)."""
+    (against the declared model: what the library added did not explain it); `progress`: the loop's steps;
+    `unit` gives a parameter's SI unit (the config's `unit`); `fields` are the Diagnosis's descriptive fields
+    (validation and noise sources, system, J definition)."""
     rounds = max_rounds if quality.ok else (0 if quality.before_fit else 1)  # a failed pre-check: no fits at all
     loop = augment(
         subject, fit, alpha=alpha, max_rounds=rounds, candidate_budget=candidate_budget,
-        refit_budget=refit_budget, claim=quality.ok, say=say, order=order,
+        refit_budget=refit_budget, claim=quality.ok, say=say, order=order, progress=progress,
     )  # fmt: skip
     after = report(loop.fit, loop.effects) if loop.fit is not fit else before
     limit = chi2_limit(chi2_residuals)
@@ -539,5 +569,6 @@ def close(
         notes=loop.notes + extra_notes,
         chi2_limit=limit,
         unexplained=left,
+        units={n: unit(n) for n in dict.fromkeys(before.names + after.names)},
         **fields,
     )

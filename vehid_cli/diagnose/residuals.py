@@ -22,8 +22,10 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from ..identify.corrections import corrected, is_sensor_unknown
+from ..models.sensors import UNIT
 
 BAND_Z = 1.959963984540054  # two-sided 95 %
+WELCH_SEGMENT_S = 1.0  # residual_spectrum's Welch segment [s] (shorter for records under 8 s: 8 segments)
 
 
 @dataclass(frozen=True)
@@ -121,6 +123,17 @@ class ResidualAnalysis:
     freq: NDArray | None = None  # (nf,) [Hz]
     psd: NDArray | None = None  # (channels, nf) residual PSD over the white level of the implied noise
     dt: float | None = None  # sampling step [s]
+    measured: NDArray | None = None  # (n, channels) the data as the fit saw them, SI units; NaN where no sample
+    sigma: NDArray | None = None  # (channels,) the noise sigma of each channel [its unit]
+    units: tuple[str, ...] = ()  # each channel's SI unit
+
+    @property
+    def fitted(self) -> NDArray | None:
+        """(n, channels) the model at the fit, as the data see it (a profiled offset included): measured - residual
+        x sigma; None when the data were not kept."""
+        if self.measured is None or self.sigma is None:
+            return None
+        return self.measured - self.residual * self.sigma
 
     def summary(self) -> dict:
         """Plain numbers for JSON."""
@@ -161,6 +174,15 @@ def spectrum(residual: NDArray, dt: float) -> tuple[NDArray, NDArray]:
         fj, pj = welch(residual[at, j], fs=1.0 / dt_j, nperseg=min(256, at.size))
         out[j] = np.where(f <= fj[-1], np.interp(f, fj, pj / (2.0 * dt_j)), np.nan)
     return f, out
+
+
+def residual_spectrum(residual: NDArray, fs: float) -> tuple[NDArray, NDArray]:
+    """Welch's one-sided amplitude spectral density of a residual sampled at `fs` [Hz]: (freq [Hz], ASD [unit/√Hz])."""
+    from scipy.signal import welch
+
+    nper = int(min(residual.size, max(16, min(WELCH_SEGMENT_S * fs, residual.size // 8))))
+    freq, psd = welch(residual, fs=fs, nperseg=nper, detrend="constant", scaling="density")
+    return freq, np.sqrt(psd)
 
 
 def fingerprint_channels(layout, p: dict[str, float], names: tuple[str, ...]) -> tuple[int, ...]:
@@ -205,13 +227,17 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
     if task.corrections:
         batch = corrected(task.corrections, {f: v[None] for f, v in sim.items()}, every)
         sim = {f: v[0] for f, v in batch.items()}
-    parts, channels = [], []
+    parts, channels, data, units = [], [], [], []
     for family in reference:
         r = objective.error(family, sim[family]) / task.sigma[family]
+        y = np.array(reference[family], dtype=float)
         if task.observed is not None:
             r = np.where(task.observed[family], r, np.nan)
+            y = np.where(task.observed[family], y, np.nan)
         parts.append(r)
+        data.append(y)
         channels += list(exp.layout.names(family))
+        units += [UNIT[family]] * r.shape[1]
     residual = np.concatenate(parts, axis=1)
     n = residual.shape[0]
     full = bool(np.all(np.isfinite(residual)))
@@ -248,6 +274,9 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
         freq=(spec := spectrum(residual, exp.dt))[0],
         psd=spec[1],
         dt=float(exp.dt),
+        measured=np.concatenate(data, axis=1),
+        sigma=np.concatenate([np.asarray(task.sigma[f], dtype=float) for f in reference]),
+        units=tuple(units),
     )
 
 
@@ -275,4 +304,7 @@ def analyse_bench(history, model_force: NDArray, sigma: float, lags: int = 20, b
         freq=f,
         psd=psd,
         dt=float(history.dt),
+        measured=np.asarray(history.force, dtype=float)[:, None],
+        sigma=np.array([sigma], dtype=float),
+        units=("N",),
     )

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import warnings
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,8 +24,16 @@ from ..core.result import Result
 from ..optimizers.base import Problem
 from .crlb import CramerRao
 
+Z95 = 1.959963984540054  # the two-sided 95 % point of the standard normal distribution
 BOUND_TOL = 1e-6  # an estimate within this fraction of its box's width of a bound sits on it
 PENALTY = Problem.__dataclass_fields__["penalty"].default  # the cost of a NaN/Inf evaluation (optimizers/base.py)
+
+
+def worst_first(chi2: dict[str, float]) -> list[str]:
+    """Channel names by their chi² per sample, largest (the worst fitted) first; NaN (no samples) last, ties in the
+    given order."""
+    known = [n for n, v in chi2.items() if not np.isnan(v)]
+    return sorted(known, key=lambda n: -chi2[n]) + [n for n in chi2 if n not in known]
 
 
 def _digest(arrays: dict[str, np.ndarray]) -> str:
@@ -245,6 +254,42 @@ class Campaign(Result):
     channels: tuple[str, ...] = ()  # the measured channels of the records' channel_chi2
     checks: tuple[dict, ...] = ()  # the pre-fit checks' findings (SPEC section 6), measured data only
     warnings: tuple[str, ...] = ()  # what a user must know beyond the table (the checks', intervals', ...)
+    stored_units: tuple[str, ...] = ()  # the units its file recorded, one per name (empty: an older file)
+
+    @property
+    def units(self) -> dict[str, str]:
+        """{name: SI unit} of the unknowns: as the results file recorded them, else as the config declares them."""
+        if len(self.stored_units) == len(self.names):
+            return dict(zip(self.names, self.stored_units, strict=True))
+        return self.config.units(self.names)
+
+    @property
+    def single_fit(self) -> bool:
+        """One fit (measured data): every run would fit the same data, so there is no spread over runs."""
+        return len(self.records) == 1
+
+    def interval95(self) -> tuple[NDArray, NDArray]:
+        """(centre, half-width) of each unknown's 95 % interval, in its unit. One fit: the estimate ± Z95 x the
+        bound's sd at the estimate (already widened by sqrt(chi2) where the residual exceeds the noise); a
+        campaign: the mean ± Z95 x the sd over runs (where one run's estimate falls). The half-width is NaN where
+        no interval exists: one fit's estimate on a bound (the optimum lies beyond the box), an unidentifiable
+        unknown (infinite sd)."""
+        if not self.single_fit:
+            return self.summary.mean, Z95 * self.summary.sd
+        half = Z95 * np.asarray(self.bound.sd, dtype=float)
+        half = np.where(np.isfinite(half), half, np.nan)
+        for name in self.at_bound:
+            half[self.names.index(name)] = np.nan
+        return self.records[0].estimate, half
+
+    @property
+    def ci95(self) -> dict[str, list[float] | None]:
+        """{name: [low, high]} of `interval95` (None where no interval exists)."""
+        centre, half = self.interval95()
+        return {
+            n: [float(c - h), float(c + h)] if np.isfinite(h) else None
+            for n, c, h in zip(self.names, centre, half, strict=True)
+        }
 
     @property
     def at_bound(self) -> dict[str, int]:
@@ -267,7 +312,9 @@ class Campaign(Result):
         rows = [r.channel_chi2 for r in self.records if r.channel_chi2.size == len(self.channels)]
         if not rows or not self.channels:
             return {}
-        med = np.nanmedian(np.array(rows), axis=0)
+        with warnings.catch_warnings():  # a channel with no entries in any run: NaN, quietly
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(np.array(rows), axis=0)
         return {n: {"chi2_per_sample": float(v)} for n, v in zip(self.channels, med, strict=True)}
 
     def worst_channels(self, low: bool = False, count: int = 3) -> list[tuple[str, float]]:
@@ -284,9 +331,11 @@ class Campaign(Result):
         runs = len(self.records)
         for name, hits in self.at_bound.items():
             where = "" if runs == 1 else f" in {hits} of {runs} runs"
+            j = self.names.index(name)
+            box = f"[{self.lower[j]:.4g}, {self.upper[j]:.4g}] {self.units[name]}".rstrip()
             out.append(
-                f"{name} sits on a bound of its search box{where}: the optimum lies beyond it and no interval means "
-                "anything there; widen identify.bounds or identify.limits, or check the data (vehid check)"
+                f"{name} sits on a bound of its search box {box}{where}: the optimum lies beyond it and no interval "
+                "means anything there; widen identify.bounds or identify.limits, or check the data (vehid check)"
             )
         low_limit = 1.0 - 5.0 * np.sqrt(2.0 / max(s.residual_samples, 1))
         if s.model_inadequate:
@@ -324,8 +373,12 @@ class Campaign(Result):
             "re_percent": obj(s.re_percent),
             "nre_percent": s.nre_percent,
             "per_run_nre_percent": None if s.per_run_nre_percent is None else [float(v) for v in s.per_run_nre_percent],
+            "units": self.units,
+            "ci95": self.ci95,
+            "ci95_from": "bound" if self.single_fit else "runs",
             "crlb": {
                 "re_sd_percent": obj(b.re_sd_percent),
+                "sd": obj(b.sd),
                 "nre_rms_percent": finite_or_none(b.nre_rms_percent),
                 "unidentifiable": b.unidentifiable(),
             },

@@ -42,6 +42,14 @@ DELAYS = ("tau_comp_rise", "tau_comp_fall", "tau_reb_rise", "tau_reb_fall")  # a
 CONTROL_STATE = 1  # models with a control input carry u_f (the lagged input) as their last state
 P0 = N_FRONT + len(DELAYS)  # where a model's own parameters start in a row
 BW_SET = ("c0", "k0", "c1", "alpha", "beta", "gamma", "delta")  # Bouc-Wen parameters that depend on u and side
+# SI units of every parameter a row can hold ('-': dimensionless, a count or the control input's own scale); the
+# tables' expanded names (c0_comp_2, v_node_1, F_2_3) take their base name's (DamperModel.unit).
+UNITS = {
+    "k1": "N/m", "x0": "m", "gap": "m", "v_switch": "m/s",
+    **{n: "s" for n in FRONT[3:7] + DELAYS},
+    "c0": "N s/m", "fc": "N", "v_eps": "m/s", "k0": "N/m", "c1": "N s/m", "alpha": "N/m", "beta": "1/m²",
+    "gamma": "1/m²", "delta": "-", "m": "-", "nv": "-", "nu": "-", "u_node": "-", "v_node": "m/s", "F": "N",
+}  # fmt: skip
 
 
 @numba.njit(error_model="numpy", inline="always")
@@ -213,6 +221,16 @@ class DamperModel:
     def layout(self, table_shape: tuple[int, ...] = ()) -> tuple[str, ...]:
         """All parameter names of a row: the front end, then the model's own (tables expanded)."""
         return FRONT + DELAYS + self.expand(table_shape)
+
+    @staticmethod
+    def unit(name: str) -> str:
+        """The SI unit of a parameter of a row (UNITS; a table entry's is its base name's), '' when unknown."""
+        if name in UNITS:
+            return UNITS[name]
+        base = name.rstrip("0123456789_")  # c0_comp_2 -> c0_comp, u_node_3 -> u_node, F_2_3 -> F
+        for side in ("_comp", "_reb"):
+            base = base.removesuffix(side)
+        return UNITS.get(base, "")
 
     def expand(self, table_shape: tuple[int, ...]) -> tuple[str, ...]:
         if self.name == "generalized_bouc_wen":

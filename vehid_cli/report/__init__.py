@@ -126,8 +126,37 @@ def system_of(campaigns: list[Campaign], files: list[str]) -> type[System]:
 
 
 def rich_tables(campaigns: list[Campaign], files: list[str]) -> list:
-    """The terminal tables of the campaigns' system (the car's summary tables, a damper's parameters and J)."""
-    return system_of(campaigns, files).tables(campaigns, files)
+    """The terminal tables of the campaigns' system (the car's summary tables, a damper's parameters and J), each
+    with its names and numbers whole (`whole_cells`) however narrow the terminal or CI log."""
+    return [whole_cells(t) for t in system_of(campaigns, files).tables(campaigns, files)]
+
+
+def whole_cells(table, width: int | None = None):
+    """A rich table whose names (the first column: `tau_comp_rise`, `hysteresis.alpha_f`) are never cut to an
+    ellipsis, and whose numbers are whole too when the console (`width`, default the terminal's; 80 in a pipe or CI
+    log) has room for them, else folded onto a second line rather than cut; headers wrap at their words."""
+    from rich.console import Console
+    from rich.text import Text
+
+    if not getattr(table, "columns", None):
+        return table
+
+    def longest(cells) -> int:
+        return max((Text.from_markup(c).cell_len if isinstance(c, str) else c.cell_len for c in cells), default=0)
+
+    def word(header) -> int:
+        return max((len(w) for w in str(header).split()), default=0)
+
+    first, rest = table.columns[0], table.columns[1:]
+    first.min_width, first.no_wrap = max(longest(first._cells), word(first.header), 1), True
+    need = [max(longest(c._cells), word(c.header), 1) for c in rest]
+    room = (width or Console().width) - first.min_width - 3 * len(table.columns) - 1
+    for column, n in zip(rest, need, strict=True):
+        if sum(need) <= room:
+            column.min_width = n
+        else:
+            column.overflow = "fold"
+    return table
 
 
 def campaign_notes(c: Campaign) -> list[str]:

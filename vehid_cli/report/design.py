@@ -74,7 +74,7 @@ def plan_rows(r: DesignResult) -> list[list[str]]:
         ["duration [s]", f"{c.duration:.3g}", f"{d.duration:.3g}", span(lim["duration"])],
     ]  # fmt: skip
     if d.sensors is not None:
-        configured = ", ".join(r.configured.config.sensor_layout().channel_names())
+        configured = ", ".join(r.configured.config.sensor_layout().channel_names)
         rows.append(["sensors", configured, ", ".join(d.sensors), f"{design.sensors.count} of "
                                                                     f"{len(design.sensors.candidates)}"])  # fmt: skip
     return rows

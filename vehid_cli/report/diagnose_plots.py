@@ -10,6 +10,9 @@ import numpy as np
 
 from ..core.figures import plt
 from ..core.figures import save as _save
+from ..identify.records import worst_first
+
+SCALE = {"m": ("mm", 1e3), "m/s^2": ("m/s²", 1.0)}  # channels drawn in another unit than their SI one: (unit, factor)
 
 
 def _label(report, name: str) -> str:
@@ -17,8 +20,9 @@ def _label(report, name: str) -> str:
 
 
 def plot_diagnosis(diagnosis, directory: str | Path, stem: str = "diagnose") -> list[Path]:
-    """Write <stem>-residual.png, <stem>-fingerprint.png, <stem>-spectrum.png and, when the residual stayed above
-    the noise, <stem>-unexplained.png (the estimated missing strut force); return their paths."""
+    """Write <stem>-residual.png, <stem>-fingerprint.png, <stem>-spectrum.png, <stem>-channels.png (every channel
+    measured against the fits before and after, worst first) and, when the residual stayed above the noise,
+    <stem>-unexplained.png (the estimated missing strut force); return their paths."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     before, after = diagnosis.before.analysis, diagnosis.after.analysis
@@ -77,9 +81,57 @@ def plot_diagnosis(diagnosis, directory: str | Path, stem: str = "diagnose") -> 
         ax.set_title("spectral residual")
         ax.legend(fontsize=8)
         paths.append(_save(fig, directory / f"{stem}-spectrum.png"))
+    if before.fitted is not None:
+        paths.append(plot_channels(diagnosis, directory / f"{stem}-channels.png"))
     if getattr(diagnosis, "unexplained", None) is not None:
         paths.append(plot_unexplained(diagnosis.unexplained, directory / f"{stem}-unexplained.png"))
     return paths
+
+
+def channel_order(analysis) -> list[int]:
+    """The channels of a residual analysis, worst fitted (largest chi² per sample) first."""
+    chi2 = {name: float(v) for name, v in zip(analysis.channels, analysis.chi2_channel, strict=True)}
+    return [analysis.channels.index(n) for n in worst_first(chi2)]
+
+
+def plot_channels(diagnosis, path: str | Path) -> Path:
+    """Every channel (a row each, worst fitted before the loop first): measured with the model before and after the
+    loop, the residual before and after, and its spectrum before and after over the noise floor of the channel's
+    sigma (1: white noise of that sigma)."""
+    before, after = diagnosis.before.analysis, diagnosis.after.analysis
+    changed = diagnosis.after is not diagnosis.before
+    order = channel_order(before)
+    fig, axes = plt.subplots(len(order), 3, figsize=(14, 2.1 * len(order) + 0.8), squeeze=False,
+                             constrained_layout=True, gridspec_kw={"width_ratios": [2.2, 2.2, 1.4]})  # fmt: skip
+    t = np.arange(before.residual.shape[0]) * (before.dt or 1.0)
+    sides = [("before", diagnosis.before, before, "0.35", "--")]
+    sides += [("after", diagnosis.after, after, "C3", "-")] if changed else []
+    for row, j in zip(axes, order, strict=True):
+        unit, scale = SCALE.get(before.units[j], (before.units[j], 1.0)) if before.units else ("-", 1.0)
+        own = np.isfinite(before.residual[:, j])
+        row[0].plot(t[own], scale * before.measured[own, j], lw=0.6, color="0.65", label="measured")
+        for side, report, an, colour, style in sides:
+            label = _label(report, side)
+            row[0].plot(t[own], scale * an.fitted[own, j], lw=1.0, color=colour, ls=style, label=label)
+            row[1].plot(t[own], scale * an.sigma[j] * an.residual[own, j], lw=0.6, color=colour, label=side)
+            if an.psd is not None:
+                row[2].semilogy(an.freq[1:], an.psd[j, 1:], lw=0.8, color=colour, label=side)
+        row[1].axhspan(-scale * before.sigma[j], scale * before.sigma[j], color="C2", alpha=0.2, lw=0,
+                       label="±1 sigma (noise)")  # fmt: skip
+        row[2].axhline(1.0, color="C2", ls="--", lw=1, label="noise floor")
+        name = before.channels[j]
+        row[0].set_ylabel(f"{name} [{unit}]")
+        row[1].set_ylabel(f"residual [{unit}]")
+        row[1].set_title(f"{name}: chi²/sample {before.chi2_channel[j]:.3g}"
+                         + (f" -> {after.chi2_channel[j]:.3g}" if changed else ""), fontsize=9)  # fmt: skip
+        row[2].set_ylabel("PSD / noise floor [-]")
+    for ax in axes[-1, :2]:
+        ax.set_xlabel("t [s]" if before.dt else "sample")
+    axes[-1, 2].set_xlabel("frequency [Hz]")
+    for ax in axes[0]:
+        ax.legend(fontsize=7, loc="upper right")
+    fig.suptitle("Measured against the model before and after the loop, worst channel first")
+    return _save(fig, path)
 
 
 def plot_unexplained(unexplained, path: str | Path) -> Path:

@@ -7,14 +7,17 @@ from pathlib import Path
 
 from rich import box
 from rich.console import Group
+from rich.markup import escape
 from rich.table import Table
 
+from ..core.digits import significant, with_uncertainty
 from ..core.errors import InputError, WriteFailed
 from .diagnose_plots import plot_diagnosis
 
 
 def diagnosis_tables(result):
-    """The candidate table (round 1) and the before/after table of a diagnosis, each within 80 columns."""
+    """The candidate table (round 1) and the before/after table of a diagnosis, each within 80 columns; estimates
+    with their units, rounded to their 95 % intervals."""
     claimed = set(result.selected)
     vname = "val. J" if result.validation_from_file else "held-out J"
     table = Table(
@@ -36,10 +39,10 @@ def diagnosis_tables(result):
     def fmt(v):
         return "-" if v is None else f"{v:.4g}"
 
-    def est(rep, j):
+    def est(rep, j):  # rounded to its 95 % interval (core.digits)
         if rep.names[j] in rep.fixed:
-            return f"{rep.x[j]:.5g} (fixed)"
-        return f"{rep.x[j]:.5g} ± {rep.ci[j]:.2g}"
+            return f"{significant(rep.x[j], 5)} (fixed)"
+        return with_uncertainty(rep.x[j], rep.ci[j])
 
     b, a = result.before, result.after
     ba.add_row("model", ", ".join(b.effects) or "(declared)", ", ".join(a.effects) or "(nothing added)")
@@ -48,7 +51,9 @@ def diagnosis_tables(result):
     ba.add_row(vname, fmt(b.validation_J), fmt(a.validation_J))
     ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
     for j, name in enumerate(a.names):
-        ba.add_row(name, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
+        unit = result.units.get(name, "")
+        label = escape(f"{name} [{unit}]" if unit else name)  # not rich markup
+        ba.add_row(label, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
     return Group(table, ba)
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..config import AnyConfig, load_config
 from ..core.errors import InputError
+from ..core.progress import ProgressHook
 from ..diagnose.checks import Checks
 from ..identify.source import DataFiles, DataSource, as_paths
 from .base import Box, Log, Simulated, System
@@ -75,14 +76,16 @@ def diagnose_config(
     data: DataFiles = None,
     validate: Sequence[str | Path] = (),
     log: Log | None = None,
+    progress: ProgressHook | None = None,
 ):
     """`vehid diagnose`: the config's system closes the loop on `data` (else the config's own runs), judged on the
-    `validate` runs; the system's diagnosis defaults come before the user's `overrides`."""
+    `validate` runs; the system's diagnosis defaults come before the user's `overrides`; `progress` hears of the
+    loop's steps (stage, done, total)."""
     cfg = load_config(config, overrides)
     cls = system_class(cfg)
     if cls.diagnosis_defaults:
         cfg = load_config(config, [*cls.diagnosis_defaults, *overrides])
-    return cls.diagnose(cfg, as_paths(data), as_paths(tuple(validate)), log)
+    return cls.diagnose(cfg, as_paths(data), as_paths(tuple(validate)), log, progress)
 
 
 def check_config(config: str | Path, overrides: Sequence[str] = (), data: DataFiles = None) -> tuple[System, Checks]:

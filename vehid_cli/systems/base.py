@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from ..config import AnyConfig
 from ..core.errors import InputError
+from ..core.progress import ProgressHook
 from ..core.streams import run_streams
 from ..diagnose.checks import Checks
 from ..identify.crlb import CramerRao
@@ -125,9 +126,12 @@ class System(ABC):
         return {}
 
     @classmethod
-    def diagnose(cls, config: AnyConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None) -> Any:
+    def diagnose(
+        cls, config: AnyConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None,
+        progress: ProgressHook | None = None,
+    ) -> Any:  # fmt: skip
         """`vehid diagnose`: close the loop on the measured `data` (judged on the `validate` runs) -> a
-        `diagnose.loop.Diagnosis`."""
+        `diagnose.loop.Diagnosis`; `progress` hears of its steps."""
         raise InputError(f"vehid diagnose has no loop for a {cls.name} yet", source=config.source, key="system")
 
     @classmethod

@@ -275,11 +275,12 @@ class LumpedSystem(System):
 
     # ------------------------------------------------------------------ vehid simulate
     @classmethod
-    def diagnose(cls, config: LumpedConfig, data: tuple[str, ...], validate: tuple[str, ...], log=None):
-        """The rig's loop (`systems.lumped_diagnosis`) on the measured runs (else data.files)."""
+    def diagnose(cls, config: LumpedConfig, data: tuple[str, ...], validate: tuple[str, ...], log=None, progress=None):
+        """The rig's loop (`systems.lumped_diagnosis`) on the measured runs (else data.files); `progress` hears of
+        its steps."""
         from .lumped_diagnosis import diagnose_rig  # the loop's machinery only for `vehid diagnose`
 
-        return diagnose_rig(cls, config, data or config.data_runs(), validate, log)
+        return diagnose_rig(cls, config, data or config.data_runs(), validate, log, progress=progress)
 
     @classmethod
     def write_simulation(cls, config, target: Path, seed: int, road=None, origin: str = "") -> Simulated:

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from ..config.lumped import LumpedConfig
 from ..core.errors import InputError
+from ..core.progress import ProgressHook
 from ..core.streams import run_streams
 from ..diagnose.attribution import (
     ALPHA,
@@ -159,8 +160,10 @@ def diagnose_rig(
     *,
     alpha: float = ALPHA,
     max_rounds: int = MAX_ROUNDS,
+    progress: ProgressHook | None = None,
 ) -> Diagnosis:
-    """Close the loop on the measured runs `files` (jointly), judged on the `validate` runs (else held-out blocks)."""
+    """Close the loop on the measured runs `files` (jointly), judged on the `validate` runs (else held-out blocks);
+    `progress` hears of each step (the declared fit, each candidate tested, each re-fit)."""
     t_start = time.perf_counter()
     say = log or (lambda _m: None)
     if not files:
@@ -180,8 +183,11 @@ def diagnose_rig(
     R_train = int(R_total if keep is None else keep.sum())
     specs = {**rig_candidates(system), **parameter_specs(system)}
     rig = RigLoop(system, ref, keep, validation, specs)
+    step = progress or (lambda _stage, _done, _total: None)
+    step("declared fit", 0, 1)
     fit = fit_declared(system, rig.problem_for(system.names)[0], REFIT_BUDGET, say)
     before = rig.report(fit, ())
+    step("declared fit", 1, 1)
     quality = quality_of(system, ref, before)
     subject = Subject(
         specs=specs, declared=frozenset(), problem_for=rig.problem_for, validation_J=rig.validation_J,
@@ -193,5 +199,5 @@ def diagnose_rig(
         candidate_budget=CANDIDATE_BUDGET, refit_budget=REFIT_BUDGET, say=say, t_start=t_start,
         chi2_residuals=R_total, validation_source=source, sigma_source=system.sigma_source,
         validation_from_file=bool(validate), system=system.name,
-        data_files=tuple(map(str, files)) if len(files) > 1 else (),
+        data_files=tuple(map(str, files)) if len(files) > 1 else (), unit=config.unit, progress=progress,
     )  # fmt: skip

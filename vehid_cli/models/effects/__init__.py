@@ -131,8 +131,16 @@ def bound_violation(effect: str, name: str, value: float) -> str | None:
     return f"{effect}.{name} = {value:g} {p.unit} is outside its physical range {lo}{p.lower:g}, {p.upper:g}]"
 
 
+def parameter_unit(effect: str, name: str) -> str:
+    """The SI unit an effect declares for its parameter `name` (per-axle ones with or without _f / _r: a damper on a
+    bench names them plainly); '' for an unknown effect or parameter."""
+    if effect not in LIBRARY:
+        return ""
+    return next((p.unit for p in LIBRARY[effect].params if name in (p.name, f"{p.name}_f", f"{p.name}_r")), "")
+
+
 __all__ = [
     "AXLES", "AXLE_OF_CORNER", "LIBRARY", "N_CORNERS", "BenchScale", "CandidateForm", "Effect", "EffectSet", "Param",
     "Shape", "bench_effect_rows", "bench_lag_state", "bench_names", "bound_violation", "check_names", "effect_rows",
-    "register", "unregister",
+    "parameter_unit", "register", "unregister",
 ]  # fmt: skip

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+from collections.abc import Callable
 
 from .base import FAIL, OK, WARNING, Channel, Context, Correction, Fault, Finding, correlation
 
@@ -29,11 +30,23 @@ def fault_of(name: str) -> Fault:
     return FAULTS[name.partition(":")[0]]
 
 
+def correction_unit(name: str, channel_unit: Callable[[str], str]) -> str | None:
+    """The SI unit of a correction of the measurement chain, ``sensor:<channel>:<param>`` (its fault's `unit`, the
+    channel's own unit in place of '{channel}'); None when `name` is not one, '' for a fault not registered."""
+    if not name.startswith("sensor:"):
+        return None
+    channel, _, param = name.removeprefix("sensor:").partition(":")
+    fault = FAULTS.get(param.partition(":")[0])
+    if fault is None:
+        return ""
+    return fault.unit.replace("{channel}", channel_unit(channel) or "?") if "{channel}" in fault.unit else fault.unit
+
+
 for _info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
     if _info.name != "base":
         register(importlib.import_module(f"{__name__}.{_info.name}").FAULT)
 
 __all__ = [
     "FAIL", "FAULTS", "OK", "WARNING", "Channel", "Context", "Correction", "Fault", "Finding", "correlation",
-    "fault_of", "register",
+    "correction_unit", "fault_of", "register",
 ]  # fmt: skip

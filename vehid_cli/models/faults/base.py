@@ -111,6 +111,7 @@ class Fault:
     correct: Callable[[NDArray, NDArray, Context], NDArray]  # (y (P, n), theta (P, m), ctx) -> recorded (P, n)
     correction: Callable[[Channel, Finding], Correction]  # how the loop fits it, from the check's finding
     order: int = 0  # the order checks run and findings are listed in
+    unit: str = "-"  # the SI unit of its correction's parameter ('{channel}': the channel's own; '-': none)
     pair: bool = False  # acts on two channels (a swap): `ctx.partner` is the other's model channel
 
 

@@ -63,4 +63,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("clip", __doc__.splitlines()[0], stops=False, check=check, correct=correct, correction=correction,
-              order=50)  # fmt: skip
+              order=50, unit="-")  # fmt: skip

@@ -43,4 +43,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("dropout", __doc__.splitlines()[0], stops=False, check=check, correct=correct, correction=correction,
-              order=60)  # fmt: skip
+              order=60, unit="-")  # fmt: skip

@@ -78,4 +78,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("gain", __doc__.splitlines()[0], stops=True, check=check, correct=correct, correction=correction,
-              order=20)  # fmt: skip
+              order=20, unit="-")  # fmt: skip

@@ -37,4 +37,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("offset", __doc__.splitlines()[0], stops=False, check=check, correct=correct, correction=correction,
-              order=80)  # fmt: skip
+              order=80, unit="{channel}")  # fmt: skip

@@ -38,4 +38,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("sign", __doc__.splitlines()[0], stops=True, check=check, correct=correct, correction=correction,
-              order=10)  # fmt: skip
+              order=10, unit="-")  # fmt: skip

@@ -43,4 +43,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("swap", __doc__.splitlines()[0], stops=True, check=check, correct=correct, correction=correction,
-              order=30, pair=True)  # fmt: skip
+              order=30, unit="-", pair=True)  # fmt: skip

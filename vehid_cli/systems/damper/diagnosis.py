@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from ...config import DamperConfig
 from ...core.errors import InputError
+from ...core.progress import ProgressHook
 from ...core.streams import run_streams
 from ...diagnose.attribution import (
     ALPHA,
@@ -255,10 +256,13 @@ def diagnose_damper(
     candidate_budget: int = CANDIDATE_BUDGET,
     refit_budget: int = REFIT_BUDGET,
     log=None,
+    progress: ProgressHook | None = None,
 ) -> Diagnosis:
-    """Close the loop for the configured damper on the measured run `data_file` (see the module doc)."""
+    """Close the loop for the configured damper on the measured run `data_file` (see the module doc); `progress`
+    hears of each step (the declared fit, each candidate tested, each re-fit)."""
     t_start = time.perf_counter()
     say = log or (lambda _msg: None)
+    step = progress or (lambda _stage, _done, _total: None)
     runs = BenchRuns.load(config, data_file, validate_files)
     spec = configured_spec(config)
     declared_names = tuple(config.identify.unknowns)
@@ -266,8 +270,10 @@ def diagnose_damper(
     effect_limits, starts = candidate_ranges(specs)
     limits = {**config.search_box(), **effect_limits}
     bench = BenchLoop(runs, spec, declared_names, starts, limits, config.bench.substeps, noise_sigma(runs.train))
+    step("declared fit", 0, 1)
     fit = fit_declared(config, bench, refit_budget, say)
     before = bench.report(fit, ())
+    step("declared fit", 1, 1)
     quality = assess_bench(runs.train, bench.sigma, declared_names, before)
     subject = Subject(
         specs=specs, declared=frozenset(), problem_for=bench.problem_for, validation_J=bench.validation_J,
@@ -278,8 +284,9 @@ def diagnose_damper(
         candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start,
         chi2_residuals=runs.train.t.size, validation_source=runs.validation_source,
         sigma_source=f"force noise sigma {bench.sigma:.4g} N estimated from the training run (third differences)",
-        system="damper", validation_from_file=bool(runs.held_out),
+        system="damper", validation_from_file=bool(runs.held_out), unit=config.unit,
         J_definition="Fleps-Dezasse Eq. 7: mean squared force error over the variance of the measured force",
+        progress=progress,
     )  # fmt: skip
 
 

@@ -56,7 +56,8 @@ class Findings(Result):
             tr.write_h5(tg.create_group(f"{k:02d}"))
 
     def json_keys(self, campaign) -> dict:
-        """The damper's keys of the JSON summary: J per run and of the truth, held-out J, the model, real time."""
+        """The damper's keys of the JSON summary: J per run and of the truth, held-out J, the model (every parameter
+        of its row, with their SI units), real time."""
         rt, recs = self.realtime, campaign.records
         return {
             "model": self.model,
@@ -65,6 +66,7 @@ class Findings(Result):
             "J_train": float(np.mean([r.cost for r in recs])),
             "validation_J": {Path(f).name: j for f, j in self.validation},
             "model_row": {n: float(v) for n, v in zip(self.names, self.values, strict=True)},
+            "model_row_units": campaign.config.units(self.names),
             "realtime": rt.to_json(),
         }
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ...core.figures import plt, save
+from ...diagnose.residuals import residual_spectrum
 
 
 def _panels(title: str):
@@ -65,4 +66,55 @@ def write_damper_plots(results, labels: list[str], out_dir: str | Path) -> list[
         path = out_dir / f"force-{safe}.png"
         plot_traces(name, entries, path)
         written.append(path)
+    return written
+
+
+def plot_fitted_force(trace, sigma: float, path: str | Path, label: str = "") -> None:
+    """One bench run measured against the identified model: the forces over time, the residual with the noise's
+    ±1 sigma band, and the residual's amplitude spectral density against the white-noise floor of sigma [N]."""
+    fig, axes = plt.subplots(
+        1, 3, figsize=(15, 3.8), constrained_layout=True, gridspec_kw={"width_ratios": [2, 2, 1.3]}
+    )
+    residual = np.asarray(trace.measured) - np.asarray(trace.model)
+    fs = 1.0 / float(np.median(np.diff(trace.t)))
+    axes[0].plot(trace.t, trace.measured, lw=0.8, color="0.55", label="measured")
+    axes[0].plot(trace.t, trace.model, lw=1.0, color="C3", label=f"fitted model (J = {trace.J:.4f})")
+    axes[0].set_ylabel("force [N]")
+    axes[1].plot(trace.t, residual, lw=0.6, color="C0")
+    axes[2].loglog(*_positive(residual_spectrum(residual, fs)), lw=0.8, color="C0", label="residual")
+    if np.isfinite(sigma) and sigma > 0:
+        axes[1].axhspan(-sigma, sigma, color="C2", alpha=0.2, lw=0, label="±1 sigma (noise)")
+        axes[2].axhline(np.sqrt(2.0 * sigma**2 / fs), color="C2", ls="--", lw=1, label="noise floor")
+        axes[1].legend(fontsize=8, loc="upper right")
+    axes[1].set_ylabel("residual [N]")
+    axes[2].set_ylabel("ASD [N/√Hz]")
+    axes[0].set_xlabel("t [s]")
+    axes[1].set_xlabel("t [s]")
+    axes[2].set_xlabel("frequency [Hz]")
+    axes[0].legend(fontsize=8, loc="upper right")
+    axes[2].legend(fontsize=8, loc="upper right")
+    kind, _, run = trace.name.partition(":")
+    fig.suptitle(f"Measured against fitted{': ' + label if label else ''}, {run or trace.name} "
+                 f"({'training' if kind == 'train' else 'held out'})")  # fmt: skip
+    save(fig, path)
+
+
+def _positive(spectrum):
+    """(freq, asd) without the zero frequency (a log axis)."""
+    freq, asd = spectrum
+    return freq[1:], asd[1:]
+
+
+def write_fitted_force_plots(campaigns, labels: list[str], out_dir: str | Path) -> list[Path]:
+    """fitted-<label>-<run>.png: each campaign's bench runs measured against its identified model."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for c, lab in zip(campaigns, labels, strict=True):
+        sigma = np.asarray(c.sigma.get("force", [np.nan]), dtype=float).ravel()
+        for tr in c.findings.traces if c.findings is not None else ():
+            safe = tr.name.replace(":", "-").replace("/", "_").replace(" ", "_")
+            path = out_dir / f"fitted-{lab}-{safe}.png"
+            plot_fitted_force(tr, float(sigma[0]) if sigma.size else float("nan"), path, lab)
+            written.append(path)
     return written

@@ -1,4 +1,4 @@
-"""Tables of damper campaigns (campaign files with system = damper): terminal, Markdown, CSV and JSON.
+"""Tables of damper campaigns (campaign files with system = damper): terminal, Markdown, LaTeX, CSV and JSON.
 
 Every number comes from the files: J (Fleps-Dezasse Eq. 7) on the training run and on each held-out run,
 the estimates (with RE against the truth for synthetic data), and the real-time check.
@@ -13,11 +13,14 @@ from pathlib import Path
 import numpy as np
 from rich.table import Table
 
+from ...core.digits import significant
 from ...core.jsonio import to_json
 from ...identify.records import Campaign
+from ..report import add_column, fixed, interval_note, latex_table, markdown_table, parameter_rows
 
 CSV_COLUMNS = (
-    "file", "model", "data_file", "runs", "parameter", "truth", "start", "mean", "re_percent", "sd",
+    "file", "model", "data_file", "runs", "parameter", "unit", "truth", "start", "mean", "ci95_low", "ci95_high",
+    "ci95_from", "at_bound_runs", "re_percent", "sd",
     "J_train", "J_truth", "validation_J", "rt_dt_s", "rt_stable", "rt_factor", "rt_largest_stable_dt_s", "wall_s",
 )  # fmt: skip
 
@@ -54,24 +57,18 @@ def _J_train(res: Campaign) -> str:
 
 
 def parameter_table(res: Campaign, file: str) -> Table:
-    """Rich table of one result: per unknown truth, start, estimate (mean over runs), RE, the spread over runs (or,
-    for one fit, its 95 % interval from the bound at the estimate) and the Cramér–Rao bound."""
+    """Rich table of one result: per unknown its unit, truth, configured value, the estimate (mean over runs) ± its
+    95 % interval (the spread over runs, or one fit's from the bound at the estimate), RE and the Cramér–Rao bound;
+    an estimate on a bound of its box is marked AT BOUND."""
     algorithm = res.config.identify.algorithm.name
     title = f"{label(res, file)} · {res.findings.model} · {source(res)} · {len(res.records)} run(s) · {algorithm}"
     table = Table(title=title, title_justify="left")
-    single = len(res.records) == 1
-    spread = "± 95 % (bound)" if single else "sd over runs %"
-    for col in ("parameter", "truth", "configured", "estimate", "RE %", spread, "CRLB sd %"):
-        table.add_column(col, justify="left" if col == "parameter" else "right")
-    re, b, at_bound = res.summary.re_percent, res.bound, res.at_bound
-    for j, name in enumerate(res.names):
-        spread = _g(1.96 * b.sd[j], ".3g") if single else _g(res.summary.re_sd_percent[j], ".3f")
-        if name in at_bound:  # the optimum lies beyond the box: no interval means anything
-            spread = "on bound" if single else f"{spread} (at a bound in {at_bound[name]} runs)"
-        row_name = name + (" AT BOUND" if name in at_bound and single else "")
+    for col in ("parameter", "unit", "truth", "config", "estimate ± 95 %", "RE %", "CRLB sd %"):
+        add_column(table, col)
+    for row in parameter_rows(res):
         table.add_row(
-            row_name, _g(None if res.truth is None else res.truth[j]), _g(res.nominal[j]), _g(res.summary.mean[j]),
-            _g(None if re is None else re[j], ".3f"), spread, _g(b.re_sd_percent[j], ".3f"),
+            row.label, row.unit, row.truth_text, significant(row.configured), row.with_interval,
+            fixed(row.re_percent), fixed(row.crlb_sd_percent),
         )  # fmt: skip
     rt = res.findings.realtime
     parts = [f"J train {_J_train(res)}"]
@@ -85,16 +82,25 @@ def parameter_table(res: Campaign, file: str) -> Table:
         f"largest stable step {1e3 * rt.largest_stable_dt:.3g} ms"
     )
     parts.append(f"evaluations/run {np.mean(res.summary.evaluations):.0f} · wall {res.summary.wall_s:.1f} s")
-    table.caption = " · ".join(parts)
+    table.caption = interval_note(res) + "\n" + " · ".join(parts)
     table.caption_justify = "left"
     return table
 
 
 def _md(header: list[str], rows: list[list[str]], right_from: int = 1) -> list[str]:
-    align = ["---" if i < right_from else "---:" for i in range(len(header))]
-    return ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"] + [
-        "| " + " | ".join(r) + " |" for r in rows
-    ]
+    return markdown_table(header, rows, left=right_from)
+
+
+def estimates(res: Campaign) -> tuple[list[str], list[list[str]]]:
+    """The identified parameters of one result for the text formats: (header, rows) with units, the estimate ± its
+    95 % interval and the interval (rounded to it), the configured value, and the truth and RE where known."""
+    header = ["parameter", "unit", "configured", "estimate ± 95 %", "95 % interval"]
+    header += ["truth", "RE of mean %"] if res.truth is not None else []
+    rows = []
+    for row in parameter_rows(res):
+        cells = [row.label, row.unit, significant(row.configured), row.with_interval, row.interval_text]
+        rows.append(cells + ([row.truth_text, fixed(row.re_percent)] if res.truth is not None else []))
+    return header, rows
 
 
 def markdown(results: list[Campaign], files: list[str]) -> str:
@@ -129,20 +135,25 @@ def markdown(results: list[Campaign], files: list[str]) -> str:
         ])  # fmt: skip
     header = ["result", "model", "step [ms]", "stable", "real-time factor", "largest stable step [ms]"]
     lines += _md(header, rows, right_from=2) + [""]
-    lines += ["#### Identified parameters (SI: N, m, s)", ""]
+    lines += ["#### Identified parameters", ""]
     for res, f in zip(results, files, strict=True):
-        re = res.summary.re_percent
-        header = ["parameter", "configured", "estimate"] + (["truth", "RE of mean %"] if res.truth is not None else [])
-        rows = []
-        for j, name in enumerate(res.names):
-            row = [name, _g(res.nominal[j]), _g(res.summary.mean[j])]
-            if res.truth is not None:
-                row += [_g(res.truth[j]), _g(re[j], ".3f")]
-            rows.append(row)
-        lines += [f"`{label(res, f)}` ({res.findings.model}, {len(res.records)} run(s), "
-                  f"{np.mean(res.summary.evaluations):.0f} evaluations per run):", ""]  # fmt: skip
-        lines += _md(header, rows) + [""]
+        header, rows = estimates(res)
+        evaluations = f"{np.mean(res.summary.evaluations):.0f} evaluations per run"
+        lines += [f"`{label(res, f)}` ({res.findings.model}, {len(res.records)} run(s), {evaluations}; "
+                  f"{interval_note(res)}):", ""]  # fmt: skip
+        lines += _md(header, rows, right_from=2) + [""]
     return "\n".join(lines)
+
+
+def latex(results: list[Campaign], files: list[str]) -> str:
+    """LaTeX (booktabs): the identified parameters of each result, with J on its training and held-out runs."""
+    parts: list[str] = []
+    for res, f in zip(results, files, strict=True):
+        header, rows = estimates(res)
+        held = "; ".join(f"J {Path(v).stem} {j:.4g}" for v, j in res.findings.validation)
+        caption = f"{label(res, f)}: {res.findings.model} on {source(res)}, J train {_J_train(res)}"
+        parts += latex_table(header, rows, caption + (f"; {held}" if held else "") + f"; {interval_note(res)}")
+    return "\n".join(parts)
 
 
 def csv_text(results: list[Campaign], files: list[str]) -> str:
@@ -153,13 +164,13 @@ def csv_text(results: list[Campaign], files: list[str]) -> str:
     for res, f in zip(results, files, strict=True):
         rt, re = res.findings.realtime, res.summary.re_percent
         validation = ";".join(f"{Path(v).name}={j:.6g}" for v, j in res.findings.validation)
-        for j, name in enumerate(res.names):
-            truth = None if res.truth is None else res.truth[j]
+        for j, row in enumerate(parameter_rows(res)):
             writer.writerow([
-                f, res.findings.model, res.data_file or "", len(res.records), name, truth, res.nominal[j],
-                res.summary.mean[j], None if re is None else re[j], res.summary.sd[j], float(_J(res).mean()),
-                None if res.truth is None else float(_J_truth(res)), validation, rt.dt, rt.stable,
-                rt.realtime_factor, rt.largest_stable_dt, res.summary.wall_s,
+                f, res.findings.model, res.data_file or "", len(res.records), row.name, row.unit,
+                None if res.truth is None else row.truth, res.nominal[j], row.estimate, row.low, row.high,
+                row.interval_from, row.at_bound, None if re is None else re[j], res.summary.sd[j],
+                float(_J(res).mean()), None if res.truth is None else float(_J_truth(res)), validation, rt.dt,
+                rt.stable, rt.realtime_factor, rt.largest_stable_dt, res.summary.wall_s,
             ])  # fmt: skip
     return buf.getvalue()
 

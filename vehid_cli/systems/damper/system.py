@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from ... import __version__
 from ...config import DamperConfig
 from ...core.errors import InputError
+from ...core.progress import ProgressHook
 from ...core.streams import run_streams
 from ...identify.crlb import CramerRao, cramer_rao_outputs
 from ...identify.records import Campaign, RunRecord
@@ -28,7 +29,15 @@ from ...identify.source import DataFiles, DataSource
 from ...models.bench import BenchHistory
 from ...optimizers.base import Problem
 from ..base import Box, Log, Simulated, System
-from .bench import MEASURED, configured_spec, load_measured, simulate_bench, write_bench_csv, write_bench_h5
+from .bench import (
+    MEASURED,
+    bench_history,
+    configured_spec,
+    load_measured,
+    simulate_bench,
+    write_bench_csv,
+    write_bench_h5,
+)
 from .findings import Findings, Trace
 from .fit import DamperSpec, cost_J, fit, j_problem, realtime_check
 
@@ -63,20 +72,32 @@ class _Staged:
     history_cost: NDArray
     stage_J: tuple[float, ...]
     histories: tuple[BenchHistory, ...]
+    sigma: float  # the last stage's force noise [N]: drawn for a simulated stage, else estimated from its data
 
 
-def _stage_histories(cfg: DamperConfig, measured: BenchHistory | None, noise_rng) -> list[BenchHistory]:
-    """Each stage's bench run: its own file, the measured run, or its (or the config's) excitation simulated with
-    noise drawn from the run's noise stream in stage order."""
-    histories = []
+def _stage_histories(cfg: DamperConfig, measured: BenchHistory | None, noise_rng) -> list[tuple[BenchHistory, float]]:
+    """Each stage's bench run and its force noise [N]: its own file or the measured run (noise estimated from its
+    force), or its (or the config's) excitation simulated with noise drawn from the run's noise stream in stage
+    order (the noise it was drawn with)."""
+    out = []
     for stage in cfg.identify.stages:
-        if stage.file is not None:
-            histories.append(load_measured(cfg, stage.file))
-        elif measured is not None and stage.bench is None:
-            histories.append(measured)
+        if stage.file is not None or (measured is not None and stage.bench is None):
+            history = load_measured(cfg, stage.file) if stage.file is not None else measured
+            out.append((history, float(MEASURED.estimated("force", history.force[:, None])[0])))
         else:
-            histories.append(simulate_bench(cfg, noise_rng, stage.bench).history)
-    return histories
+            run = simulate_bench(cfg, noise_rng, stage.bench)
+            out.append((run.history, run.sigma))
+    return out
+
+
+def _last_stage_samples(cfg: DamperConfig, measured: BenchHistory | None) -> int:
+    """How many force samples the last stage's J (and so a staged run's chi2) is over."""
+    stage = cfg.identify.stages[-1]
+    if stage.file is not None:
+        return int(load_measured(cfg, stage.file).t.size)
+    if measured is not None and stage.bench is None:
+        return int(measured.t.size)
+    return int(bench_history(cfg, stage.bench).t.size)
 
 
 def _fit_in_stages(cfg, spec, measured, names, box, start, noise_rng, rng) -> _Staged:
@@ -85,7 +106,8 @@ def _fit_in_stages(cfg, spec, measured, names, box, start, noise_rng, rng) -> _S
     if start is not None:
         spec = spec.with_values(dict(zip(names, start, strict=True)))
     fits = []
-    histories = _stage_histories(cfg, measured, noise_rng)
+    staged = _stage_histories(cfg, measured, noise_rng)
+    histories = [h for h, _ in staged]
     for stage, history in zip(cfg.identify.stages, histories, strict=True):
         result = _fit_once(cfg, spec, history, stage.unknowns, {n: box[n] for n in stage.unknowns}, None, rng)
         spec = result.spec
@@ -95,7 +117,7 @@ def _fit_in_stages(cfg, spec, measured, names, box, start, noise_rng, rng) -> _S
         spec=spec, J=fits[-1].J, J_initial=fits[0].J_initial, evaluations=sum(f.evaluations for f in fits),
         penalised=sum(f.penalised for f in fits), wall_s=sum(f.wall_s for f in fits), history_evals=evals,
         history_cost=np.concatenate([f.history_cost for f in fits]), stage_J=tuple(f.J for f in fits),
-        histories=tuple(histories),
+        histories=tuple(histories), sigma=staged[-1][1],
     )  # fmt: skip
 
 
@@ -154,6 +176,8 @@ class DamperSystem(System):
 
     @property
     def residual_samples(self) -> int:
+        if self.config.identify.stages:  # a staged run's J and chi2 are the last stage's
+            return _last_stage_samples(self.config, self.measured)
         return int(self.first.t.size)
 
     @property
@@ -171,8 +195,9 @@ class DamperSystem(System):
 
     @classmethod
     def diagnose(
-        cls, config: DamperConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None
-    ) -> Diagnosis:
+        cls, config: DamperConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None,
+        progress: ProgressHook | None = None,
+    ) -> Diagnosis:  # fmt: skip
         """The bench's loop (`diagnosis.diagnose_damper`) on one run (else data.file), judged on `validate` (else
         data.validate)."""
         if len(data) > 1:
@@ -180,7 +205,7 @@ class DamperSystem(System):
                              source=config.source)  # fmt: skip
         from .diagnosis import diagnose_damper  # the loop's machinery only for `vehid diagnose`
 
-        return diagnose_damper(config, data[0] if data else None, validate or None, log=log)
+        return diagnose_damper(config, data[0] if data else None, validate or None, log=log, progress=progress)
 
     @classmethod
     def tables(cls, campaigns: Sequence[Campaign], files: Sequence[str]) -> list:
@@ -190,17 +215,18 @@ class DamperSystem(System):
 
     @classmethod
     def render(cls, campaigns: Sequence[Campaign], files: Sequence[str], fmt: str, published: dict | None) -> str:
-        from .report import csv_text, markdown
+        from .report import csv_text, latex, markdown
 
-        if fmt == "latex":
-            raise InputError("--format latex is not available for damper campaigns; use table, md, csv or json")
-        return (markdown if fmt == "md" else csv_text)(list(campaigns), list(files))
+        return {"md": markdown, "latex": latex}.get(fmt, csv_text)(list(campaigns), list(files))
 
     @classmethod
     def figures(cls, campaigns: Sequence[Campaign], files: Sequence[str], out_dir: Path) -> list[Path]:
-        from .plots import write_damper_plots
+        from .plots import write_damper_plots, write_fitted_force_plots
 
-        return write_damper_plots([c.findings for c in campaigns], [Path(f).stem for f in files], out_dir)
+        stems = [Path(f).stem for f in files]
+        return write_damper_plots([c.findings for c in campaigns], stems, out_dir) + write_fitted_force_plots(
+            campaigns, stems, out_dir
+        )
 
     @classmethod
     def plot_simulation(cls, simulated: Simulated, path: Path) -> None:
@@ -262,9 +288,10 @@ class DamperSystem(System):
         lower, upper = self.box.lower, self.box.upper
         return lower + (upper - lower) * rng.random(lower.size)
 
-    def _chi2(self, J: float, history: BenchHistory) -> float:
-        """Residual power over the noise power: J var(F) / sigma² (NaN without noise)."""
-        sigma = float(self.sigma["force"][0])
+    def _chi2(self, J: float, history: BenchHistory, sigma: float | None = None) -> float:
+        """Residual power over the noise power: J var(F) / sigma² (NaN without noise); `sigma` the noise of
+        `history` when it is not the campaign's run (a stage's bench run has its own)."""
+        sigma = float(self.sigma["force"][0]) if sigma is None else sigma
         return float(J * np.var(history.force) / sigma**2) if sigma > 0 else float("nan")
 
     def _fit(self, index: int) -> tuple[_Staged, BenchHistory]:
@@ -283,6 +310,7 @@ class DamperSystem(System):
 
     def identify_run(self, index: int) -> RunRecord:
         result, history = self._fit(index)
+        sigma = result.sigma if isinstance(result, _Staged) else None  # a staged run's chi2: the last stage's noise
         spec, substeps = self.spec, self.config.bench.substeps
         J_truth = (
             float(cost_J(history.force, spec.simulate(history, substeps))) if self.box.truth is not None else np.nan
@@ -291,7 +319,7 @@ class DamperSystem(System):
             index=index, estimate=np.array([result.spec.values[n] for n in self.names]), cost=result.J,
             evaluations=result.evaluations, penalised=result.penalised, wall_s=result.wall_s,
             history_evals=np.asarray(result.history_evals), history_cost=np.asarray(result.history_cost),
-            truth_cost=J_truth, chi2=self._chi2(result.J, history), initial_cost=result.J_initial,
+            truth_cost=J_truth, chi2=self._chi2(result.J, history, sigma), initial_cost=result.J_initial,
         )  # fmt: skip
 
     def conclude(self, records: tuple[RunRecord, ...]) -> Findings:
@@ -304,7 +332,7 @@ class DamperSystem(System):
             if self.measured is None:  # run 0 drew the config's bench run first (see _fit)
                 simulate_bench(cfg, noise)
             histories = _stage_histories(cfg, self.measured, noise)
-            for stage, h in zip(cfg.identify.stages, histories, strict=True):
+            for stage, (h, _) in zip(cfg.identify.stages, histories, strict=True):
                 traces.append(_trace(f"stage:{stage.name}", h, final, substeps))
         else:
             history = self.first

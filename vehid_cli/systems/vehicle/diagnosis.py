@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...config import Config, config_from_dict
+from ...core.progress import ProgressHook
 from ...core.streams import run_streams
 from ...diagnose.attribution import (
     ALPHA,
@@ -211,12 +212,14 @@ def diagnose(
     refit_budget: int = REFIT_BUDGET,
     analyse_residuals: bool = True,
     log=None,
+    progress: ProgressHook | None = None,
 ) -> Diagnosis:
     """Close the loop on the measured run `data_file`, or on several runs jointly (one parameter set; each run its
     own road, noise and offsets; J the wls over every run's residuals, the residual analysis per run); see the
-    module doc."""
+    module doc; `progress` hears of each step (the declared fit, each candidate tested, each re-fit)."""
     t_start = time.perf_counter()
     say = log or (lambda _msg: None)
+    step = progress or (lambda _stage, _done, _total: None)
     config = prepare_config(config)
     files = as_paths(data_file)
     task = build_tasks(config, files)
@@ -234,8 +237,10 @@ def diagnose(
     # 0. can the data tell at all? (before any fit: length, noise, excitation)
     pre = precheck_vehicle(task, ref)
     # 1. the declared model, by the configured algorithm, then polished
+    step("declared fit", 0, 1)
     fit = fit_declared(config, task, car.problem_of(task, ref, split.keep), pre.ok, refit_budget, say)
     before = car.report(fit, ())
+    step("declared fit", 1, 1)
     quality = assess_vehicle(task, ref, before, pre)
     missing, order, notes = None, (), ()
     if quality.ok:  # the strut force the declared model misses, non-parametrically: which candidates to fit first
@@ -257,7 +262,7 @@ def diagnose(
         candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start, order=order,
         unexplained=missing, chi2_residuals=R_total, validation_source=split.source, sigma_source=task.sigma_source,
         validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if car.joint else (),
-        extra_notes=notes, checks=tuple(found.to_json()),
+        extra_notes=notes, checks=tuple(found.to_json()), unit=config.unit, progress=progress,
     )  # fmt: skip
 
 

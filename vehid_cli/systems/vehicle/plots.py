@@ -10,12 +10,13 @@ from ...core.figures import plt, save
 from ...identify.experiment import SimulatedRun
 from ...identify.task import JointTask, Task, build_tasks
 from . import report as tables
+from .fitted import ChannelFit, campaign_fits
 from .report import grouped
 
 FAMILY_AXES = {"disp": ("mm", 1e3), "acc": ("m/s²", 1.0)}  # the unit each family is drawn in, and its scale from SI
 
 
-def plot_responses(run: SimulatedRun, path: str | Path) -> None:
+def plot_responses(run: SimulatedRun, path: str | Path, model: str = "clean (configured car)") -> None:
     """Road inputs and every channel of the layout, measured (noisy) over clean: displacements left, accelerations
     right (for the paper's layout, z1..z4 and z1''..z4'': Gökdağ Fig. 4)."""
     exp = run.experiment
@@ -48,7 +49,7 @@ def plot_responses(run: SimulatedRun, path: str | Path) -> None:
             noisy, clean = run.channels[family][:, row], run.clean_channels[family][:, row]
             if not np.array_equal(noisy, clean):
                 ax.plot(t, scale * noisy, lw=0.5, color="0.6", label="measured (noisy)")
-            ax.plot(t, scale * clean, lw=1.2, color="C0", label="clean (configured car)")
+            ax.plot(t, scale * clean, lw=1.2, color="C0", label=model)
             ax.set_ylabel(f"{names[row]} [{unit}]")
             if row == 0:
                 ax.legend(fontsize=8, loc="upper right")
@@ -101,7 +102,8 @@ def plot_convergence(group, path: str | Path) -> None:
 
 
 def plot_re_boxes(group, path: str | Path) -> None:
-    """Per-run RE of each parameter, a box per algorithm, with the Cramér–Rao ±1 sd band shaded."""
+    """Per-run RE of each parameter, a box per algorithm, with the Cramér–Rao ±1 sd band shaded; each panel's title
+    gives the truth in the parameter's unit."""
     names = group[0].names
     fig, axes = plt.subplots(1, len(names), figsize=(3 * len(names), 4), constrained_layout=True, squeeze=False)
     for j, name in enumerate(names):
@@ -112,7 +114,8 @@ def plot_re_boxes(group, path: str | Path) -> None:
         if bound < 1e3:
             ax.axhspan(-bound, bound, color="C2", alpha=0.2, lw=0, label="CRLB ±1 sd")
         ax.axhline(0, color="0.3", lw=0.8)
-        ax.set_title(name)
+        unit = group[0].units[name]
+        ax.set_title(f"{name}, truth {group[0].truth[j]:g} {unit}".rstrip(), fontsize=10)
         ax.set_ylabel("RE per run [%]")
         ax.tick_params(axis="x", rotation=45)
     axes[0, 0].legend(fontsize=8)
@@ -140,19 +143,61 @@ def plot_true_vs_estimated(campaign, path: str | Path) -> None:
 
 
 def plot_noisy_vs_clean(campaign, path: str | Path) -> None:
-    """The data run 0 identified from (its first measured run), over the configured car's clean channels (the
-    paper's Fig. 4)."""
+    """The data run 0 identified from (its first measured run), over the clean channels (the paper's Fig. 4): of the
+    configured car for simulated data (their truth), of the fitted car (run 0's estimate) for measured data."""
     task = first_task(campaign)
     exp = task.experiment
-    clean = exp.simulate()
+    fitted = campaign.data_file is not None
+    values = {n: [v] for n, v in zip(campaign.names, campaign.records[0].estimate, strict=True)} if fitted else None
+    clean = exp.simulate(values) if fitted else exp.simulate()
     model = exp.read(clean)
+    if fitted:  # a batch of one
+        model = {f: v[0] for f, v in model.items()}
     data = task.measured if task.measured is not None else task.reference(0)
     channels = {f: data.get(f, model[f]) for f in model}
     if task.offsets:  # the channels' offsets are unknowns: draw the data with the offsets that fit it best removed
         objective = task.objective({f: channels[f] for f in task.families})
         channels.update({f: model[f] + objective.error(f, model[f]) for f in task.families})
     run = SimulatedRun(exp, clean, model, channels, task.sigma, campaign.config.noise.level)
-    plot_responses(run, path)
+    plot_responses(run, path, "fitted car (the estimate)" if fitted else "clean (configured car)")
+
+
+def plot_fitted(label: str, fits: list[ChannelFit], path: str | Path) -> None:
+    """Per channel (a row each, worst fitted first): measured and fitted time histories, the residual with the
+    noise's ±1 sigma band, and the residual's amplitude spectral density against the noise floor of that sigma."""
+    fig, axes = plt.subplots(len(fits), 3, figsize=(14, 2.1 * len(fits) + 0.8), squeeze=False,
+                             constrained_layout=True, gridspec_kw={"width_ratios": [2.2, 2.2, 1.4]})  # fmt: skip
+    for row, f in zip(axes, fits, strict=True):
+        unit, scale = FAMILY_AXES[f.family]
+        row[0].plot(f.t, scale * f.measured, lw=0.6, color="0.55", label="measured")
+        row[0].plot(f.t, scale * f.fitted, lw=1.0, color="C3", label="fitted model")
+        row[0].set_ylabel(f"{f.name} [{unit}]")
+        row[1].plot(f.t, scale * f.residual, lw=0.6, color="C0")
+        row[1].axhspan(-scale * f.sigma, scale * f.sigma, color="C2", alpha=0.2, lw=0, label="±1 sigma (noise)")
+        row[1].set_ylabel(f"residual [{unit}]")
+        row[1].set_title(f"{f.name}: chi²/sample {f.chi2_per_sample:.3g}", fontsize=9)
+        row[2].loglog(f.freq[1:], scale * f.asd[1:], lw=0.8, color="C0", label="residual")
+        row[2].axhline(scale * f.floor, color="C2", ls="--", lw=1, label="noise floor")
+        row[2].set_ylabel(f"ASD [{unit}/√Hz]")
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    axes[-1, 2].set_xlabel("frequency [Hz]")
+    for j in range(3):
+        axes[0, j].legend(fontsize=8, loc="upper right")
+    fig.suptitle(f"Measured against fitted, worst channel first: {label}")
+    save(fig, path)
+
+
+def write_fitted_plots(campaign, stem: str, out_dir: Path) -> list[Path]:
+    """fitted_<stem>.png (a measured run: fitted_<stem>_run<i>.png each, several runs) for a measured-data
+    campaign."""
+    runs = campaign_fits(campaign)
+    written = []
+    for i, (label, fits) in enumerate(runs, start=1):
+        p = out_dir / (f"fitted_{stem}.png" if len(runs) == 1 else f"fitted_{stem}_run{i}.png")
+        plot_fitted(label, fits, p)
+        written.append(p)
+    return written
 
 
 def write_campaign_plots(campaigns, files, out_dir: str | Path) -> list[Path]:
@@ -182,4 +227,6 @@ def write_campaign_plots(campaigns, files, out_dir: str | Path) -> list[Path]:
             p = out_dir / f"true_vs_estimated_{stems[id(c)]}.png"
             plot_true_vs_estimated(c, p)
             written.append(p)
+            if c.data_file is not None:
+                written.extend(write_fitted_plots(c, stems[id(c)], out_dir))
     return written

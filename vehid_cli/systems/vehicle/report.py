@@ -9,6 +9,7 @@ import numpy as np
 from rich.table import Table
 
 from ...identify.records import Campaign
+from ..report import ParameterRow, add_column, fixed, interval_note, latex_table, markdown_table, parameter_rows
 
 
 def _f(value, digits: int = 3) -> str:
@@ -35,30 +36,24 @@ def campaign_title(c: Campaign) -> str:
 
 
 def summary_table(c: Campaign) -> Table:
-    """Per parameter: truth, mean estimate, RE of the mean, spread over runs, the bound; then the NRE figures.
-    One fit (measured data): the estimate with its 95 % interval from the bound at the estimate, no spread."""
-    if len(c.records) == 1:
+    """Per parameter: its unit, the truth, the mean estimate ± the 95 % spread over runs (rounded to it), RE of the
+    mean, the spread over runs and the bound; then the NRE figures. One fit (measured data): `single_fit_table`."""
+    if c.single_fit:
         return single_fit_table(c)
     s, b = c.summary, c.bound
     table = Table(title=campaign_title(c), title_justify="left")
-    for col in ("parameter", "truth", "mean", "RE of mean %", "sd over runs %", "CRLB sd %", "sd/CRLB"):
-        table.add_column(col, justify="left" if col == "parameter" else "right")
-    at_bound = c.at_bound
-    for j, name in enumerate(c.names):
-        finite = np.isfinite(b.re_sd_percent[j]) and b.re_sd_percent[j] > 0
-        ratio = s.re_sd_percent[j] / b.re_sd_percent[j] if finite else None
-        flag = "" if b.identifiable[j] else " (not identifiable)"
-        flag += f" (at a bound in {at_bound[name]} runs)" if name in at_bound else ""
+    columns = ("parameter", "unit", "truth", "mean ± 95 %", "RE of mean %", "sd over runs %", "CRLB sd %", "sd / CRLB")
+    for col in columns:
+        add_column(table, col)
+    for row in parameter_rows(c):
+        finite = np.isfinite(row.crlb_sd_percent) and row.crlb_sd_percent > 0
+        ratio = row.sd_percent / row.crlb_sd_percent if finite else None
         table.add_row(
-            name + flag,
-            _g(None if c.truth is None else c.truth[j]),
-            _g(s.mean[j]),
-            _f(None if s.re_percent is None else s.re_percent[j]),
-            _f(s.re_sd_percent[j]),
-            _f(b.re_sd_percent[j]),
-            _f(ratio, 2),
-        )
+            row.label, row.unit, row.truth_text, row.with_interval, fixed(row.re_percent), fixed(row.sd_percent),
+            fixed(row.crlb_sd_percent), fixed(ratio, 2),
+        )  # fmt: skip
     table.caption = (
+        f"{interval_note(c)}\n"
         f"NRE of mean {_f(s.nre_percent)} % · per-run NRE median {_f(s.per_run_nre_median)} % · "
         f"RMS {_f(s.per_run_nre_rms)} % · CRLB NRE {_f(b.nre_rms_percent)} % · NRE/CRLB {_f(s.nre_over_crlb, 2)} · "
         f"χ²/sample {_f(s.chi2_median, 2)} · "
@@ -70,25 +65,20 @@ def summary_table(c: Campaign) -> Table:
 
 
 def single_fit_table(c: Campaign) -> Table:
-    """One fit: per parameter the estimate, its 95 % interval (1.96 x the bound's sd at the estimate, for the noise
-    the data imply), the bound relative to the estimate, and RE when the truth is declared."""
-    s, b, r = c.summary, c.bound, c.records[0]
+    """One fit: per parameter its unit, the estimate ± its 95 % interval (1.96 x the bound's sd at the estimate, for
+    the noise the data imply), the bound relative to the estimate, and RE when the truth is declared; an estimate
+    on a bound of its box is marked AT BOUND, with no interval (the notes name the box)."""
+    s, r = c.summary, c.records[0]
     table = Table(title=campaign_title(c), title_justify="left")
-    for col in ("parameter", "truth", "estimate", "± 95 % (bound)", "CRLB sd %", "RE %"):
-        table.add_column(col, justify="left" if col == "parameter" else "right")
-    at_bound = c.at_bound
-    for j, name in enumerate(c.names):
-        flag = "" if b.identifiable[j] else " (not identifiable)"
-        interval = _g(1.96 * b.sd[j])
-        if name in at_bound:  # the optimum lies beyond the box: no interval means anything
-            flag, interval = flag + " AT BOUND", f"on bound [{c.lower[j]:.4g}, {c.upper[j]:.4g}]"
+    for col in ("parameter", "unit", "truth", "estimate ± 95 %", "CRLB sd %", "RE %"):
+        add_column(table, col)
+    for row in parameter_rows(c):
         table.add_row(
-            name + flag, _g(None if c.truth is None else c.truth[j]), _g(r.estimate[j]), interval,
-            _f(b.re_sd_percent[j]), _f(None if s.re_percent is None else s.re_percent[j]),
-        )  # fmt: skip
+            row.label, row.unit, row.truth_text, row.with_interval, fixed(row.crlb_sd_percent), fixed(row.re_percent)
+        )
     table.caption = (
-        f"one fit (every run would fit the same data) · χ²/sample {_f(s.chi2_median, 2)} · evaluations "
-        f"{r.evaluations} · penalised {s.penalised} · wall {s.wall_s:.1f} s"
+        f"{interval_note(c)}\none fit (every run would fit the same data) · χ²/sample {_f(s.chi2_median, 2)} · "
+        f"evaluations {r.evaluations} · penalised {s.penalised} · wall {s.wall_s:.1f} s"
     )
     table.caption_justify = "left"
     return table
@@ -127,23 +117,29 @@ def published_for(published: dict | None, c: Campaign) -> dict | None:
     return None
 
 
+def estimate_cell(row: ParameterRow) -> str:
+    """A campaign's estimate of one parameter for the side-by-side tables: rounded to its 95 % interval, with the
+    interval, and marked when it sits on a bound."""
+    flag = f" ({row.flag})" if row.flag and row.runs > 1 else ""
+    return row.with_interval + flag
+
+
 def _grid(group: list[Campaign], published: dict | None = None) -> tuple[list[str], list[list[str]]]:
-    """The paper's layout: a row per parameter (then NRE rows), Est and RE columns per algorithm,
-    and the published RE beside ours where `published` has it."""
-    first = group[0]
-    header = ["", "true"]
+    """The paper's layout: a row per parameter with its unit (then NRE rows), the estimate ± 95 % and RE columns per
+    algorithm, and the published RE beside ours where `published` has it."""
+    header = ["parameter", "unit", "true"]
     refs = [published_for(published, c) for c in group]
+    rows_of = [parameter_rows(c) for c in group]
     for c, ref in zip(group, refs, strict=True):
         name = c.config.identify.algorithm.name
-        header += [f"{name} est", f"{name} RE %"] + ([f"{name} paper RE %"] if ref else [])
+        header += [f"{name} est ± 95 %", f"{name} RE %"] + ([f"{name} paper RE %"] if ref else [])
     rows = []
-    for j, pname in enumerate(first.names):
-        row = [pname, _g(None if first.truth is None else first.truth[j])]
-        for c, ref in zip(group, refs, strict=True):
-            s = c.summary
-            row += [_g(s.mean[j]), _f(None if s.re_percent is None else s.re_percent[j])]
+    for j, first_row in enumerate(rows_of[0]):
+        row = [first_row.name, first_row.unit, first_row.truth_text]
+        for ref, prow in zip(refs, (r[j] for r in rows_of), strict=True):
+            row += [estimate_cell(prow), fixed(prow.re_percent)]
             if ref:
-                row.append(_f(ref["re"].get(pname)))
+                row.append(_f(ref["re"].get(prow.name)))
         rows.append(row)
     for label, getter in (
         ("NRE of mean %", lambda s, b: s.nre_percent),
@@ -155,7 +151,7 @@ def _grid(group: list[Campaign], published: dict | None = None) -> tuple[list[st
         ("runs", lambda s, b: float(len(s.evaluations))),
         ("converged runs", lambda s, b: None if s.converged is None else float(s.converged)),
     ):
-        row = [label, ""]
+        row = [label, "", ""]
         for c, ref in zip(group, refs, strict=True):
             value = getter(c.summary, c.bound)
             digits = (
@@ -176,9 +172,8 @@ def markdown(campaigns: list[Campaign], published: dict | None = None) -> str:
     for group in grouped(campaigns):
         header, rows = _grid(group, published)
         parts.append(f"**{group_title(group[0])}**\n")
-        parts.append("| " + " | ".join(header) + " |")
-        parts.append("|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|")
-        parts.extend("| " + " | ".join(r) + " |" for r in rows)
+        parts.append(f"_{interval_note(group[0])}_\n")
+        parts.extend(markdown_table(header, rows, left=2))
         parts.append("")
     return "\n".join(parts)
 
@@ -188,43 +183,31 @@ def latex(campaigns: list[Campaign], published: dict | None = None) -> str:
     parts = []
     for group in grouped(campaigns):
         header, rows = _grid(group, published)
-        esc = [h.replace("%", r"\%").replace("_", r"\_") for h in header]
-        parts.append(r"\begin{table}[ht]\centering")
-        parts.append(
-            r"\caption{" + group_title(group[0]).replace("%", r"\%").replace("`", "").replace("_", r"\_") + "}"
-        )
-        parts.append(r"\begin{tabular}{l" + "r" * (len(header) - 1) + "}")
-        parts.append(r"\toprule")
-        parts.append(" & ".join(esc) + r" \\")
-        parts.append(r"\midrule")
-        for i, r in enumerate(rows):
-            if i == len(group[0].names):
-                parts.append(r"\midrule")
-            parts.append(" & ".join(cell.replace("%", r"\%").replace("–", "--") for cell in r) + r" \\")
-        parts.append(r"\bottomrule")
-        parts.append(r"\end{tabular}")
-        parts.append(r"\end{table}")
-        parts.append("")
+        caption = f"{group_title(group[0])} ({interval_note(group[0])})"
+        parts += latex_table(header, rows, caption, rule_after=len(group[0].names))
     return "\n".join(parts)
 
 
 CSV_COLUMNS = (
-    "file", "algorithm", "objective", "sensors", "noise_level", "runs", "parameter", "truth", "mean",
+    "file", "algorithm", "objective", "sensors", "noise_level", "runs", "parameter", "unit", "truth", "mean",
+    "ci95_low", "ci95_high", "ci95_from", "sd", "crlb_sd", "at_bound_runs",
     "re_percent", "sd_percent", "crlb_sd_percent", "nre_percent", "per_run_nre_median", "per_run_nre_rms",
     "crlb_nre_rms_percent", "nre_over_crlb", "evaluations_per_run", "wall_s",
 )  # fmt: skip
 
 
 def csv_rows(campaigns: list[Campaign], files: list[str]) -> list[list]:
-    """Long format: one row per campaign and parameter, campaign figures repeated on each row."""
+    """Long format at full precision: one row per campaign and parameter (its unit, the estimate and its 95 %
+    interval: over runs, or one fit's from the bound), campaign figures repeated on each row."""
     rows = []
     for c, file in zip(campaigns, files, strict=True):
         s, b, cfg = c.summary, c.bound, c.config
-        for j, name in enumerate(c.names):
+        for row in parameter_rows(c):
             rows.append([
                 file, cfg.identify.algorithm.name, cfg.identify.objective, cfg.sensors, cfg.noise.level,
-                len(c.records), name, None if c.truth is None else c.truth[j], s.mean[j],
-                None if s.re_percent is None else s.re_percent[j], s.re_sd_percent[j], b.re_sd_percent[j],
+                len(c.records), row.name, row.unit, None if c.truth is None else row.truth, row.estimate,
+                row.low, row.high, row.interval_from, row.sd, row.crlb_sd, row.at_bound,
+                None if s.re_percent is None else row.re_percent, row.sd_percent, row.crlb_sd_percent,
                 s.nre_percent, s.per_run_nre_median, s.per_run_nre_rms, b.nre_rms_percent, s.nre_over_crlb,
                 float(s.evaluations.mean()), s.wall_s,
             ])  # fmt: skip

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 from ... import __version__
 from ...config import Config
 from ...core.errors import InputError
+from ...core.progress import ProgressHook
 from ...core.provenance import provenance
 from ...core.store import h5_file
 from ...core.streams import run_streams
@@ -80,7 +81,10 @@ class VehicleSystem(System):
         return {"sensors": config.sensors}
 
     @classmethod
-    def diagnose(cls, config: Config, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None) -> Diagnosis:
+    def diagnose(
+        cls, config: Config, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None,
+        progress: ProgressHook | None = None,
+    ) -> Diagnosis:  # fmt: skip
         """The car's loop (`diagnosis.diagnose`) on one run or several jointly (else the config's data.files)."""
         files = data or config.data_runs()
         if not files:
@@ -90,7 +94,11 @@ class VehicleSystem(System):
         from . import diagnosis  # the loop's machinery (scipy.stats, splines) only for `vehid diagnose`
 
         return diagnosis.diagnose(
-            config, files[0] if len(files) == 1 else files, validate[0] if validate else None, log=log
+            config,
+            files[0] if len(files) == 1 else files,
+            validate[0] if validate else None,
+            log=log,
+            progress=progress,
         )
 
     @classmethod
