@@ -188,6 +188,25 @@ def test_a_gap_in_time_is_not_jitter(tmp_path):
     raises(path, str(path), "acc_fl", "gap", channels={"acc_fl": "ACC_FL_Z"})
 
 
+def test_half_a_step_of_jitter_is_read_at_the_grids_rate_and_a_dropped_sample_among_it_is_a_gap(tmp_path):
+    """A lab rig's clock: every stamp anywhere within half a step of its slot (steps from near 0 to near 2): read at
+    the rate of the grid the stamps were drawn around; one sample dropped mid-way in such stamps, and one dropped
+    near the end of clean stamps, are gaps (the slots judge, not the steps alone)."""
+    rng = np.random.default_rng(5)
+    k = np.arange(1200)
+    t = np.round((k + rng.uniform(-0.5, 0.5, k.size) * (k > 0)) / 300.0 * 1e6) / 1e6
+    assert np.diff(t).max() > 1.9 / 300 and np.diff(t).min() < 0.1 / 300
+    path = tmp_path / "jitter.csv"
+    write_csv(path, t)
+    record = read_record(path, channels={"acc_fl": "ACC_FL_Z"})
+    assert record.rate == pytest.approx(300.0, rel=2e-4)
+    write_csv(path, np.delete(t, 600))
+    raises(path, str(path), "acc_fl", "gap", channels={"acc_fl": "ACC_FL_Z"})
+    clean = np.round(k / 300.0 * 1e6) / 1e6
+    write_csv(path, np.delete(clean, k.size - 3))
+    raises(path, str(path), "acc_fl", "gap", channels={"acc_fl": "ACC_FL_Z"})
+
+
 def test_a_window_outside_the_record_names_the_window_and_the_span(files):
     raises((files, "mf4"), str(files["mf4"]), "[10, 20)", "[0, 3.995]", window=(10.0, 20.0))
 

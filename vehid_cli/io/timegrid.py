@@ -10,8 +10,14 @@ each channel put on it (`io.read.read_record` runs these steps in order; `Record
   samples already on the grid are kept as they are;
 - the low-pass starts up over about 2.5 / cut-off seconds at the record's ends (30 ms for a 200 Hz grid): there,
   content above the new Nyquist frequency is not fully removed; cut it with `window` when it matters;
-- time stamps that jitter (steps within ±50 % of the median step) are resampled the same way at the median rate;
-  a larger step is a gap (a dropped block of samples) and an error, as is a time that goes backwards.
+- time stamps that jitter are resampled the same way: steps within ±50 % of the median step at the median rate;
+  stamps that jitter more (a lab rig's clock: each stamp anywhere within about half a step of its slot, so that
+  steps run from near 0 to near 2 steps) are told from gaps by their slots on the uniform grid fitted to them (least
+  squares over the sample index): jitter scatters the stamps about their slots, a dropped block of samples moves
+  every later stamp off its slot by the block's length, which the means of the deviation over adjacent windows show
+  as a shift of more than half a step (`GRID_SHIFT`), or a stamp further than ¾ step from its slot (`GRID_SLOT`: a block
+  dropped near an end); such a record is resampled at the fitted rate. A gap is an error, as is a time
+  that goes backwards.
 
 `resample=False` refuses all of this: channels at different rates, jittered stamps or samples off the common grid
 are an error, and every value in the Record is a sample of the file. Either way the Record keeps each channel's
@@ -31,7 +37,11 @@ from ..core.errors import InputError
 from .formats.base import Raw
 from .measurement import UNIFORM_TOLERANCE
 
-JITTER = 0.5  # a step within ±50 % of the median step is jitter (resampled); a longer one is a gap (an error)
+JITTER = 0.5  # a step within ±50 % of the median step is jitter (resampled); beyond, the grid's slots judge
+GRID_SHIFT = 0.5  # ... the stamps' deviation from the fitted grid shifting by more steps between windows: a gap
+GRID_WINDOW = 101  # samples in each such window (at most a quarter of the record)
+GRID_SLOT = 0.75  # ... or a stamp further than this many steps from its slot so moved (½ step of jitter, the slot's
+# uncertainty, and short of the whole step a block dropped near an end moves it)
 DOWNSAMPLE_ORDER = 8  # Butterworth order of the anti-alias filter (applied forwards and backwards: zero phase)
 DOWNSAMPLE_CUTOFF = 0.4  # its cut-off as a fraction of the new rate (0.8 x the new Nyquist frequency)
 RATE_MATCH = 1e-2  # a channel within 1 % of the grid rate is at the grid rate (no filter)
@@ -110,13 +120,41 @@ def check_channel(name: str, theirs: str, raw: Raw, src: str) -> float:
         )
     dt = float(np.median(steps))
     worst = _worst_step(steps, dt)
-    if abs(steps[worst] - dt) > JITTER * dt:
+    if abs(steps[worst] - dt) <= JITTER * dt:
+        return dt
+    fitted, shift, off = grid_shift(raw.t)
+    if shift > 1.0 or off > GRID_SLOT:
         raise InputError(
-            f"{label}: a gap in time at sample {worst + 2}: step {steps[worst]:.6g} s against the usual {dt:.6g} s "
+            f"{label}: a gap in time at sample {worst + 2}: step {steps[worst]:.6g} s against the usual {dt:.6g} s, "
+            f"and the stamps leave their slots on a uniform grid by up to {max(shift * GRID_SHIFT, off):.2g} steps "
             f"(dropped samples?); cut the record with a window",
             source=src,
         )
-    return dt
+    return fitted
+
+
+def grid_shift(t: NDArray) -> tuple[float, float, float]:
+    """The step [s] of the uniform grid fitted to stamps `t` (least squares over the sample index) and two measures
+    of how the stamps leave their slots on it. A dropped block of samples moves every later stamp off its slot by the
+    block's length, jitter scatters them about their slots: (1) the largest shift [steps] of the deviation between
+    the means of two adjacent windows (2, 5, 11, ... `GRID_WINDOW` samples each, at most a quarter of the record),
+    over the shift the jitter alone could make at that window (`GRID_SHIFT` steps or 6 sd of the difference of two
+    such means, the jitter's sd from the stamps); (2) the largest distance [steps] of a stamp from the mean of its
+    largest window (a block dropped within a window of an end moves only the last few stamps)."""
+    index = np.arange(t.size, dtype=float)
+    step, start = np.polyfit(index, t - t[0], 1)
+    deviation = (t - t[0] - start - step * index) / step
+    moves = np.diff(deviation)
+    sd = 1.4826 * float(np.median(np.abs(moves - np.median(moves)))) / math.sqrt(2)  # robust: a gap is one move
+    ratio, window, level = 0.0, 2, deviation
+    while window <= max(2, min(GRID_WINDOW, t.size // 4)):
+        level = np.convolve(deviation, np.full(window, 1.0 / window), mode="valid")
+        if level.size > window:
+            noise = max(GRID_SHIFT, 6.0 * sd * math.sqrt(2.0 / window))
+            ratio = max(ratio, float(np.max(np.abs(level[window:] - level[:-window]))) / noise)
+        window, last = 2 * window + 1, window
+    level = np.pad(level, (last // 2, last - 1 - last // 2), mode="edge")  # the ends' slots as their window's
+    return float(step), ratio, float(np.max(np.abs(deviation - level)))
 
 
 def uniform(t: NDArray, dt: float) -> bool:
