@@ -122,6 +122,18 @@ class LumpedSystem(System):
         for rig in self.rigs:
             self.check_time_step(rig.dt, "simulation.dt" if rig.measured is None else f"{rig.source}: time step")
         self._prepare_noise()
+        self._checks = None
+
+    def checks(self):
+        """Every measured channel of every run against the configured rig (`systems.lumped_checks`), once; None on
+        simulated data."""
+        if self.source.simulated:
+            return None
+        if self._checks is None:
+            from .lumped_checks import rig_checks
+
+            self._checks = rig_checks(self)
+        return self._checks
 
     def _prepare_noise(self) -> None:
         if self.source.simulated:
@@ -305,7 +317,24 @@ class LumpedSystem(System):
                     f"noise {config.noise.describe()}, seed {seed}, inputs from {rig.source}"]  # fmt: skip
         write_csv(target, names, table, comments)
         summary = f"{rig.t.size} samples at dt = {rig.dt * 1e3:g} ms, {len(config.layout)} channels"
-        return Simulated(noisy, summary, f"{cls.name}: {config.noise.describe()}")
+        from .lumped_plots import trace
+
+        return Simulated(trace(system, 0, noisy, clean), summary, f"{cls.name}: {config.noise.describe()}")
+
+    @classmethod
+    def plot_simulation(cls, simulated: Simulated, path: Path) -> None:
+        """The inputs, then every channel simulated (noisy) over the configured rig's clean response."""
+        from .lumped_plots import plot_trace
+
+        plot_trace(simulated.run, path, f"Responses of the sensors: {simulated.title}", "measured (noisy)",
+                   "clean (configured rig)")  # fmt: skip
+
+    @classmethod
+    def figures(cls, campaigns, files, out_dir: Path) -> list[Path]:
+        """Per campaign, every channel against the rig at the estimate (`systems.lumped_plots`)."""
+        from .lumped_plots import campaign_figures
+
+        return campaign_figures(cls, campaigns, files, out_dir)
 
 
 def describe_direction(direction: dict[str, float]) -> str:
