@@ -81,7 +81,7 @@ def assert_honest(d, truth):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "off", [{"ktr": 0.9, "kR": 1.2}, {"ktr": 1.08, "kR": 1.08, "mr": 1.15}], ids=lambda o: "-".join(o)
+    "off", [{"ktr": 0.9, "kR": 1.2}, {"ktr": 0.9, "kR": 1.2, "mr": 1.15}], ids=lambda o: "-".join(o)
 )
 def test_several_misset_known_parameters_reach_the_oracle_with_honest_intervals(tmp_path, off):
     """Issue 25, acceptance 2: two or three known parameters off. A second one hardly shows in J once the first is

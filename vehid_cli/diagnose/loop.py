@@ -42,6 +42,7 @@ from .attribution import (
     rank_candidates,
     undistinguished,
 )
+from .bench_law import BenchLaw
 from .quality import Quality
 from .residuals import ResidualAnalysis
 from .uncertainty import ModelUncertainty, compare_explanations
@@ -139,7 +140,7 @@ class Diagnosis(Result):
     J_definition: str = "wls: noise-weighted residual power per sample (chi2 per sample) on the training data"
     validation_from_file: bool = True
     chi2_limit: float | None = None  # residual power per sample above which the residual is not noise
-    unexplained: Unexplained | None = None  # the non-parametric strut force left unexplained (car, incomplete)
+    unexplained: Unexplained | BenchLaw | None = None  # the non-parametric force left unexplained (incomplete)
     data_files: tuple[str, ...] = ()  # several runs fitted jointly (empty: one run)
     checks: tuple[dict, ...] = ()  # the pre-fit checks of the measurement chain (SPEC section 6)
     model_uncertainty: ModelUncertainty | None = None  # the selected terms against the non-parametric explanation
@@ -182,7 +183,8 @@ class Diagnosis(Result):
             none = "; no library effect or known parameter explains it"
             out += f"; the library's best approximation adds {found} but does not explain it" if found else none
             if self.unexplained is not None and self.unexplained.significant:
-                out += f"; the unexplained strut force {self.unexplained.summary()}"
+                noun = getattr(self.unexplained, "noun", "strut force")
+                out += f"; the unexplained {noun} {self.unexplained.summary()}"
             return out + (f" (then stopped: {ambiguous})" if ambiguous else "")
         level = "" if self.at_noise is None else f" (residual {self.residual_ratio:.3g}x the noise)"
         if self.selected:

@@ -241,8 +241,9 @@ class Unexplained(Result):
             "samples": self.samples,
             "iterations": self.iterations,
             "refit_dx": dict(zip(self.names, map(float, self.dx), strict=True)),
-            "refit_ci95_halfwidth": None if self.dx_ci is None or not self.dx.size else
-            dict(zip(self.names, map(float, self.dx_ci), strict=True)),
+            "refit_ci95_halfwidth": None
+            if self.dx_ci is None or not self.dx.size
+            else dict(zip(self.names, map(float, self.dx_ci), strict=True)),
             "peak_force_N": self.peak_force_N,
             "acts_on": self.acts_on,
             "resembles": self.resembles,
