@@ -99,11 +99,10 @@ class BenchLaw(Result):
         c = self.dominant
         unit = UNITS[c.variable]
         at = f"{1e3 * c.peak_at:.3g} mm" if c.variable == "displacement" else f"{c.peak_at:.3g} {unit}"
-        return (
-            f"peaks at {c.peak_force:.3g} N over {c.variable} (at {at}); with it the held-out J falls from "
-            f"{self.validation_J_parametric:.4g} to {self.validation_J_non_parametric:.4g}"
-            + ("" if self.lowers_validation else " (it does not lower it on every held-out run)")
-        )
+        held = f"held-out J {self.validation_J_parametric:.4g} -> {self.validation_J_non_parametric:.4g} with it"
+        if not self.lowers_validation:
+            held += " (it does not carry over to every held-out run: a law of this run's motion only)"
+        return f"peaks at {c.peak_force:.3g} N over {c.variable} (at {at}); {held}"
 
     def to_json(self) -> dict:
         return {

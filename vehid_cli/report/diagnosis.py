@@ -49,6 +49,10 @@ def diagnosis_tables(result):
     ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
     for j, name in enumerate(a.names):
         ba.add_row(name, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
+    mu = getattr(result, "model_uncertainty", None)
+    if mu is not None and mu.imitates:  # the intervals that cover the explanations' spread, marked as such
+        for name, lo, hi in zip(mu.names, mu.low, mu.high, strict=True):
+            ba.add_row(f"{name} 95 % (model unc.)", "", f"[{lo:.5g}, {hi:.5g}]")
     return Group(table, ba)
 
 
