@@ -182,6 +182,8 @@ class Diagnosis(Result):
             out = f"incomplete: residual {self.residual_ratio:.3g}x the noise (noise: at most {self.chi2_limit:.3g}x)"
             none = "; no library effect or known parameter explains it"
             out += f"; the library's best approximation adds {found} but does not explain it" if found else none
+            if self.imitation:
+                out += "; library terms imitate a law they do not contain: " + self.model_uncertainty.summary()
             if self.unexplained is not None and self.unexplained.significant:
                 noun = getattr(self.unexplained, "noun", "strut force")
                 out += f"; the unexplained {noun} {self.unexplained.summary()}"
