@@ -74,6 +74,7 @@ class ModelReport(Result):
     fixed: tuple[str, ...] = ()  # shape parameters the data could not tell, held at their start value
     nre_bound_percent: float | None = None  # the NRE's Cramér–Rao bound for this model (RSS of relative sds)
     run_analyses: tuple[tuple[str, ResidualAnalysis], ...] = ()  # several runs: (file, its analysis) each
+    ci_misfit: NDArray | None = None  # residual above the noise: 95 % half-widths that survive the misfit (sandwich)
 
     def to_json(self, validation_from_file: bool = True) -> dict:
         def ci(v, h):
@@ -91,6 +92,11 @@ class ModelReport(Result):
             "nre_bound_percent": self.nre_bound_percent,
             "residual": None if self.analysis is None else self.analysis.summary(),
         }
+        if self.ci_misfit is not None:  # marked: intervals that account for the misfit, beside those that assume none
+            out["ci95_misfit"] = {n: ci(v, h) for n, v, h in zip(self.names, self.x, self.ci_misfit, strict=True)}
+            out["ci95_misfit_method"] = (
+                "sandwich (J'J)^-1 S (J'J)^-1 over 30 stretches of the record: the residual's correlation kept"
+            )
         if not validation_from_file:
             out["holdout_J"] = self.validation_J
         if self.validation_per_file:

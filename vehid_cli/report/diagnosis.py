@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from rich import box
 from rich.console import Group
 from rich.table import Table
@@ -49,6 +50,10 @@ def diagnosis_tables(result):
     ba.add_row("NRE [%]", fmt(b.nre_percent), fmt(a.nre_percent))
     for j, name in enumerate(a.names):
         ba.add_row(name, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
+    if getattr(a, "ci_misfit", None) is not None:  # the model is wrong: intervals that survive the misfit, marked
+        for j, name in enumerate(a.names):
+            ba.add_row(f"{name} 95 % (misfit)", "", "-" if not np.isfinite(a.ci_misfit[j]) else
+                       f"{a.x[j]:.5g} ± {a.ci_misfit[j]:.2g}")  # fmt: skip
     mu = getattr(result, "model_uncertainty", None)
     if mu is not None and mu.imitates:  # the intervals that cover the explanations' spread, marked as such
         for name, lo, hi in zip(mu.names, mu.low, mu.high, strict=True):

@@ -26,6 +26,7 @@ from ...diagnose.attribution import (
     chi2_statistic,
     fit_intervals,
     lsq_fit,
+    misfit_ci,
     sensor_candidates,
 )
 from ...diagnose.checks import check_runs
@@ -142,7 +143,10 @@ class CarLoop:
         residual analysis."""
         task = self.task
         t = self.augmented(task, f.names)
-        ci = fit_intervals(self.problem_of(t, self.ref, self.split.keep), f, f.J)
+        problem = self.problem_of(t, self.ref, self.split.keep)
+        ci = fit_intervals(problem, f, f.J)
+        kept = task.residual_samples if self.split.keep is None else int(self.split.keep.sum())
+        misfit = misfit_ci(problem, f) if f.J > chi2_limit(kept) else None  # the model is wrong: say how wide
         nre = bound = None
         if task.truth is not None:  # the NRE of the declared unknowns, and its bound (sd = half-width / 1.96)
             idx = [f.names.index(n) for n in task.names]
@@ -153,7 +157,8 @@ class CarLoop:
         an = per_run[0][1] if per_run else None
         chi2 = f.J if an is None else (joint_chi2([a for _, a in per_run]) if self.joint else an.chi2_per_sample)
         return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an, fixed=f.fixed,
-                           nre_bound_percent=bound, run_analyses=per_run if self.joint else ())  # fmt: skip
+                           nre_bound_percent=bound, run_analyses=per_run if self.joint else (),
+                           ci_misfit=misfit)  # fmt: skip
 
 
 def fit_declared(
