@@ -51,6 +51,9 @@ def test_explanations_that_disagree_beyond_their_intervals_widen_them_to_cover_b
     out = mu.to_json()
     assert out["reason"] == "library terms imitate a law they do not contain"
     assert out["ci95_model_uncertainty"]["m"] == [1290.5, 1303.0]
+    misfit = compare_explanations(["coulomb_friction", "parameter:cr"], names, x, ci, alt, ci_misfit=[12.0, 1.0])
+    np.testing.assert_allclose(misfit.low, [1280.0, 512.0])  # the wider misfit interval of m, Ix's own
+    np.testing.assert_allclose(misfit.separation, mu.separation)  # the test itself assumes the model
     agree = compare_explanations(["coulomb_friction", "parameter:cr"], names, x, ci, fake_unexplained(names, x, ci))
     assert agree is not None and not agree.imitates
     assert compare_explanations(["coulomb_friction"], names, x, ci, alt) is None  # one term: nothing to compare

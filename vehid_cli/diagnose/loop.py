@@ -577,7 +577,10 @@ def close(
     uncertainty = None
     if quality.ok and unexplained is not None and all(n in after.names for n in before.names):
         idx = [after.names.index(n) for n in before.names]
-        uncertainty = compare_explanations(loop.effects, before.names, after.x[idx], after.ci[idx], unexplained)
+        misfit = None if after.ci_misfit is None else after.ci_misfit[idx]
+        uncertainty = compare_explanations(
+            loop.effects, before.names, after.x[idx], after.ci[idx], unexplained, misfit
+        )  # fmt: skip
     imitation = uncertainty is not None and uncertainty.imitates
     left = unexplained if quality.ok and (incomplete or imitation) else None
     return Diagnosis(

@@ -12,8 +12,9 @@ far outside their intervals). Two signs that the selected explanation is such an
   the two fits' 95 % intervals together (sqrt(ci_a² + ci_b²)).
 
 Both together make the verdict "incomplete: library terms imitate a law they do not contain", and the declared
-unknowns' intervals are widened to the union of the two explanations' intervals (both reported; the widened ones
-are marked as covering the model uncertainty).
+unknowns' intervals are widened to the union of the two explanations' intervals (the final model's taken from its
+misfit-robust sandwich where that is wider; both reported, the widened ones marked as covering the model
+uncertainty).
 """
 
 from __future__ import annotations
@@ -116,11 +117,18 @@ class ModelUncertainty(Result):
 
 
 def compare_explanations(
-    selected: Sequence[str], names: Sequence[str], x: NDArray, ci: NDArray, unexplained
+    selected: Sequence[str],
+    names: Sequence[str],
+    x: NDArray,
+    ci: NDArray,
+    unexplained,
+    ci_misfit: NDArray | None = None,
 ) -> ModelUncertainty | None:
     """The declared unknowns `names` = x (95 % half-widths ci) of the final model with the `selected` terms against
     the non-parametric explanation (`unexplained`: an Unexplained fitted with the declared unknowns as nuisance),
-    when the selected terms crowd on one element of the strut; None when they do not, or nothing to compare."""
+    when the selected terms crowd on one element of the strut; None when they do not, or nothing to compare. The
+    widened intervals take the final model's misfit intervals (`ci_misfit`, where the residual is above the noise)
+    where they are wider than ci."""
     crowd = crowded_element(selected)
     if crowd is None or unexplained is None or unexplained.unknowns is None or unexplained.dx_ci is None:
         return None
@@ -131,6 +139,7 @@ def compare_explanations(
     alt, alt_ci = unexplained.unknowns[idx], unexplained.dx_ci[idx]
     if not (np.all(np.isfinite(ci)) and np.all(np.isfinite(alt_ci))):
         return None
-    low = np.minimum(x - ci, alt - alt_ci)
-    high = np.maximum(x + ci, alt + alt_ci)
+    wide = ci if ci_misfit is None else np.fmax(ci, np.asarray(ci_misfit, dtype=float))
+    low = np.minimum(x - wide, alt - alt_ci)
+    high = np.maximum(x + wide, alt + alt_ci)
     return ModelUncertainty(crowd[0], crowd[1], tuple(names), x, ci, alt, alt_ci, low, high)
