@@ -45,7 +45,7 @@ from .attribution import (
 from .bench_law import BenchLaw
 from .quality import Quality
 from .residuals import ResidualAnalysis
-from .uncertainty import ModelUncertainty, compare_explanations
+from .uncertainty import ModelUncertainty, compare_reports
 from .unexplained import Unexplained
 
 MAX_ROUNDS = 4
@@ -94,9 +94,7 @@ class ModelReport(Result):
         }
         if self.ci_misfit is not None:  # marked: intervals that account for the misfit, beside those that assume none
             out["ci95_misfit"] = {n: ci(v, h) for n, v, h in zip(self.names, self.x, self.ci_misfit, strict=True)}
-            out["ci95_misfit_method"] = (
-                "sandwich (J'J)^-1 S (J'J)^-1 over 30 stretches of the record: the residual's correlation kept"
-            )
+            out["ci95_misfit_method"] = "sandwich over 30 stretches of the record (the residual's correlation kept)"
         if not validation_from_file:
             out["holdout_J"] = self.validation_J
         if self.validation_per_file:
@@ -178,12 +176,11 @@ class Diagnosis(Result):
         if ambiguous and not self.selected:
             return "inconclusive, no effect claimed: " + ambiguous
         found = ", ".join(self.selected)
+        level = "" if self.at_noise is None else f" (residual {self.residual_ratio:.3g}x the noise)"
         if self.imitation and self.at_noise is not False:
             out = "incomplete: library terms imitate a law they do not contain: " + self.model_uncertainty.summary()
-            if self.unexplained is not None and self.unexplained.significant:
-                out += f"; the unexplained strut force {self.unexplained.summary()}"
-            level = "" if self.at_noise is None else f" (residual {self.residual_ratio:.3g}x the noise)"
-            return out + level
+            law = self.unexplained is not None and self.unexplained.significant
+            return out + (f"; the unexplained strut force {self.unexplained.summary()}" if law else "") + level
         if self.at_noise is False:
             out = f"incomplete: residual {self.residual_ratio:.3g}x the noise (noise: at most {self.chi2_limit:.3g}x)"
             none = "; no library effect or known parameter explains it"
@@ -194,7 +191,6 @@ class Diagnosis(Result):
                 noun = getattr(self.unexplained, "noun", "strut force")
                 out += f"; the unexplained {noun} {self.unexplained.summary()}"
             return out + (f" (then stopped: {ambiguous})" if ambiguous else "")
-        level = "" if self.at_noise is None else f" (residual {self.residual_ratio:.3g}x the noise)"
         if self.selected:
             return f"found: {found}; the residual is now at the noise{level}"
         return f"adequate: nothing missing, the residual is at the noise{level}"
@@ -345,16 +341,12 @@ class _Augmentation:
             and not (specs[e].kind == "parameter" and specs[e].unknowns[0] in current.names)
         ]  # fmt: skip
         if self.claimed and subject.noise_limit is not None and current.J <= subject.noise_limit:
-            # at the noise a second mis-set known parameter hardly shows in J but still biases the unknowns
-            # (kR 20 % off beside ktr: Ix 6 standard errors off): the known parameters are tested once more
+            # a second mis-set known parameter hardly shows in J at the noise but biases the unknowns: test those
             todo = [c for c in todo if c.kind == "parameter"]
+            at = f"the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g})"
+            self.note(f"{at}: only the known parameters are tested further" if todo else f"stopped: {at}")
             if not todo:
-                self.note(f"stopped: the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g})")
                 return False
-            self.note(
-                f"the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g}): only the known "
-                "parameters are tested further"
-            )
         if not todo:
             return False
         best = self.choose(self.rank(todo))
@@ -475,13 +467,11 @@ class _Augmentation:
                 self.move_to(without)
 
     def polish(self) -> None:
-        """The final model's joint least-squares polish: every free unknown (declared, freed known parameters, effect
-        strengths) together from the loop's best point, to the likelihood's minimum (a re-fit that stopped short
-        leaves the declared unknowns where the freed parameter's earlier value bent them); kept when J falls."""
+        """The final model's joint least-squares polish of every free unknown from the loop's best point (kept when
+        J falls): a re-fit that stopped short leaves the unknowns where a freed parameter's earlier value bent them."""
         f = self.current
-        problem, _ = self.subject.problem_for(f.names)
-        free = np.array([n not in f.fixed for n in f.names])
-        polished = fit_free(problem, f.x, free, self.refit_budget)
+        polished = fit_free(self.subject.problem_for(f.names)[0], f.x, [n not in f.fixed for n in f.names],
+                            self.refit_budget)  # fmt: skip
         if polished.J < f.J:
             self.move_to(polished)
 
@@ -574,13 +564,7 @@ def close(
     after = report(loop.fit, loop.effects) if loop.fit is not fit else before
     limit = chi2_limit(chi2_residuals)
     incomplete = after.chi2_per_sample is not None and after.chi2_per_sample > limit
-    uncertainty = None
-    if quality.ok and unexplained is not None and all(n in after.names for n in before.names):
-        idx = [after.names.index(n) for n in before.names]
-        misfit = None if after.ci_misfit is None else after.ci_misfit[idx]
-        uncertainty = compare_explanations(
-            loop.effects, before.names, after.x[idx], after.ci[idx], unexplained, misfit
-        )  # fmt: skip
+    uncertainty = compare_reports(loop.effects, before.names, after, unexplained) if quality.ok else None
     imitation = uncertainty is not None and uncertainty.imitates
     left = unexplained if quality.ok and (incomplete or imitation) else None
     return Diagnosis(

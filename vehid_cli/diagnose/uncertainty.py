@@ -143,3 +143,13 @@ def compare_explanations(
     low = np.minimum(x - wide, alt - alt_ci)
     high = np.maximum(x + wide, alt + alt_ci)
     return ModelUncertainty(crowd[0], crowd[1], tuple(names), x, ci, alt, alt_ci, low, high)
+
+
+def compare_reports(selected: Sequence[str], names: Sequence[str], after, unexplained) -> ModelUncertainty | None:
+    """compare_explanations for the declared unknowns `names` in the final model's report `after` (its names, x, ci
+    and ci_misfit)."""
+    if unexplained is None or not all(n in after.names for n in names):
+        return None
+    idx = [list(after.names).index(n) for n in names]
+    misfit = None if after.ci_misfit is None else np.asarray(after.ci_misfit)[idx]
+    return compare_explanations(selected, names, after.x[idx], after.ci[idx], unexplained, misfit)
