@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import errno
-import json
 import os
 import shutil
 import signal
@@ -356,27 +355,30 @@ def test_a_file_rewritten_by_another_sweep_with_another_config_is_not_overwritte
 
 
 def test_unstable_parameter_sets_are_penalised_counted_and_reported(tmp_path):
-    """Negative damping is in the box: those cars blow up. The campaign completes without a floating-point
-    warning, every cost is finite, and the penalised evaluations are counted in the file, the JSON and the output."""
-    extra = ["identify.unknowns=[m, cf, cr]", "identify.limits={cf: [-60000, 60000], cr: [-60000, 60000]}",
-             "identify.runs=2"]  # fmt: skip
+    """Negative damping in the box (put there past the config's physical ranges, which refuse it since issue 22):
+    those cars blow up. The campaign completes without a floating-point warning, every cost is finite, and the
+    penalised evaluations are counted in the campaign, its JSON and its file."""
+    config = small_config("identify.unknowns=[m, cf, cr]", "identify.runs=2")
+    limits = {"cf": (-60000.0, 60000.0), "cr": (-60000.0, 60000.0)}
+    config = config.model_copy(update={"identify": config.identify.model_copy(update={"limits": limits})})
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        campaign = run_campaign(small_config(*extra), jobs=1)
+        campaign = run_campaign(config, jobs=1)
     assert campaign.summary.penalised == sum(r.penalised for r in campaign.records) > 0
     assert all(np.isfinite(r.cost) for r in campaign.records)
     # run 1's 40 evaluations were all unstable: its "estimate" is meaningless, and the campaign says so
     assert [r.penalised for r in campaign.records][1] == 40 and campaign.summary.at_penalty == 1
-    out, js = tmp_path / "c.h5", tmp_path / "c.json"
-    code, text = invoke("identify", BASE_CONFIG, *sets(SMALL + extra), "--jobs", 1, "-o", out, "--json", js)
-    assert code == 0, text
-    doc = json.loads(js.read_text())
+    doc = campaign.to_json()
     assert doc["penalised_evaluations"] == campaign.summary.penalised and doc["runs_at_penalty"] == 1
-    assert f"{campaign.summary.penalised} of" in text and "penalty cost" in text
-    assert "1 of 2 run(s) found no usable parameter set" in text
+    out = tmp_path / "c.h5"
+    write_campaign_h5(out, campaign)
     with h5py.File(out) as h5:
         assert h5["summary"].attrs["penalised"] == campaign.summary.penalised
         assert list(h5["runs/penalised"][()]) == [r.penalised for r in campaign.records]
+    # from the command line, such a box is refused before any run, naming the physical range it leaves
+    extra = ["identify.unknowns=[m, cf, cr]", "identify.limits={cf: [-60000, 60000], cr: [-60000, 60000]}"]
+    code, text = invoke("identify", BASE_CONFIG, *sets(SMALL + extra), "-o", tmp_path / "d.h5")
+    assert code == 2 and "physical range" in text and not (tmp_path / "d.h5").exists(), text
 
 
 @pytest.mark.parametrize("what", ["symlink", "directory", "fifo"])

@@ -93,12 +93,12 @@ class BenchSection(_Section):
         if not samples >= 3:
             raise ValueError(
                 f"the {self.excitation} lasts {seconds:.3g} s: fewer than 3 samples of dt = {self.dt:g} s "
-                "(more cycles, a smaller dt, a slower motion)"
+                "(more 'bench.cycles', a smaller 'bench.dt', a slower motion)"
             )
         if samples > BENCH_SAMPLES:
             raise ValueError(
                 f"the {self.excitation} holds {samples:.3g} samples of dt = {self.dt:g} s; keep it below "
-                f"{BENCH_SAMPLES:,} (a larger dt, fewer cycles, a faster motion)"
+                f"{BENCH_SAMPLES:,} (a larger 'bench.dt', fewer 'bench.cycles', a faster motion)"
             )
         if samples * self.substeps > BENCH_STEPS:
             raise ValueError(
