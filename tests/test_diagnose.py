@@ -176,7 +176,7 @@ def test_bad_vehicle_data_claims_no_effect(tmp_path, case, overrides, reason):
 
 def test_chi2_limit_is_five_standard_deviations_of_noise():
     """chi² per sample of R white unit residuals has sd sqrt(2/R): the limit sits 5 of them above 1."""
-    from vehid_cli.diagnose.loop import chi2_limit
+    from vehid_cli.diagnose.result import chi2_limit
 
     assert chi2_limit(24000) == pytest.approx(1 + 5 * np.sqrt(2 / 24000))
     rng = np.random.default_rng(7)
@@ -185,8 +185,8 @@ def test_chi2_limit_is_five_standard_deviations_of_noise():
 
 
 def _diagnosis(selected=(), chi2=1.0, notes=(), quality=None):
-    from vehid_cli.diagnose.loop import Diagnosis, ModelReport, chi2_limit
     from vehid_cli.diagnose.quality import Quality
+    from vehid_cli.diagnose.result import Diagnosis, ModelReport, chi2_limit
 
     rep = ModelReport((), ("m",), np.ones(1), np.ones(1), chi2, chi2, None, None)
     return Diagnosis(rep, rep, (), tuple(selected), 1e-3, "", "", 0.0, tuple(notes), quality=quality or Quality(),

@@ -165,10 +165,14 @@ MR = ROOT / "configs" / "dampers" / "mr_bingham.yaml"
 
 
 @pytest.mark.parametrize("config", [BRFD, MR], ids=["friction", "mr"])
-def test_real_damper_claims_are_real(config):
+def test_real_damper_claims_are_real(config, tmp_path):
     """Issue 11, acceptance 4: on the shared real dampers every claimed effect has a strength interval that
-    excludes zero and lowers J on every held-out run; the verdict says whether the residual is at the noise."""
+    excludes zero and lowers J on every held-out run; the verdict says whether the residual is at the noise.
+    Issue 25, acceptance 3: when it is not, the force the model misses is shown as a law of velocity and
+    displacement (JSON `unexplained`, a figure); on the MR damper it lowers the held-out J below the final
+    parametric model's on every held-out run."""
     d = diagnose_damper(load_config(needs_shared_data_of(config)))
+    check_bench_law(d, config, tmp_path)
     assert d.selected, d.notes
     before = d.before.validation_per_file
     assert before and len(before) >= 2
@@ -185,3 +189,26 @@ def test_real_damper_claims_are_real(config):
             assert abs(d.after.x[j]) > d.after.ci[j], (n, d.after.x[j], d.after.ci[j])
     assert d.verdict.split(":")[0] in ("found", "incomplete")
     assert d.verdict.startswith("incomplete") == (d.after.chi2_per_sample > d.chi2_limit)
+
+
+def check_bench_law(d, config, tmp_path):
+    """The bench's non-parametric law of an incomplete diagnosis: in the JSON beside the parametric held-out J (the
+    final model's, recomputed independently here from the per-run values), in the verdict and in a figure."""
+    if not d.verdict.startswith("incomplete"):
+        return
+    law = d.unexplained
+    assert law is not None and law.significant
+    out = d.to_json()["unexplained"]
+    assert out["kind"] == "bench" and set(out["curves"]) >= {"velocity"}
+    per = d.after.validation_per_file
+    assert set(out["validation_J_per_file"]) == set(per)
+    for k, v in out["validation_J_per_file"].items():
+        assert v["parametric"] == pytest.approx(per[k], rel=1e-9)
+    assert out["validation_J_parametric"] == pytest.approx(d.after.validation_J, rel=1e-9)
+    assert "the unexplained damper force" in d.verdict
+    if config == MR:
+        assert law.lowers_validation, out["validation_J_per_file"]
+        assert out["validation_J_non_parametric"] < 0.9 * out["validation_J_parametric"]
+    from vehid_cli.report.diagnose_plots import plot_unexplained
+
+    read_png(plot_unexplained(law, tmp_path / "law.png"))

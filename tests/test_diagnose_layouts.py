@@ -24,8 +24,8 @@ from vehid_cli.core.errors import InputError
 from vehid_cli.diagnose.holdout import holdout_blocks
 from vehid_cli.diagnose.linear_response import linear_car as _linear_car
 from vehid_cli.diagnose.linear_response import responses as _responses
-from vehid_cli.diagnose.loop import chi2_limit
 from vehid_cli.diagnose.residuals import analyse, fingerprint_channels
+from vehid_cli.diagnose.result import chi2_limit
 from vehid_cli.diagnose.unexplained import estimate_unexplained
 from vehid_cli.identify.experiment import build_experiment
 from vehid_cli.identify.objectives import Objective

@@ -60,6 +60,7 @@ SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR
 SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
 PROBE = 1e-4  # difference step of the screening's Gauss-Newton step, as a fraction of each unknown's range
 Z95 = 1.959963984540054
+MISFIT_BLOCKS = 30  # stretches of the record the misfit-robust (sandwich) intervals compare
 PARAMETER_GROUPS = {
     "springs": ("kf", "kr"),
     "dampers": ("cf", "cr"),
@@ -200,15 +201,45 @@ def fit_free(problem: Problem, x0: NDArray, free: NDArray, budget: int, tol: flo
     return Fit(tuple(problem.names), x, sub.J, sub.evaluations, fixed)
 
 
-def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
-    """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
-    differences, one batch) and `scale` the variance of one residual entry (NaN where singular)."""
+def _jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
+    """The Jacobian (R, D) of the problem's residuals at x (forward differences, one batch) and the residual (R,)."""
     width = problem.upper - problem.lower
     h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
     step = np.where(x + h <= problem.upper, h, -h)
     X = np.vstack([x[None, :], x[None, :] + np.diag(step)])
     _, R = problem.residuals(X)
-    Jac = ((R[1:] - R[0][None, :]) / step[:, None]).T
+    return ((R[1:] - R[0][None, :]) / step[:, None]).T, R[0]
+
+
+def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArray:
+    """95 % half-widths that survive a wrong model (NaN for the fixed unknowns): the sandwich (J'J)^-1 S (J'J)^-1
+    with S = sum over `blocks` contiguous blocks of the residual entries (stretches of time) of g_b g_b',
+    g_b = J_b' r_b: the residual's own correlation within a block is kept, where (J'J)^-1 chi² assumes it white.
+    With a right model and white noise it is the usual covariance; with a misfit it grows with what the misfit
+    does to the estimate from one stretch of the record to the next."""
+    free = np.array([n not in fit.fixed for n in fit.names])
+    out = np.full(len(fit.names), np.nan)
+    sub = restricted(problem, fit.x, free)
+    Jac, r = _jacobian(sub, fit.x[free])
+    if not (np.all(np.isfinite(Jac)) and np.all(np.isfinite(r))):
+        return out
+    try:
+        inv = np.linalg.inv(Jac.T @ Jac)
+    except np.linalg.LinAlgError:
+        return out
+    edges = np.linspace(0, r.size, max(2, min(blocks, r.size)) + 1).astype(int)
+    g = np.array([Jac[a:b].T @ r[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)])
+    g -= g.mean(axis=0)
+    cov = inv @ (g.T @ g) * (len(g) / max(len(g) - 1, 1)) @ inv
+    d = np.diag(cov)
+    out[free] = np.where(d >= 0, Z95 * np.sqrt(np.abs(d)), np.nan)
+    return out
+
+
+def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
+    """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
+    differences, one batch) and `scale` the variance of one residual entry (NaN where singular)."""
+    Jac, _ = _jacobian(problem, x)
     if not np.all(np.isfinite(Jac)):
         return np.full(x.size, np.nan)
     try:

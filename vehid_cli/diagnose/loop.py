@@ -17,7 +17,6 @@ with the noise: above 1 + 5 sqrt(2/R) (R residuals) it is ``incomplete``, whatev
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,7 +26,6 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from ..core.progress import ProgressHook
-from ..core.result import Result
 from ..optimizers.base import Problem
 from .attribution import (
     PARAMETER_PREFIX,
@@ -44,163 +42,12 @@ from .attribution import (
     undistinguished,
 )
 from .quality import Quality
-from .residuals import ResidualAnalysis
+from .result import Diagnosis, ModelReport, Step, chi2_limit
+from .uncertainty import compare_reports
 from .unexplained import Unexplained
 
 MAX_ROUNDS = 4
 REFIT_BUDGET = 600
-
-
-def chi2_limit(residual_count: int) -> float:
-    """The largest residual power per sample (over the noise power) that is still noise: 1 + 5 sqrt(2/R)."""
-    return 1.0 + 5.0 * math.sqrt(2.0 / max(residual_count, 1))
-
-
-@dataclass(frozen=True)
-class ModelReport(Result):
-    """One model's fit: estimates with 95 % intervals (NaN: held fixed or undetermined), J, validation J, NRE."""
-
-    effects: tuple[str, ...]
-    names: tuple[str, ...]
-    x: NDArray
-    ci: NDArray  # (D,) half-width of the 95 % interval (NaN where the information is singular or x is fixed)
-    J: float
-    chi2_per_sample: float | None
-    validation_J: float | None
-    nre_percent: float | None
-    analysis: ResidualAnalysis | None = None
-    validation_per_file: dict[str, float] | None = None
-    fixed: tuple[str, ...] = ()  # shape parameters the data could not tell, held at their start value
-    nre_bound_percent: float | None = None  # the NRE's Cramér–Rao bound for this model (RSS of relative sds)
-    run_analyses: tuple[tuple[str, ResidualAnalysis], ...] = ()  # several runs: (file, its analysis) each
-
-    def to_json(self, validation_from_file: bool = True) -> dict:
-        def ci(v, h):
-            return [float(v - h), float(v + h)] if np.isfinite(h) else None
-
-        out = {
-            "effects": list(self.effects),
-            "estimates": {n: float(v) for n, v in zip(self.names, self.x, strict=True)},
-            "ci95": {n: ci(v, h) for n, v, h in zip(self.names, self.x, self.ci, strict=True)},
-            "fixed": list(self.fixed),
-            "J": self.J,
-            "chi2_per_sample": self.chi2_per_sample,
-            "validation_J": self.validation_J if validation_from_file else None,
-            "nre_percent": self.nre_percent,
-            "nre_bound_percent": self.nre_bound_percent,
-            "residual": None if self.analysis is None else self.analysis.summary(),
-        }
-        if not validation_from_file:
-            out["holdout_J"] = self.validation_J
-        if self.validation_per_file:
-            out["validation_J_per_file"] = dict(self.validation_per_file)
-        if self.run_analyses:
-            out["residual_per_file"] = {f: a.summary() for f, a in self.run_analyses}
-        return out
-
-
-@dataclass(frozen=True)
-class Step(Result):
-    """One candidate the loop added: J on the training data and on the validation data, before and after."""
-
-    effect: str
-    J_before: float
-    J_after: float
-    validation_J_before: float
-    validation_J_after: float
-    validation_per_file_after: dict[str, float] | None = None
-
-    def to_json(self) -> dict:
-        out = {
-            "effect": self.effect, "J_before": self.J_before, "J_after": self.J_after,
-            "validation_J_before": self.validation_J_before, "validation_J_after": self.validation_J_after,
-        }  # fmt: skip
-        if self.validation_per_file_after:
-            out["validation_J_per_file_after"] = dict(self.validation_per_file_after)
-        return out
-
-
-@dataclass(frozen=True)
-class Diagnosis(Result):
-    """The loop's outcome: the declared and the final model, every round's ranking, what was added."""
-
-    before: ModelReport
-    after: ModelReport
-    rounds: tuple[tuple[Ranked, ...], ...]
-    selected: tuple[str, ...]
-    alpha: float
-    validation_source: str
-    sigma_source: str
-    wall_s: float
-    notes: tuple[str, ...] = field(default_factory=tuple)
-    steps: tuple[Step, ...] = ()
-    quality: Quality = field(default_factory=Quality)
-    system: str = "vehicle"
-    J_definition: str = "wls: noise-weighted residual power per sample (chi2 per sample) on the training data"
-    validation_from_file: bool = True
-    chi2_limit: float | None = None  # residual power per sample above which the residual is not noise
-    unexplained: Unexplained | None = None  # the non-parametric strut force left unexplained (car, incomplete)
-    data_files: tuple[str, ...] = ()  # several runs fitted jointly (empty: one run)
-    checks: tuple[dict, ...] = ()  # the pre-fit checks of the measurement chain (SPEC section 6)
-    units: dict[str, str] = field(default_factory=dict)  # SI unit of each estimate before and after ('' unknown)
-
-    @property
-    def residual_ratio(self) -> float | None:
-        """The final residual power over the noise power (chi² per sample)."""
-        return self.after.chi2_per_sample
-
-    @property
-    def at_noise(self) -> bool | None:
-        """Is the final residual at the noise (None where the noise is unknown)?"""
-        r = self.residual_ratio
-        if r is None or self.chi2_limit is None or not np.isfinite(r):
-            return None
-        return bool(r <= self.chi2_limit)
-
-    @property
-    def verdict(self) -> str:
-        """One line whose first word is adequate, found, incomplete or inconclusive (SPEC section 5)."""
-        ambiguous = next((n for n in self.notes if n.startswith("cannot tell")), None)
-        if not self.quality.ok:
-            return "inconclusive, no effect claimed: " + "; ".join(self.quality.reasons)
-        if ambiguous and not self.selected:
-            return "inconclusive, no effect claimed: " + ambiguous
-        found = ", ".join(self.selected)
-        if self.at_noise is False:
-            out = f"incomplete: residual {self.residual_ratio:.3g}x the noise (noise: at most {self.chi2_limit:.3g}x)"
-            none = "; no library effect or known parameter explains it"
-            out += f"; the library's best approximation adds {found} but does not explain it" if found else none
-            if self.unexplained is not None and self.unexplained.significant:
-                out += f"; the unexplained strut force {self.unexplained.summary()}"
-            return out + (f" (then stopped: {ambiguous})" if ambiguous else "")
-        level = "" if self.at_noise is None else f" (residual {self.residual_ratio:.3g}x the noise)"
-        if self.selected:
-            return f"found: {found}; the residual is now at the noise{level}"
-        return f"adequate: nothing missing, the residual is at the noise{level}"
-
-    def to_json(self) -> dict:
-        vf = self.validation_from_file
-        return {
-            "system": self.system,
-            "J_definition": self.J_definition,
-            "before": self.before.to_json(vf),
-            "after": self.after.to_json(vf),
-            "candidates": [r.to_json() for r in self.rounds[0]] if self.rounds else [],
-            "rounds": [[r.to_json() for r in rnd] for rnd in self.rounds],
-            "selected": list(self.selected),
-            "steps": [s.to_json() for s in self.steps],
-            "verdict": self.verdict,
-            "chi2_limit": self.chi2_limit,
-            "unexplained": None if self.unexplained is None else self.unexplained.to_json(),
-            "data_quality": self.quality.to_json(),
-            "alpha": self.alpha,
-            "validation": self.validation_source,
-            "noise": self.sigma_source,
-            "wall_s": self.wall_s,
-            "notes": list(self.notes),
-            "checks": [dict(c) for c in self.checks],
-            "units": dict(self.units),
-        } | ({"data_files": list(self.data_files)} if self.data_files else {})
 
 
 @dataclass(frozen=True)
@@ -315,15 +162,19 @@ class _Augmentation:
         the loop stops: the residual is at the noise, no candidate is left or accepted, or the data cannot tell the
         best from another."""
         subject, current = self.subject, self.current
-        if self.claimed and subject.noise_limit is not None and current.J <= subject.noise_limit:
-            self.note(f"stopped: the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g})")
-            return False
         specs = subject.specs
         todo = [
             specs[e] for e in self.ordered
             if e not in subject.declared and e not in self.claimed and e not in self.dropped
             and not (specs[e].kind == "parameter" and specs[e].unknowns[0] in current.names)
         ]  # fmt: skip
+        if self.claimed and subject.noise_limit is not None and current.J <= subject.noise_limit:
+            # a second mis-set known parameter hardly shows in J at the noise but biases the unknowns: test those
+            todo = [c for c in todo if c.kind == "parameter"]
+            at = f"the residual is at the noise (J = {current.J:.4g} <= {subject.noise_limit:.4g})"
+            self.note(f"{at}: only the known parameters are tested further" if todo else f"stopped: {at}")
+            if not todo:
+                return False
         if not todo:
             return False
         best = self.choose(self.rank(todo))
@@ -449,6 +300,15 @@ class _Augmentation:
                 self.note(f"{e} dropped at the end: with the later claims it is no longer needed (p = {p_keep:.2g})")
                 self.move_to(without)
 
+    def polish(self) -> None:
+        """The final model's joint least-squares polish of every free unknown from the loop's best point (kept when
+        J falls): a re-fit that stopped short leaves the unknowns where a freed parameter's earlier value bent them."""
+        f = self.current
+        polished = fit_free(self.subject.problem_for(f.names)[0], f.x, [n not in f.fixed for n in f.names],
+                            self.refit_budget)  # fmt: skip
+        if polished.J < f.J:
+            self.move_to(polished)
+
     def settle_companions(self, declared: int) -> None:
         """Known parameters an effect freed beside its own (asymmetric damping's cf, cr; unknowns after the first
         `declared`) whose effect was dropped: back to their configured value unless the data say they are off, then
@@ -518,6 +378,8 @@ def augment(
     if claim and len(run.claimed) > 1:  # the final model: is every claim still needed beside the others?
         run.recheck_claims()
     run.settle_companions(len(fit.names))
+    if claim and run.claimed:
+        run.polish()
     return Loop(run.current, tuple(run.claimed), tuple(run.rounds), tuple(run.steps), tuple(run.notes))
 
 
@@ -556,7 +418,9 @@ def close(
     after = report(loop.fit, loop.effects) if loop.fit is not fit else before
     limit = chi2_limit(chi2_residuals)
     incomplete = after.chi2_per_sample is not None and after.chi2_per_sample > limit
-    left = unexplained if quality.ok and incomplete else None
+    uncertainty = compare_reports(loop.effects, before.names, after, unexplained) if quality.ok else None
+    imitation = uncertainty is not None and uncertainty.imitates
+    left = unexplained if quality.ok and (incomplete or imitation) else None
     return Diagnosis(
         before=before,
         after=after,
@@ -570,5 +434,6 @@ def close(
         chi2_limit=limit,
         unexplained=left,
         units={n: unit(n) for n in dict.fromkeys(before.names + after.names)},
+        model_uncertainty=uncertainty,
         **fields,
     )

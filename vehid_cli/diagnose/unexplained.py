@@ -180,6 +180,13 @@ class Unexplained(Result):
     iterations: int  # trajectory corrections made
     dx: NDArray  # re-fit of the unknowns that comes with the estimate (from x)
     names: tuple[str, ...]
+    x: NDArray | None = None  # the fit the estimate started from (names = x; x + dx: the unknowns beside the force)
+    dx_ci: NDArray | None = None  # 95 % half-widths of the unknowns fitted beside the force (posterior covariance)
+
+    @property
+    def unknowns(self) -> NDArray | None:
+        """The unknowns fitted jointly with the non-parametric force (None when they were not re-fitted)."""
+        return None if self.x is None or not self.dx.size else self.x + self.dx
 
     @property
     def axles(self) -> dict[str, AxleEstimate]:
@@ -234,6 +241,9 @@ class Unexplained(Result):
             "samples": self.samples,
             "iterations": self.iterations,
             "refit_dx": dict(zip(self.names, map(float, self.dx), strict=True)),
+            "refit_ci95_halfwidth": None
+            if self.dx_ci is None or not self.dx.size
+            else dict(zip(self.names, map(float, self.dx_ci), strict=True)),
             "peak_force_N": self.peak_force_N,
             "acts_on": self.acts_on,
             "resembles": self.resembles,
@@ -543,8 +553,11 @@ def estimate_unexplained(
     end = _iterate(fitted, lin, x, keep, n_knots, iterations, criterion)
     test = _f_test(end.fit, rss0, edf0, R)
     axles = _axle_estimates(end.fit, names, test.sigma2, grid_points)
+    p = end.fit.p
+    dx_ci = Z95 * np.sqrt(np.maximum(np.diag(test.sigma2 * end.fit.sol.cov)[:p], 0.0))
     return Unexplained(
         front=axles[0], rear=axles[1], chi2_before=float(np.mean(rk0**2)), chi2_after=test.rss1 / R,
         edf=float(test.edf_force), edf_total=float(end.fit.sol.edf), df_test=float(test.df_test), F=float(test.F),
         p_value=test.p_value, sigma2=float(test.sigma2), samples=R, iterations=end.corrections, dx=end.dx, names=names,
+        x=x, dx_ci=dx_ci,
     )  # fmt: skip

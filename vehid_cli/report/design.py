@@ -204,7 +204,8 @@ def design_json(r: DesignResult, output: str | None = None) -> dict:
         "proposals": [
             {
                 "variable": p.variable,
-                "value": p.value,
+                "value": finite_or_none(p.value),
+                "sensors": None if p.sensors is None else list(p.sensors),
                 "text": p.text,
                 "change": p.change,
                 "nre_rms_percent": finite_or_none(p.nre_rms_percent),

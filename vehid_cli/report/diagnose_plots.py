@@ -134,9 +134,46 @@ def plot_channels(diagnosis, path: str | Path) -> Path:
     return _save(fig, path)
 
 
+def plot_bench_law(law, path: str | Path) -> Path:
+    """Write a damper's missing force law on its bench (``diagnose.bench_law``): force [N] over each variable with its
+    95 % band, and the held-out J of the parametric model beside the model plus the law, per held-out run."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    n = len(law.curves)
+    fig, axes = plt.subplots(1, n + 1, figsize=(4.2 * (n + 1), 3.8), squeeze=False, constrained_layout=True)
+    for ax, c in zip(axes[0], law.curves, strict=False):
+        scale, unit = (1e3, "mm") if c.variable == "displacement" else (1.0, "m/s" if c.variable == "velocity" else "-")
+        x = c.grid * scale
+        ax.fill_between(x, c.band[0], c.band[1], color="C0", alpha=0.2, lw=0, label="95 % band")
+        ax.plot(x, c.force, color="C0", lw=1.5, label="estimate")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xlabel(f"{c.variable} [{unit}]")
+        ax.set_ylabel("missing force [N]")
+        ax.set_title(f"f({c.variable}){'' if c.significant else ': nothing significant'}", fontsize=9)
+        ax.legend(fontsize=8)
+    ax = axes[0, n]
+    per = law.validation_per_file or {"held out": (law.validation_J_parametric, law.validation_J_non_parametric)}
+    names = list(per)
+    pos = np.arange(len(names))
+    ax.bar(pos - 0.2, [per[k][0] for k in names], 0.4, label="parametric model", color="0.55")
+    ax.bar(pos + 0.2, [per[k][1] for k in names], 0.4, label="+ non-parametric law", color="C3")
+    ax.set_xticks(pos, names, rotation=30, fontsize=8)
+    ax.set_ylabel("held-out J (Eq. 7)")
+    ax.legend(fontsize=8)
+    fig.suptitle(
+        f"unexplained damper force: training J {law.J_before:.3g} -> {law.J_after:.3g}, held-out J "
+        f"{law.validation_J_parametric:.3g} -> {law.validation_J_non_parametric:.3g}, edf {law.edf:.1f}",
+        fontsize=10,
+    )
+    return _save(fig, path)
+
+
 def plot_unexplained(unexplained, path: str | Path) -> Path:
     """Write the estimated missing strut force (``diagnose.unexplained``) as a 2x2 figure: front/rear x force [N]
-    over deflection [mm] and over velocity [m/s], each with its 95 % band and the closest library shape."""
+    over deflection [mm] and over velocity [m/s], each with its 95 % band and the closest library shape; a damper's
+    law on its bench (it has `curves`) by plot_bench_law."""
+    if hasattr(unexplained, "curves"):
+        return plot_bench_law(unexplained, path)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(2, 2, figsize=(10, 7), squeeze=False, constrained_layout=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from rich import box
 from rich.console import Group
 from rich.markup import escape
@@ -54,6 +55,14 @@ def diagnosis_tables(result):
         unit = result.units.get(name, "")
         label = escape(f"{name} [{unit}]" if unit else name)  # not rich markup
         ba.add_row(label, est(b, b.names.index(name)) if name in b.names else "-", est(a, j))
+    if getattr(a, "ci_misfit", None) is not None:  # the model is wrong: intervals that survive the misfit, marked
+        for j, name in enumerate(a.names):
+            ba.add_row(escape(f"{name} 95 % (misfit)"), "", "-" if not np.isfinite(a.ci_misfit[j]) else
+                       f"{a.x[j]:.5g} ± {a.ci_misfit[j]:.2g}")  # fmt: skip
+    mu = getattr(result, "model_uncertainty", None)
+    if mu is not None and mu.imitates:  # the intervals that cover the explanations' spread, marked as such
+        for name, lo, hi in zip(mu.names, mu.low, mu.high, strict=True):
+            ba.add_row(escape(f"{name} 95 % (model unc.)"), "", f"[{lo:.5g}, {hi:.5g}]")
     return Group(table, ba)
 
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -45,10 +45,12 @@ from ...diagnose.attribution import (
     lsq_fit,
     parameter_candidate,
 )
+from ...diagnose.bench_law import BenchLaw, bench_law
 from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks
-from ...diagnose.loop import Diagnosis, ModelReport, Subject, close
+from ...diagnose.loop import Subject, close
 from ...diagnose.quality import assess_bench
 from ...diagnose.residuals import analyse_bench, autocorrelation
+from ...diagnose.result import Diagnosis, ModelReport
 from ...models.bench import BenchHistory
 from ...models.effects import LIBRARY, BenchScale
 from ...optimizers import get_optimizer
@@ -279,7 +281,7 @@ def diagnose_damper(
         specs=specs, declared=frozenset(), problem_for=bench.problem_for, validation_J=bench.validation_J,
         residual_count=bench.residual_count, statistic=bench.statistic, scale=bench.scale, min_gain=MIN_GAIN,
     )  # fmt: skip
-    return close(
+    d = close(
         subject, fit, before, bench.report, quality, alpha=alpha, max_rounds=max_rounds,
         candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start,
         chi2_residuals=runs.train.t.size, validation_source=runs.validation_source,
@@ -288,6 +290,30 @@ def diagnose_damper(
         J_definition="Fleps-Dezasse Eq. 7: mean squared force error over the variance of the measured force",
         progress=progress,
     )  # fmt: skip
+    if quality.ok and d.at_noise is False:  # what the final model misses, as a law of x and v (and u)
+        law = bench_law_of(bench, d.after)
+        say(f"the unexplained damper force {law.summary()}")
+        d = replace(d, unexplained=law)
+    return d
+
+
+def bench_law_of(bench: BenchLoop, f: ModelReport) -> BenchLaw:
+    """The non-parametric law of the force the model `f` misses (diagnose.bench_law): fitted on the training samples,
+    judged on the held-out runs (else the held-out blocks)."""
+    runs = bench.runs
+    spec = bench.spec_for(f.names)
+
+    def arrays(h: BenchHistory, mask: NDArray | None) -> dict[str, NDArray]:
+        model = spec.simulate_batch(f.names, np.asarray(f.x)[None, :], h, bench.substeps).force[0]
+        out = {"force": h.force, "model": model, "displacement": h.x, "velocity": h.v, "control": h.u}
+        return {k: np.asarray(v) if mask is None else np.asarray(v)[mask] for k, v in out.items()}
+
+    train = arrays(runs.train, runs.keep)
+    if runs.held_out:
+        held = {k: arrays(h, None) for k, h in runs.held_out.items()}
+    else:
+        held = {"held-out blocks": arrays(runs.train, ~runs.keep)}
+    return bench_law(train, held)
 
 
 def _with_penalty(problem: Problem, start: NDArray) -> Problem:

@@ -127,7 +127,7 @@ def _trace(name: str, history: BenchHistory, spec: DamperSpec, substeps: int) ->
 
 
 if TYPE_CHECKING:  # the loop is imported by `diagnose` alone: a campaign does not load it
-    from ...diagnose.loop import Diagnosis
+    from ...diagnose.result import Diagnosis
 
 
 class DamperSystem(System):

@@ -27,13 +27,15 @@ from ...diagnose.attribution import (
     chi2_statistic,
     fit_intervals,
     lsq_fit,
+    misfit_ci,
     sensor_candidates,
 )
 from ...diagnose.checks import check_runs
 from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks, masked
-from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Diagnosis, ModelReport, Subject, chi2_limit, close
+from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Subject, close
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
 from ...diagnose.residuals import ResidualAnalysis, analyse
+from ...diagnose.result import Diagnosis, ModelReport, chi2_limit
 from ...diagnose.shapes import candidate_order
 from ...diagnose.unexplained import Unexplained, estimate_unexplained
 from ...identify.source import as_paths
@@ -143,7 +145,10 @@ class CarLoop:
         residual analysis."""
         task = self.task
         t = self.augmented(task, f.names)
-        ci = fit_intervals(self.problem_of(t, self.ref, self.split.keep), f, f.J)
+        problem = self.problem_of(t, self.ref, self.split.keep)
+        ci = fit_intervals(problem, f, f.J)
+        kept = task.residual_samples if self.split.keep is None else int(self.split.keep.sum())
+        misfit = misfit_ci(problem, f) if f.J > chi2_limit(kept) else None  # the model is wrong: say how wide
         nre = bound = None
         if task.truth is not None:  # the NRE of the declared unknowns, and its bound (sd = half-width / 1.96)
             idx = [f.names.index(n) for n in task.names]
@@ -154,7 +159,8 @@ class CarLoop:
         an = per_run[0][1] if per_run else None
         chi2 = f.J if an is None else (joint_chi2([a for _, a in per_run]) if self.joint else an.chi2_per_sample)
         return ModelReport(tuple(effs), f.names, f.x, ci, f.J, chi2, vJ, nre, an, fixed=f.fixed,
-                           nre_bound_percent=bound, run_analyses=per_run if self.joint else ())  # fmt: skip
+                           nre_bound_percent=bound, run_analyses=per_run if self.joint else (),
+                           ci_misfit=misfit)  # fmt: skip
 
 
 def fit_declared(

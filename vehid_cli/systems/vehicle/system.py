@@ -33,7 +33,7 @@ from ...optimizers.base import Problem
 from ..base import Box, Log, Simulated, System
 
 if TYPE_CHECKING:  # the loop is imported by `diagnose` alone: a campaign does not load it
-    from ...diagnose.loop import Diagnosis
+    from ...diagnose.result import Diagnosis
 
 
 class VehicleSystem(System):

@@ -1,0 +1,126 @@
+"""Issue 25: model uncertainty (library terms imitating a law they do not contain) and the bench's non-parametric law.
+
+The unit checks here are fast: which strut element each library term acts on, the comparison of two explanations'
+declared unknowns, and the bench law recovered from a force with a known law outside the library (a square-root
+damper) and not found in pure noise. The loop's own cases (laws outside the library made by the independent
+simulator) are in tests/test_diagnose_independent.py (slow).
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from vehid_cli.diagnose.bench_law import bench_law, eq7
+from vehid_cli.diagnose.uncertainty import compare_explanations, crowded_element, elements_of
+
+
+def test_each_term_acts_on_its_element_of_the_strut():
+    assert elements_of("coulomb_friction") == ("velocity",)
+    assert elements_of("asymmetric_damping") == ("velocity",)
+    assert elements_of("progressive_spring") == ("deflection",)
+    assert elements_of("parameter:cf") == ("velocity",)
+    assert elements_of("parameter:kr") == ("deflection",)
+    assert elements_of("parameter:ktr") == ()
+    assert elements_of("tyre_damping") == ()
+
+
+def test_terms_crowd_on_one_element_only_when_two_or_more_share_it():
+    assert crowded_element(["coulomb_friction", "parameter:cr", "parameter:ktr"]) == (
+        "velocity", ("coulomb_friction", "parameter:cr"),
+    )  # fmt: skip
+    assert crowded_element(["asymmetric_damping", "progressive_spring"]) is None
+    assert crowded_element(["parameter:kf", "parameter:cr"]) is None
+    assert crowded_element(["hysteresis", "tyre_damping"]) is None
+
+
+def fake_unexplained(names, values, ci):
+    return SimpleNamespace(names=tuple(names), unknowns=np.asarray(values, float), dx_ci=np.asarray(ci, float))
+
+
+def test_explanations_that_disagree_beyond_their_intervals_widen_them_to_cover_both():
+    names = ("m", "Ix")
+    x, ci = np.array([1292.0, 517.0]), np.array([1.5, 5.0])
+    alt = fake_unexplained(names, [1300.0, 519.0], [3.0, 6.0])
+    mu = compare_explanations(["coulomb_friction", "parameter:cr", "parameter:cf"], names, x, ci, alt)
+    assert mu is not None and mu.imitates and mu.worst == "m"
+    np.testing.assert_allclose(mu.separation, [8.0 / np.hypot(1.5, 3.0), 2.0 / np.hypot(5.0, 6.0)])
+    np.testing.assert_allclose(mu.low, [1290.5, 512.0])
+    np.testing.assert_allclose(mu.high, [1303.0, 525.0])
+    out = mu.to_json()
+    assert out["reason"] == "library terms imitate a law they do not contain"
+    assert out["ci95_model_uncertainty"]["m"] == [1290.5, 1303.0]
+    misfit = compare_explanations(["coulomb_friction", "parameter:cr"], names, x, ci, alt, ci_misfit=[12.0, 1.0])
+    np.testing.assert_allclose(misfit.low, [1280.0, 512.0])  # the wider misfit interval of m, Ix's own
+    np.testing.assert_allclose(misfit.separation, mu.separation)  # the test itself assumes the model
+    agree = compare_explanations(["coulomb_friction", "parameter:cr"], names, x, ci, fake_unexplained(names, x, ci))
+    assert agree is not None and not agree.imitates
+    assert compare_explanations(["coulomb_friction"], names, x, ci, alt) is None  # one term: nothing to compare
+
+
+def bench_run(amplitude, frequency, law, seed, n=2000, dt=0.005, noise=5.0):
+    t = np.arange(n) * dt
+    w = 2 * np.pi * frequency
+    x, v = amplitude * np.sin(w * t), amplitude * w * np.cos(w * t)
+    model = 800.0 * v + 2000.0 * x  # what the fitted model gives
+    force = model + law(v) + noise * np.random.default_rng(seed).standard_normal(n)
+    return {"force": force, "model": model, "displacement": x, "velocity": v, "control": np.zeros(n)}
+
+
+def sqrt_law(v):
+    return 150.0 * np.sign(v) * np.sqrt(np.abs(v) / 0.1)
+
+
+def test_the_bench_law_recovers_a_square_root_damper_and_lowers_the_held_out_J():
+    train = bench_run(0.02, 1.5, sqrt_law, 1)
+    held = {"a": bench_run(0.015, 2.0, sqrt_law, 2), "b": bench_run(0.01, 1.0, sqrt_law, 3)}
+    law = bench_law(train, held)
+    assert law.significant and law.lowers_validation
+    for name, h in held.items():  # independent truth: the held-out J of the model is Eq. 7 of the law's force
+        assert law.validation_per_file[name][0] == eq7(h["force"], h["model"])
+    # the oracle: the model plus the true law leaves only the noise; the estimated law comes close to it
+    oracle = np.mean([eq7(h["force"], h["model"] + sqrt_law(h["velocity"])) for h in held.values()])
+    assert law.validation_J_non_parametric <= 3.0 * oracle, (law.validation_J_non_parametric, oracle)
+    assert law.validation_J_parametric >= 20 * oracle
+    assert law.dominant.variable == "velocity"
+
+
+def test_no_bench_law_in_pure_noise():
+    train = bench_run(0.02, 1.5, lambda v: 0.0 * v, 4)
+    law = bench_law(train, {"a": bench_run(0.015, 2.0, lambda v: 0.0 * v, 5)})
+    assert not law.significant
+
+
+def test_misfit_intervals_keep_the_residuals_correlation():
+    """The sandwich intervals of a fit whose residual is correlated (a line through AR(1) errors, rho 0.9) against the
+    exact covariance of least squares under that correlation, (X'X)^-1 X' Sigma X (X'X)^-1: within the sampling
+    error of 30 blocks, where the white-noise intervals are 4x too narrow."""
+    from vehid_cli.diagnose.attribution import Fit, fisher_ci, misfit_ci
+    from vehid_cli.optimizers.base import Problem
+
+    n, rho = 3000, 0.9
+    t = np.linspace(0.0, 1.0, n)
+    rng = np.random.default_rng(5)
+    e = np.zeros(n)
+    w = rng.standard_normal(n) * np.sqrt(1 - rho**2)
+    for i in range(1, n):
+        e[i] = rho * e[i - 1] + w[i]
+    y = 1.0 + 2.0 * t + e
+    X = np.column_stack([np.ones(n), t])
+
+    def residuals(P):
+        R = y[None, :] - P @ X.T
+        return np.mean(R**2, axis=1), R
+
+    problem = Problem(np.array([-10.0, -10.0]), np.array([10.0, 10.0]), lambda P: residuals(P)[0], residuals, 1.0,
+                      ("a", "b"))  # fmt: skip
+    x = np.linalg.lstsq(X, y, rcond=None)[0]
+    fit = Fit(("a", "b"), x, float(np.mean((y - X @ x) ** 2)), 0)
+    Sigma = rho ** np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    inv = np.linalg.inv(X.T @ X)
+    exact = 1.959963984540054 * np.sqrt(np.diag(inv @ X.T @ Sigma @ X @ inv))
+    got = misfit_ci(problem, fit)
+    white = fisher_ci(problem, x, fit.J)
+    assert np.all(white < 0.4 * exact), (white, exact)
+    assert np.all((got > 0.6 * exact) & (got < 1.5 * exact)), (got, exact)

@@ -1,0 +1,155 @@
+"""Model uncertainty: when library terms only imitate a law they do not contain.
+
+A strut whose damping grows with the square root of the velocity is outside the library, yet Coulomb friction, a
+stiffer rear damper and asymmetric damping together fit it to the noise, and bias the declared unknowns (4.8 % NRE,
+far outside their intervals). Two signs that the selected explanation is such an imitation:
+
+* several library terms on one element of the strut (IMITATION_TERMS or more on its deflection law or on its
+  velocity law: an effect counts on the variables of its own shapes, a known spring or damper on its axle's
+  deflection or velocity, `shapes.PARAMETER_AFFINITY`): the law has a shape none of them has alone;
+* the other explanation of the same residual, the non-parametric strut force F(d, v) = g(d) + h(v) per axle fitted
+  jointly with the declared unknowns (`unexplained.py`), puts the declared unknowns elsewhere: farther apart than
+  the two fits' 95 % intervals together (sqrt(ci_a² + ci_b²)).
+
+Both together make the verdict "incomplete: library terms imitate a law they do not contain", and the declared
+unknowns' intervals are widened to the union of the two explanations' intervals (the final model's taken from its
+misfit-robust sandwich where that is wider; both reported, the widened ones marked as covering the model
+uncertainty).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.result import Result
+from ..models.effects import LIBRARY
+from .shapes import PARAMETER_AFFINITY, all_shapes
+
+IMITATION_TERMS = 2  # library terms on one element of the strut from which the explanation is compared
+AXLE_SUFFIX = ("f", "r")
+
+
+def elements_of(term: str) -> tuple[str, ...]:
+    """The strut variables (deflection, velocity) a selected term acts on: an effect's own shapes' variables, a known
+    spring's or damper's (the linear shapes' parameter affinity); none for anything else (a tyre, a mass)."""
+    effect = LIBRARY.get(term)
+    if effect is not None:
+        return tuple(dict.fromkeys(s.variable for s in effect.shapes))
+    variable = {s.name: s.variable for v in all_shapes().values() for s in v}
+    out = []
+    for shape, pairs in PARAMETER_AFFINITY.items():
+        if any(term == name.format(axle=a) for name, _ in pairs for a in AXLE_SUFFIX):
+            out.append(variable[shape])
+    return tuple(out)
+
+
+def crowded_element(selected: Sequence[str]) -> tuple[str, tuple[str, ...]] | None:
+    """The strut variable with IMITATION_TERMS or more selected terms on it, and those terms (the most crowded)."""
+    by: dict[str, list[str]] = {}
+    for term in selected:
+        for variable in elements_of(term):
+            by.setdefault(variable, []).append(term)
+    if not by:
+        return None
+    variable, terms = max(by.items(), key=lambda kv: len(kv[1]))
+    return (variable, tuple(terms)) if len(terms) >= IMITATION_TERMS else None
+
+
+@dataclass(frozen=True)
+class ModelUncertainty(Result):
+    """The declared unknowns under two explanations of one residual: the selected library terms and the
+    non-parametric strut force; where they disagree beyond their intervals, intervals that cover both."""
+
+    element: str  # the strut variable the terms crowd on
+    terms: tuple[str, ...]
+    names: tuple[str, ...]  # the declared unknowns
+    selected: NDArray  # their estimates with the selected terms
+    selected_ci: NDArray  # 95 % half-widths
+    alternative: NDArray  # their estimates beside the non-parametric force
+    alternative_ci: NDArray
+    low: NDArray  # the widened 95 % interval: the union of both explanations' intervals
+    high: NDArray
+
+    @property
+    def separation(self) -> NDArray:
+        """|selected - alternative| over the two intervals together, per unknown (above 1: they disagree)."""
+        both = np.hypot(self.selected_ci, self.alternative_ci)
+        return np.abs(self.selected - self.alternative) / np.maximum(both, 1e-300)
+
+    @property
+    def imitates(self) -> bool:
+        """Do the explanations move some declared unknown beyond their intervals?"""
+        return bool(np.any(self.separation > 1.0))
+
+    @property
+    def worst(self) -> str:
+        return self.names[int(np.argmax(self.separation))]
+
+    def summary(self) -> str:
+        """One clause for the verdict."""
+        return (
+            f"{', '.join(self.terms)} on the strut {self.element} fit the residual, but the non-parametric strut "
+            f"force puts the declared unknowns elsewhere (up to {float(np.max(self.separation)):.3g}x their "
+            f"intervals apart, {self.worst}); their 95 % intervals are widened to cover both"
+        )
+
+    def to_json(self) -> dict:
+        def pairs(lo, hi):
+            return {n: [float(a), float(b)] for n, a, b in zip(self.names, lo, hi, strict=True)}
+
+        sel, alt = self.selected, self.alternative
+        return {
+            "reason": "library terms imitate a law they do not contain",
+            "imitates": self.imitates,
+            "element": f"strut {self.element}",
+            "terms": list(self.terms),
+            "selected": {"estimates": dict(zip(self.names, map(float, sel), strict=True)),
+                         "ci95": pairs(sel - self.selected_ci, sel + self.selected_ci)},
+            "non_parametric": {"estimates": dict(zip(self.names, map(float, alt), strict=True)),
+                               "ci95": pairs(alt - self.alternative_ci, alt + self.alternative_ci)},
+            "separation": dict(zip(self.names, map(float, self.separation), strict=True)),
+            "ci95_model_uncertainty": pairs(self.low, self.high),
+        }  # fmt: skip
+
+
+def compare_explanations(
+    selected: Sequence[str],
+    names: Sequence[str],
+    x: NDArray,
+    ci: NDArray,
+    unexplained,
+    ci_misfit: NDArray | None = None,
+) -> ModelUncertainty | None:
+    """The declared unknowns `names` = x (95 % half-widths ci) of the final model with the `selected` terms against
+    the non-parametric explanation (`unexplained`: an Unexplained fitted with the declared unknowns as nuisance),
+    when the selected terms crowd on one element of the strut; None when they do not, or nothing to compare. The
+    widened intervals take the final model's misfit intervals (`ci_misfit`, where the residual is above the noise)
+    where they are wider than ci."""
+    crowd = crowded_element(selected)
+    if crowd is None or unexplained is None or unexplained.unknowns is None or unexplained.dx_ci is None:
+        return None
+    idx = [list(unexplained.names).index(n) for n in names if n in unexplained.names]
+    if len(idx) != len(names):
+        return None
+    x, ci = np.asarray(x, dtype=float), np.asarray(ci, dtype=float)
+    alt, alt_ci = unexplained.unknowns[idx], unexplained.dx_ci[idx]
+    if not (np.all(np.isfinite(ci)) and np.all(np.isfinite(alt_ci))):
+        return None
+    wide = ci if ci_misfit is None else np.fmax(ci, np.asarray(ci_misfit, dtype=float))
+    low = np.minimum(x - wide, alt - alt_ci)
+    high = np.maximum(x + wide, alt + alt_ci)
+    return ModelUncertainty(crowd[0], crowd[1], tuple(names), x, ci, alt, alt_ci, low, high)
+
+
+def compare_reports(selected: Sequence[str], names: Sequence[str], after, unexplained) -> ModelUncertainty | None:
+    """compare_explanations for the declared unknowns `names` in the final model's report `after` (its names, x, ci
+    and ci_misfit)."""
+    if unexplained is None or not all(n in after.names for n in names):
+        return None
+    idx = [list(after.names).index(n) for n in names]
+    misfit = None if after.ci_misfit is None else np.asarray(after.ci_misfit)[idx]
+    return compare_explanations(selected, names, after.x[idx], after.ci[idx], unexplained, misfit)
