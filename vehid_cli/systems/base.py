@@ -131,7 +131,7 @@ class System(ABC):
         progress: ProgressHook | None = None,
     ) -> Any:  # fmt: skip
         """`vehid diagnose`: close the loop on the measured `data` (judged on the `validate` runs) -> a
-        `diagnose.loop.Diagnosis`; `progress` hears of its steps."""
+        `diagnose.result.Diagnosis`; `progress` hears of its steps."""
         raise InputError(f"vehid diagnose has no loop for a {cls.name} yet", source=config.source, key="system")
 
     @classmethod
