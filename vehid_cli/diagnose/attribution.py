@@ -208,7 +208,8 @@ def _jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
     step = np.where(x + h <= problem.upper, h, -h)
     X = np.vstack([x[None, :], x[None, :] + np.diag(step)])
     _, R = problem.residuals(X)
-    return ((R[1:] - R[0][None, :]) / step[:, None]).T, R[0]
+    with np.errstate(over="ignore", invalid="ignore"):  # a step into an unstable model: inf columns, not a warning
+        return ((R[1:] - R[0][None, :]) / step[:, None]).T, R[0]
 
 
 def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArray:
@@ -304,7 +305,8 @@ def screen_starts(problem: Problem, x0: NDArray, cand: Candidate, extra: Sequenc
         trial = P.copy()
         for i, x in enumerate(P):
             r0 = R[i * k]
-            D = np.stack([(R[i * k + 1 + m] - r0) / (rows[i * k + 1 + m][j] - x[j]) for m, j in enumerate(free)], 1)
+            with np.errstate(over="ignore", invalid="ignore"):  # an unstable trial point: inf, not a printed warning
+                D = np.stack([(R[i * k + 1 + m] - r0) / (rows[i * k + 1 + m][j] - x[j]) for m, j in enumerate(free)], 1)
             if not (np.all(np.isfinite(D)) and np.all(np.isfinite(r0))):
                 continue
             JtJ = D.T @ D
