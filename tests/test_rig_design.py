@@ -105,3 +105,19 @@ def test_a_rig_without_a_design_section_names_it():
     with pytest.raises(InputError) as exc:
         load_config(QUARTER, ["design=null"]).design_variables()
     assert exc.value.key == "design"
+
+
+def test_the_designed_chirp_band_is_no_worse_than_any_band_of_a_grid_and_the_same_for_any_job_count(tmp_path):
+    space = ["simulation.duration=6", "design.amplitude=null", "design.force_amplitude=null", "design.band=[1,25]"]
+    docs = []
+    for jobs in (1, 3):
+        doc = tmp_path / f"d{jobs}.json"
+        res = cli("design", QUARTER, *sets([*space, *SMALL]), "--jobs", jobs, "--json", doc)
+        assert res.exit_code == 0, res.output
+        docs.append(json.loads(doc.read_text()))
+    assert docs[0]["designed"] == docs[1]["designed"]  # bit-identical for any number of jobs
+    grid = [
+        nre(QUARTER, [*space, f"road.chirp.f0={a}", f"road.chirp.f1={b}"])
+        for a, b in itertools.product(np.linspace(1, 25, 7), np.linspace(1, 25, 7))
+    ]
+    assert docs[0]["designed"]["criterion"] <= min(grid) * (1 + 1e-6)
