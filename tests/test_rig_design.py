@@ -91,6 +91,8 @@ def test_the_half_car_designs_its_bump_speed_and_height(tmp_path):
         (["design.bump_height=[0.01,0.02]"], "design.bump_height"),
         (["design.criterion=worst:zz"], "design.criterion"),
         (["design.criterion=best"], "design.criterion"),
+        (["data.files=[run.csv]"], "data.files"),
+        (["road.input=measured"], "road.input"),
     ],
 )
 def test_bad_design_ranges_exit_2_naming_the_key(extra, key):

@@ -237,6 +237,8 @@ class LumpedConfig(SystemConfig):
         d, road = self.design, self.road
         if d is None:
             raise self._refused("design", "no 'design' section: give the limits of the test to plan (README)")
+        if self.data.files:
+            raise self._refused("data.files", "vehid design plans a simulated test: remove data.files")
         out = []
         if d.band is not None and road.chirp is not None:
             out += [DesignVariable("road.chirp.f0", *d.band, "Hz"), DesignVariable("road.chirp.f1", *d.band, "Hz")]
