@@ -1,4 +1,4 @@
-"""`vehid design`: plan the test that identifies the car best, within the limits of the config's design: section."""
+"""`vehid design`: plan the test that identifies the car (or a rig) best, within the config's design: limits."""
 
 from __future__ import annotations
 
@@ -58,10 +58,35 @@ def _print_design(result, output: Path | None, json_out: Path | None, plots: Pat
             out.print(f"wrote {path}")
 
 
+def _design_variables(cfg, output: Path | None, json_out: Path | None, plots: Path | None, verify: int,
+                      jobs: int | None) -> None:  # fmt: skip
+    """A test designed through the system's design variables (the rigs): the table, -o and --json."""
+    from ..campaign.executor import LocalExecutor
+    from ..core.jsonio import write_json
+    from ..design.variables import design_variables_test
+    from ..report.variable_design import design_json, notes, rich_table, write_config
+
+    for given, option in ((plots is not None, "--plots"), (verify > 0, "--verify")):
+        if given:
+            raise InputError(f"{option} is not available for a {cfg.system} design yet", source=cfg.source)
+    with interruptible(lambda: "nothing was written", warn), LocalExecutor(jobs) as pool:
+        result = design_variables_test(cfg, pool)
+    out.print(rich_table(result))
+    for note in notes(result):
+        out.print(note, markup=False)
+    if output is not None:
+        write_config(result, cfg.source, output)
+        out.print(f"wrote {output}")
+    if json_out is not None:
+        write_json(json_out, design_json(result, None if output is None else str(output)))
+        out.print(f"wrote {json_out}")
+
+
 @guarded
 def design(
     config: Annotated[
-        Path, typer.Argument(metavar="CONFIG", help="Car config with a design: section (YAML).", show_default=False)
+        Path,
+        typer.Argument(metavar="CONFIG", help="Car or rig config with a design: section (YAML).", show_default=False),
     ],
     output: Annotated[
         Optional[Path],  # noqa: UP045
@@ -90,7 +115,8 @@ def design(
     optionally N sensors among candidates are chosen to minimise the Cramér–Rao bound of the configured
     identification (design.criterion: nre, d_optimal, worst, worst:<param>). Prints the configured and the
     designed test side by side, names the unknowns the configured test cannot identify with the cheapest change
-    that fixes it; --verify N checks the prediction with campaigns of N runs.
+    that fixes it; --verify N checks the prediction with campaigns of N runs. On a quarter or half car: the road
+    chirp's band and amplitude, the force chirp's amplitude, the bump's speed and height (README).
     """
     from ..campaign.executor import LocalExecutor
     from ..design.search import design_test
@@ -98,8 +124,12 @@ def design(
 
     _check_options(output, json_out, plots, verify, jobs)
     cfg = load_config(config, set_ or ())
-    if not system_class(cfg).designable:
-        raise InputError("vehid design plans a car's test (system: vehicle)", source=str(config), key="system")
+    cls = system_class(cfg)
+    if not cls.designable:
+        raise InputError(f"vehid design has no test to plan for a {cls.name} yet", source=str(config), key="system")
+    if cls.design_variables(cfg) is not None:
+        _design_variables(cfg, output, json_out, plots, verify, jobs)
+        return
     with interruptible(lambda: "nothing was written", warn), LocalExecutor(jobs) as pool, progress_bar("design") as bar:
         progress = stage_hook(bar, {"search": "generation"})
         result = design_test(cfg, executor=pool, verify=verify, progress=progress)

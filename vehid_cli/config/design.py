@@ -9,7 +9,7 @@ objective uses) are in `vehid_cli.design.check_design`.
 from __future__ import annotations
 
 import re
-from typing import Annotated
+from typing import Annotated, NamedTuple
 
 from pydantic import Field, model_validator
 
@@ -21,6 +21,25 @@ BumpLength = within(1e-4, 100, low_open=True)  # m, as road.bump.length
 Duration = within(0, 1e5, low_open=True)  # s, as simulation.duration
 CRITERIA = ("nre", "d_optimal", "worst")  # worst: the largest bound; worst:<param>: that parameter's
 CRITERION = re.compile(r"^(nre|d_optimal|worst)(?::(\S+))?$")
+
+
+class DesignVariable(NamedTuple):
+    """One variable of a test a system designs through its config (the rigs): the config key it is written to, its
+    range, its unit, and keys the written value replaces (removed from the config)."""
+
+    key: str
+    lower: float
+    upper: float
+    unit: str
+    replaces: tuple[str, ...] = ()
+
+
+def check_criterion(criterion: str) -> None:
+    """Refuse an unknown design.criterion (keyed)."""
+    if CRITERION.match(criterion) is None:
+        raise _KeyedError(
+            "design.criterion", f"unknown criterion '{criterion}' (known: nre, d_optimal, worst, worst:<param>)"
+        )
 
 
 def _check_range(key: str, pair: tuple[float, float] | None, unit: str) -> None:
@@ -109,11 +128,7 @@ class Design(_Section):
         _check_range("design.duration", self.duration, "s")
         if self.shapes is not None and not self.shapes:
             raise _KeyedError("design.shapes", "no bump shape to choose from")
-        if CRITERION.match(self.criterion) is None:
-            raise _KeyedError(
-                "design.criterion",
-                f"unknown criterion '{self.criterion}' (known: nre, d_optimal, worst, worst:<param>)",
-            )
+        check_criterion(self.criterion)
         return self
 
     @property

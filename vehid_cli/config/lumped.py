@@ -25,6 +25,7 @@ from .common import (
     _Section,
     within,
 )
+from .design import CRITERION, DesignSearch, DesignVariable, check_criterion
 from .vehicle import SIMULATION_SAMPLES, Noise, RandomRoad
 
 Frequency = within(1e-4, 1e5)
@@ -167,6 +168,55 @@ class RigIdentify(IdentifyCommon):
     objective: Literal["wls"] = "wls"
 
 
+def _range(key: str, pair: tuple[float, float] | None, unit: str) -> None:
+    if pair is not None and not pair[0] <= pair[1]:
+        raise _KeyedError(key, f"empty range: min {pair[0]:g} {unit} is above max {pair[1]:g} {unit}")
+
+
+class RigDesign(_Section):
+    """Limits of the rig's test `vehid design` plans: the road chirp's band (its start and end frequencies, each
+    anywhere in the band: up or down sweeps) and amplitude, the actuator force chirp's amplitude, the bump's speed
+    and height. A variable without a range keeps its configured value; each needs its input configured."""
+
+    band: tuple[Frequency, Frequency] | None = Field(
+        (0.5, 30.0), description="road.chirp's f0 and f1 range [Hz] (null: the configured band)"
+    )
+    amplitude: tuple[within(0, 1e7, low_open=True), within(0, 1e7, low_open=True)] | None = Field(
+        None, description="road.chirp's amplitude range [m] (at most the rig's stroke)"
+    )
+    force_amplitude: tuple[within(0, 1e7, low_open=True), within(0, 1e7, low_open=True)] | None = Field(
+        None, description="road.force's amplitude range [N] (actuator_force: config)"
+    )
+    bump_speed_kmh: tuple[within(0, 1000, low_open=True), within(0, 1000, low_open=True)] | None = Field(
+        None, description="the speed the bump is met at [km/h]"
+    )
+    bump_height: tuple[within(-1, 1), within(-1, 1)] | None = Field(None, description="road.bump's height range [m]")
+    criterion: str = Field(
+        "nre",
+        description="nre: the bound on the per-run NRE RMS; d_optimal: the largest log det of the Fisher "
+        "information; worst: the largest per-parameter bound; worst:<param>: that parameter's bound",
+    )
+    search: DesignSearch = DesignSearch()
+
+    @model_validator(mode="after")
+    def _limits(self) -> RigDesign:
+        for key, unit in (("band", "Hz"), ("amplitude", "m"), ("force_amplitude", "N"), ("bump_speed_kmh", "km/h"),
+                          ("bump_height", "m")):  # fmt: skip
+            _range(f"design.{key}", getattr(self, key), unit)
+        check_criterion(self.criterion)
+        return self
+
+    @property
+    def criterion_kind(self) -> str:
+        """nre, d_optimal or worst."""
+        return CRITERION.match(self.criterion).group(1)
+
+    @property
+    def criterion_parameter(self) -> str | None:
+        """The parameter of worst:<param> (None: every unknown)."""
+        return CRITERION.match(self.criterion).group(2)
+
+
 class LumpedConfig(SystemConfig):
     """Base of a lumped rig's config: the subclass sets `section` (its parameters' key), `inputs` (the road columns)
     and adds that section; `values()` of the section gives the parameters."""
@@ -179,6 +229,45 @@ class LumpedConfig(SystemConfig):
     noise: Noise = Noise()
     data: RigData = RigData()
     identify: RigIdentify
+    design: RigDesign | None = None
+
+    def design_variables(self) -> tuple[DesignVariable, ...]:
+        """The variables of the test `vehid design` plans (`design:`), each with the config key it is written to;
+        keyed error when a range is given for an input the rig does not have configured."""
+        d, road = self.design, self.road
+        if d is None:
+            raise self._refused("design", "no 'design' section: give the limits of the test to plan (README)")
+        if self.data.files:
+            raise self._refused("data.files", "vehid design plans a simulated test: remove data.files")
+        out = []
+        if d.band is not None and road.chirp is not None:
+            out += [DesignVariable("road.chirp.f0", *d.band, "Hz"), DesignVariable("road.chirp.f1", *d.band, "Hz")]
+        if d.amplitude is not None:
+            if road.chirp is None:
+                raise self._refused("design.amplitude", "the road chirp's amplitude needs road.chirp")
+            out.append(DesignVariable("road.chirp.amplitude", *d.amplitude, "m"))
+        if d.force_amplitude is not None:
+            if road.actuator_force != "config":
+                raise self._refused(
+                    "design.force_amplitude", "the force chirp's amplitude needs actuator_force: config"
+                )
+            out.append(DesignVariable("road.force.amplitude", *d.force_amplitude, "N"))
+        for key, pair, target, unit in (("bump_speed_kmh", d.bump_speed_kmh, "road.speed_kmh", "km/h"),
+                                        ("bump_height", d.bump_height, "road.bump.height", "m")):  # fmt: skip
+            if pair is not None:
+                if road.bump is None:
+                    raise self._refused(f"design.{key}", "the bump's speed and height need road.bump")
+                out.append(DesignVariable(target, *pair, unit, ("road.speed",) if key == "bump_speed_kmh" else ()))
+        if road.input != "config" and any(v.key.startswith("road.chirp") or v.key.startswith("road.bump")
+                                          for v in out):  # fmt: skip
+            raise self._refused("road.input", "vehid design plans the configured road: road.input must be config")
+        if not out:
+            raise self._refused("design", "nothing to design: give a range (band, amplitude, force_amplitude, "
+                              "bump_speed_kmh, bump_height) for an input the rig has")  # fmt: skip
+        return tuple(out)
+
+    def _refused(self, key: str, message: str) -> InputError:
+        return InputError(message, source=self.source, key=key)
 
     def parameter_values(self) -> dict[str, float]:
         return getattr(self, self.section).values()

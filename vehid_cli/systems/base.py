@@ -126,6 +126,12 @@ class System(ABC):
         return {}
 
     @classmethod
+    def design_variables(cls, config: AnyConfig) -> tuple | None:
+        """The variables of the test `vehid design` plans through the config (`config.design.DesignVariable`s, each
+        written to its key), or None: the system plans its test as a `design.Plan` (the car)."""
+        return None
+
+    @classmethod
     def diagnose(
         cls, config: AnyConfig, data: tuple[str, ...], validate: tuple[str, ...], log: Log | None,
         progress: ProgressHook | None = None,

@@ -66,6 +66,7 @@ class LumpedSystem(System):
     axles: ClassVar[tuple[str, ...]] = ("f", "r")  # the car's axles the rig's struts stand for (effects' _f, _r)
     companion_names: ClassVar[dict[str, str]] = {}  # the car's parameter names -> the rig's (an effect's companions)
     excluded_effects: ClassVar[tuple[str, ...]] = ()  # library effects the rig's linear model already has
+    designable: ClassVar[bool] = True  # through the config's design variables (`design_variables`)
     kernel: bool = False  # simulate by RK4 on the compiled kernel even without effects (a diagnosis: one scheme)
     config: LumpedConfig
 
@@ -95,6 +96,11 @@ class LumpedSystem(System):
     def remedies(self, free: tuple[str, ...]) -> str:
         """What would make the free unknowns identifiable, in words."""
         return "fix one of them (remove it from identify.unknowns), or add an input or a sensor that sees it"
+
+    @classmethod
+    def design_variables(cls, config: LumpedConfig) -> tuple:
+        """The chirp's band and amplitude, the force's amplitude, the bump's speed and height (config `design:`)."""
+        return config.design_variables()
 
     # ------------------------------------------------------------------ construction
     def __init__(self, config: LumpedConfig, source: DataFiles | DataSource = None):
