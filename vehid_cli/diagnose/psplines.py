@@ -136,7 +136,8 @@ def penalised_fit(
     common = min(grid, key=lambda g: score(np.full(k, g)))
     rho = np.full(k, common)
     if k:
-        res = scipy.optimize.minimize(score, rho, method="L-BFGS-B", bounds=[LOG_LAMBDA] * k, options={"eps": 1e-4})
+        with np.errstate(invalid="ignore"):  # a step where the score is inf: inf - inf, not a printed warning
+            res = scipy.optimize.minimize(score, rho, method="L-BFGS-B", bounds=[LOG_LAMBDA] * k, options={"eps": 1e-4})
         if np.isfinite(res.fun) and score(res.x) <= score(rho):
             rho = res.x
     c, Hinv, rss, edf, _, _, edf2 = fit(rho)
