@@ -139,6 +139,13 @@ class IdentifyCommon(_Section):
         if not lo_f < hi_f:
             raise _KeyedError("identify.bounds", f"lower factor {lo_f:g} must be below upper factor {hi_f:g}")
 
+    def box(self, values: Mapping[str, float]) -> dict[str, tuple[float, float]]:
+        """Search range of each unknown [SI]: 'limits' where given, else 'bounds' x its configured value in
+        `values` (ordered low, high: a negative value turns the factors round)."""
+        lo_f, hi_f = self.bounds
+        box = {n: self.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in self.unknowns}
+        return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
+
     def check_box(
         self,
         values: Mapping[str, float],

@@ -42,7 +42,8 @@ def check_criterion(criterion: str) -> None:
         )
 
 
-def _check_range(key: str, pair: tuple[float, float] | None, unit: str) -> None:
+def check_range(key: str, pair: tuple[float, float] | None, unit: str) -> None:
+    """Refuse a design range whose min is above its max (keyed)."""
     if pair is not None and not pair[0] <= pair[1]:
         raise _KeyedError(key, f"empty range: min {pair[0]:g} {unit} is above max {pair[1]:g} {unit}")
 
@@ -105,31 +106,14 @@ class DesignSearch(_Section):
     )
 
 
-class Design(_Section):
-    """Limits of the test `vehid design` plans, and what 'best' means."""
+CRITERION_HELP = (
+    "nre: the bound on the per-run NRE RMS; d_optimal: the largest log det of the Fisher information; worst: the "
+    "largest per-parameter bound; worst:<param>: that parameter's bound"
+)
 
-    speed_kmh: tuple[Speed, Speed] | None = Field(None, description="forward speed range [km/h]")
-    heights: DesignHeights | None = None
-    shapes: tuple[BumpShape, ...] | None = Field(None, description="bump shapes to choose from")
-    length: tuple[BumpLength, BumpLength] | None = Field(None, description="bump (ramp) length range [m]")
-    duration: tuple[Duration, Duration] | None = Field(None, description="record length range [s]")
-    sensors: DesignSensors | None = None
-    criterion: str = Field(
-        "nre",
-        description="nre: the bound on the per-run NRE RMS; d_optimal: the largest log det of the Fisher "
-        "information; worst: the largest per-parameter bound; worst:<param>: that parameter's bound",
-    )
-    search: DesignSearch = DesignSearch()
 
-    @model_validator(mode="after")
-    def _limits(self) -> Design:
-        _check_range("design.speed_kmh", self.speed_kmh, "km/h")
-        _check_range("design.length", self.length, "m")
-        _check_range("design.duration", self.duration, "s")
-        if self.shapes is not None and not self.shapes:
-            raise _KeyedError("design.shapes", "no bump shape to choose from")
-        check_criterion(self.criterion)
-        return self
+class DesignGoal:
+    """What 'best' means for a design section (the car's, a rig's), mixed into it: its `criterion` field read apart."""
 
     @property
     def criterion_kind(self) -> str:
@@ -140,3 +124,26 @@ class Design(_Section):
     def criterion_parameter(self) -> str | None:
         """The parameter of worst:<param> (None: every unknown)."""
         return CRITERION.match(self.criterion).group(2)
+
+
+class Design(DesignGoal, _Section):
+    """Limits of the test `vehid design` plans, and what 'best' means."""
+
+    speed_kmh: tuple[Speed, Speed] | None = Field(None, description="forward speed range [km/h]")
+    heights: DesignHeights | None = None
+    shapes: tuple[BumpShape, ...] | None = Field(None, description="bump shapes to choose from")
+    length: tuple[BumpLength, BumpLength] | None = Field(None, description="bump (ramp) length range [m]")
+    duration: tuple[Duration, Duration] | None = Field(None, description="record length range [s]")
+    sensors: DesignSensors | None = None
+    criterion: str = Field("nre", description=CRITERION_HELP)
+    search: DesignSearch = DesignSearch()
+
+    @model_validator(mode="after")
+    def _limits(self) -> Design:
+        check_range("design.speed_kmh", self.speed_kmh, "km/h")
+        check_range("design.length", self.length, "m")
+        check_range("design.duration", self.duration, "s")
+        if self.shapes is not None and not self.shapes:
+            raise _KeyedError("design.shapes", "no bump shape to choose from")
+        check_criterion(self.criterion)
+        return self

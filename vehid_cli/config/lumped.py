@@ -25,7 +25,7 @@ from .common import (
     _Section,
     within,
 )
-from .design import CRITERION, DesignSearch, DesignVariable, check_criterion
+from .design import CRITERION_HELP, DesignGoal, DesignSearch, DesignVariable, check_criterion, check_range
 from .vehicle import SIMULATION_SAMPLES, Noise, RandomRoad
 
 Frequency = within(1e-4, 1e5)
@@ -168,12 +168,7 @@ class RigIdentify(IdentifyCommon):
     objective: Literal["wls"] = "wls"
 
 
-def _range(key: str, pair: tuple[float, float] | None, unit: str) -> None:
-    if pair is not None and not pair[0] <= pair[1]:
-        raise _KeyedError(key, f"empty range: min {pair[0]:g} {unit} is above max {pair[1]:g} {unit}")
-
-
-class RigDesign(_Section):
+class RigDesign(DesignGoal, _Section):
     """Limits of the rig's test `vehid design` plans: the road chirp's band (its start and end frequencies, each
     anywhere in the band: up or down sweeps) and amplitude, the actuator force chirp's amplitude, the bump's speed
     and height. A variable without a range keeps its configured value; each needs its input configured."""
@@ -191,30 +186,16 @@ class RigDesign(_Section):
         None, description="the speed the bump is met at [km/h]"
     )
     bump_height: tuple[within(-1, 1), within(-1, 1)] | None = Field(None, description="road.bump's height range [m]")
-    criterion: str = Field(
-        "nre",
-        description="nre: the bound on the per-run NRE RMS; d_optimal: the largest log det of the Fisher "
-        "information; worst: the largest per-parameter bound; worst:<param>: that parameter's bound",
-    )
+    criterion: str = Field("nre", description=CRITERION_HELP)
     search: DesignSearch = DesignSearch()
 
     @model_validator(mode="after")
     def _limits(self) -> RigDesign:
         for key, unit in (("band", "Hz"), ("amplitude", "m"), ("force_amplitude", "N"), ("bump_speed_kmh", "km/h"),
                           ("bump_height", "m")):  # fmt: skip
-            _range(f"design.{key}", getattr(self, key), unit)
+            check_range(f"design.{key}", getattr(self, key), unit)
         check_criterion(self.criterion)
         return self
-
-    @property
-    def criterion_kind(self) -> str:
-        """nre, d_optimal or worst."""
-        return CRITERION.match(self.criterion).group(1)
-
-    @property
-    def criterion_parameter(self) -> str | None:
-        """The parameter of worst:<param> (None: every unknown)."""
-        return CRITERION.match(self.criterion).group(2)
 
 
 class LumpedConfig(SystemConfig):
@@ -322,10 +303,7 @@ class LumpedConfig(SystemConfig):
 
     def search_box(self) -> dict[str, tuple[float, float]]:
         """Search range of each unknown [SI]: 'limits' where given, else 'bounds' x configured value."""
-        values, ident = self.parameter_values(), self.identify
-        lo_f, hi_f = ident.bounds
-        box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
-        return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
+        return self.identify.box(self.parameter_values())
 
     def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
         """`<section>.<name>` for the rig's parameters; an effect's parameter (`vehid diagnose` fitted it to the

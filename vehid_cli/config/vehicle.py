@@ -514,10 +514,7 @@ class Config(SystemConfig):
 
     def search_box(self) -> dict[str, tuple[float, float]]:
         """Search range of each unknown [SI units]: 'limits' where given, else 'bounds' x configured value."""
-        values, ident = self.parameter_values(), self.identify
-        lo_f, hi_f = ident.bounds
-        box = {n: ident.limits.get(n, (lo_f * values[n], hi_f * values[n])) for n in ident.unknowns}
-        return {n: (min(lo, hi), max(lo, hi)) for n, (lo, hi) in box.items()}
+        return self.identify.box(self.parameter_values())
 
     def edits_for(self, values: Mapping[str, float]) -> list[ConfigEdit]:
         """`vehicle.<name>` for the car's parameters, `vehicle.effects.<effect>.<param>` for an effect's (an effect
