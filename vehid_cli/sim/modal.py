@@ -237,32 +237,13 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray |
     """
     batch, A, Bs, G, q0, u = _flatten(mats, road, points)
     P, n = A.shape[0], u.shape[1]
-    lam, V = np.linalg.eig(A)  # (P, 14), (P, 14, 14); LAPACK returns conjugate pairs exactly conjugate
-    lam, V = lam.astype(complex), V.astype(complex)
-    W = np.linalg.inv(V)
-    cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(W).sum(axis=-2).max(axis=-1)
-    good = np.isfinite(cond) & (cond < COND_MAX)
-
-    # Keep Im(lam) > 0 (weight 2: its conjugate adds the same real part) and real modes (weight 1).
-    keep = lam.imag >= 0
-    weight = np.where(lam.imag > 0, 2.0, 1.0) * keep
-    m = int(keep.sum(axis=-1).max())
-    idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]  # kept modes first; padding has weight 0
-    lam_k = np.take_along_axis(lam, idx, axis=-1)
-    w_k = np.take_along_axis(weight, idx, axis=-1)
-    V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)  # (P, 14, m)
-    W_k = np.take_along_axis(W, idx[:, :, None], axis=-2)  # (P, m, 14)
-
+    lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, 14, m), (P, m, 14), (P,)
+    m = lam_k.shape[1]
     bm = W_k @ Bs  # (P, m, 4): modal input matrix
     z0 = (W_k[:, :, :N_DOF] @ q0[:, :, None])[..., 0]  # (P, m)
-    x = lam_k * dt
-    phi1, phi2 = _phi12(x)
-    g1 = (dt * phi1)[..., None] * bm
-    g2 = (dt * phi2)[..., None] * bm
-    a = np.ascontiguousarray(np.moveaxis(g1 - g2, -1, 0).reshape(N_CORNERS, P * m))
-    b = np.ascontiguousarray(np.moveaxis(g2, -1, 0).reshape(N_CORNERS, P * m))
+    decay, a, b = _foh_gains(lam_k, bm, dt)
     out = np.empty((n, P, 2 * m + N_CORNERS))
-    _modal_recursion(np.exp(x).reshape(P * m), a, b, z0.reshape(P * m), u, out)
+    _modal_recursion(decay, a, b, z0.reshape(P * m), u, out)
 
     # Output j-th mode column: w_j [V_j, lam_j V_j[7:], G V_j[:3], G lam_j V_j[7:10]]; Re(c z) = Re c Re z - Im c Im z.
     qdd_modes = lam_k[:, None, :] * V_k[:, N_DOF:, :]
@@ -275,6 +256,40 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray |
         ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[bad])
         Y[bad] = _statespace_outputs(A[bad], Bs[bad], G[bad], q0[bad], ub, dt)
     return _split(Y, batch)
+
+
+def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """The modes of each state matrix A (P, ns, ns) the recursion runs on: eigenvalues with Im > 0 (weight 2: the
+    conjugate adds the same real part) and real ones (weight 1), first and padded to one count m with weight 0;
+    their eigenvalues (P, m), weights (P, m), eigenvectors (P, ns, m), rows of the inverse (P, m, ns), and whether
+    the eigenvector matrix is well conditioned (P,). LAPACK returns conjugate pairs exactly conjugate."""
+    lam, V = np.linalg.eig(A)
+    lam, V = lam.astype(complex), V.astype(complex)
+    W = np.linalg.inv(V)
+    cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(W).sum(axis=-2).max(axis=-1)
+    good = np.isfinite(cond) & (cond < COND_MAX)
+    keep = lam.imag >= 0
+    weight = np.where(lam.imag > 0, 2.0, 1.0) * keep
+    m = int(keep.sum(axis=-1).max())
+    idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]  # kept modes first; padding has weight 0
+    lam_k = np.take_along_axis(lam, idx, axis=-1)
+    w_k = np.take_along_axis(weight, idx, axis=-1)
+    V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)
+    W_k = np.take_along_axis(W, idx[:, :, None], axis=-2)
+    return lam_k, w_k, V_k, W_k, good
+
+
+def _foh_gains(lam_k: NDArray, bm: NDArray, dt: float) -> tuple[NDArray, NDArray, NDArray]:
+    """The modal recursion's per-step decay exp(lam dt) (P m,) and its first-order-hold gains on this sample's and
+    the next sample's input, (inputs, P m) each, from the modal input matrix bm (P, m, inputs)."""
+    P, m, inputs = bm.shape
+    x = lam_k * dt
+    phi1, phi2 = _phi12(x)
+    g1 = (dt * phi1)[..., None] * bm
+    g2 = (dt * phi2)[..., None] * bm
+    a = np.ascontiguousarray(np.moveaxis(g1 - g2, -1, 0).reshape(inputs, P * m))
+    b = np.ascontiguousarray(np.moveaxis(g2, -1, 0).reshape(inputs, P * m))
+    return np.exp(x).reshape(P * m), a, b
 
 
 MAX_MODAL_INPUTS = 4  # the modal recursion's inputs per step (fewer are padded with zeros: a zero adds nothing)
@@ -293,32 +308,16 @@ def linear_foh(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: 
     drive = (u3 @ np.swapaxes(Dy, -1, -2)) if Dy.size else 0.0  # (P or 1, n, ny) feedthrough
     if nu > MAX_MODAL_INPUTS:
         return _statespace_linear(A, Bs, s0, u3, dt, Cy) + drive
-    lam, V = np.linalg.eig(A)
-    lam, V = lam.astype(complex), V.astype(complex)
-    W = np.linalg.inv(V)
-    cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(W).sum(axis=-2).max(axis=-1)
-    good = np.isfinite(cond) & (cond < COND_MAX)
-    keep = lam.imag >= 0
-    weight = np.where(lam.imag > 0, 2.0, 1.0) * keep
-    m = int(keep.sum(axis=-1).max())
-    idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]
-    lam_k = np.take_along_axis(lam, idx, axis=-1)
-    w_k = np.take_along_axis(weight, idx, axis=-1)
-    V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)  # (P, ns, m)
-    W_k = np.take_along_axis(W, idx[:, :, None], axis=-2)  # (P, m, ns)
+    lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, ns, m), (P, m, ns), (P,)
+    m = lam_k.shape[1]
     bm = np.zeros((P, m, MAX_MODAL_INPUTS), dtype=complex)
     bm[..., :nu] = W_k @ Bs
     z0 = (W_k @ s0[:, :, None])[..., 0]
-    x = lam_k * dt
-    phi1, phi2 = _phi12(x)
-    g1 = (dt * phi1)[..., None] * bm
-    g2 = (dt * phi2)[..., None] * bm
-    a = np.ascontiguousarray(np.moveaxis(g1 - g2, -1, 0).reshape(MAX_MODAL_INPUTS, P * m))
-    b = np.ascontiguousarray(np.moveaxis(g2, -1, 0).reshape(MAX_MODAL_INPUTS, P * m))
+    decay, a, b = _foh_gains(lam_k, bm, dt)
     padded = np.zeros(u3.shape[:2] + (MAX_MODAL_INPUTS,))
     padded[..., :nu] = u3
     out = np.empty((n, P, 2 * m + MAX_MODAL_INPUTS))
-    _modal_recursion(np.exp(x).reshape(P * m), a, b, z0.reshape(P * m), padded, out)
+    _modal_recursion(decay, a, b, z0.reshape(P * m), padded, out)
     ct = np.swapaxes((Cy @ V_k) * w_k[:, None, :], -1, -2)  # (P, m, ny)
     proj = np.concatenate([ct.real, -ct.imag], axis=1)
     Y = np.matmul(out.transpose(1, 0, 2)[..., : 2 * m], proj)
