@@ -204,19 +204,220 @@ def force_map_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     _finish(d[0], p, f_out, force)
 
 
+# ------------------------------------------------------------------------------------------ lane laws
+# The same laws over a whole batch of candidates at once (``lanes``): ``law(d, z, par, f, zd)`` with the bench's
+# channels d (n_u, P), the states z and their rates zd (n_z, P), the rows par (n_par, P, transposed) and the force
+# f (P,). The candidates are independent, so the compiled loop over them (innermost, ``sim.prescribed.lanes_loop``)
+# runs several at a time (SIMD where the law has no table look-up, overlapped latency chains where it has) instead
+# of one candidate's serial chain of RK4 stages. Each is the scalar law above, operation for operation: the forces
+# agree bit for bit (tests/test_damper_lanes.py), the scalar laws stay as the reference path.
+
+
+@numba.njit(error_model="numpy", inline="always")
+def viscous_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+    """``viscous_law`` over the batch."""
+    for p in range(f.shape[0]):
+        f[p] = par[P0, p] * d[1, p] + par[0, p] * (d[0, p] - par[1, p])
+
+
+@numba.njit(error_model="numpy", inline="always")
+def gas_spring_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+    """``gas_spring_law`` over the batch."""
+    for p in range(f.shape[0]):
+        f[p] = 0.0 + par[0, p] * (d[0, p] - par[1, p])
+
+
+@numba.njit(error_model="numpy", inline="always")
+def bingham_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+    """``bingham_law`` over the batch."""
+    for p in range(f.shape[0]):
+        vb = d[1, p]
+        force = par[P0, p] * vb + par[P0 + 1, p] * math.tanh(vb / par[P0 + 2, p])
+        f[p] = force + par[0, p] * (d[0, p] - par[1, p])
+
+
+@numba.njit(error_model="numpy", inline="always")
+def bouc_wen_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+    """``bouc_wen_law`` over the batch: states z[0] = y, z[1] = z."""
+    q = P0
+    for p in range(f.shape[0]):
+        xb, vb = d[0, p], d[1, p]
+        force, ydot, zdot = _bouc_wen(
+            xb, vb, z[0, p], z[1, p], par[q, p], par[q + 1, p], par[q + 2, p], par[q + 3, p], par[q + 4, p],
+            par[q + 5, p], par[q + 6, p],
+        )  # fmt: skip
+        zd[0, p] = ydot
+        zd[1, p] = zdot
+        f[p] = force + par[0, p] * (xb - par[1, p])
+
+
+# The control models' scratch (w, kept from call to call: RK4's stages 2 and 3, and its stage 4 and the output,
+# see the same inputs): the switch of Eq. 5 and the ratio v / v_switch it was computed at, the input the damper sees
+# (u), where u falls in the table's nodes and at which u that was found, and (the force map) the velocity's interval.
+W_S, W_X, W_U, W_J, W_T, W_AT, W_JV, W_TV, W_V = range(9)
+N_SCRATCH = 9
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _switches(d, par, w):  # pragma: no cover - compiled
+    """w[W_S] = Eq. 5's switch of every candidate, s = 0.5 tanh(v / v_switch) + 0.5 as ``_switch`` computes it; the
+    tanh only where the ratio v / v_switch differs from the one it was last computed at for this candidate or for
+    the one before (the candidates of a batch mostly share the motion and v_switch): same numbers, a fraction of
+    the tanh calls, the most expensive step of the control models."""
+    for p in range(w.shape[1]):
+        x = d[1, p] / par[7, p]
+        if x == w[W_X, p]:
+            continue
+        if p > 0 and x == w[W_X, p - 1]:
+            w[W_S, p] = w[W_S, p - 1]
+        else:
+            w[W_S, p] = 0.5 * math.tanh(x) + 0.5
+        w[W_X, p] = x
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _controls(d, z, par, zd, w, i):  # pragma: no cover - compiled
+    """``_control`` of every candidate (the switch in w[W_S]): the rate of z[i] = u_f, the input it sees in w[W_U]."""
+    for p in range(w.shape[1]):
+        s, r = w[W_S, p], d[3, p]
+        T = r * ((1 - s) * par[3, p] + s * par[5, p]) + (1 - r) * ((1 - s) * par[4, p] + s * par[6, p])
+        if T > 0.0:
+            zd[i, p] = (d[2, p] - z[i, p]) / T
+            w[W_U, p] = z[i, p]
+        else:
+            zd[i, p] = 0.0
+            w[W_U, p] = d[2, p]
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _cell(par, first, m, u, p):  # pragma: no cover - compiled
+    """Where u falls in the m nodes par[first : first + m, p], found as ``_table_1d`` finds it but once for every
+    table over the same nodes: (i, -1) for the value at node i itself (u at or outside the end nodes, or m = 1),
+    else the interval j and the fraction t in [0, 1) of it (NaN for a NaN u)."""
+    if m == 1 or u <= par[first, p]:
+        return 0, -1.0
+    if u >= par[first + m - 1, p]:
+        return m - 1, -1.0
+    j = 0
+    while par[first + j + 1, p] < u:
+        j += 1
+    return j, (u - par[first + j, p]) / (par[first + j + 1, p] - par[first + j, p])
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _cell_of_u(par, first, m, w, p):  # pragma: no cover - compiled
+    """``_cell`` of candidate p's input w[W_U], looked up again only when u changed (a held command, a settled lag)."""
+    u = w[W_U, p]
+    if u != w[W_AT, p]:
+        j, t = _cell(par, first, m, u, p)
+        w[W_J, p], w[W_T, p], w[W_AT, p] = j, t, u
+    return int(w[W_J, p]), w[W_T, p]
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _at(par, first, j, t, p):  # pragma: no cover - compiled
+    """``_table_1d``'s value of the table par[first : first + m, p] in the cell (j, t) that ``_cell`` found."""
+    if t < 0.0:
+        return par[first + j, p]
+    return (1 - t) * par[first + j, p] + t * par[first + j + 1, p]
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _blend(par, comp, reb, m, i, j, t, s, p):  # pragma: no cover - compiled
+    """Parameter i of the Bouc-Wen set at the cell (j, t) of u, compression and rebound blended by s (Eq. 4-5)."""
+    return s * _at(par, reb + i * m, j, t, p) + (1 - s) * _at(par, comp + i * m, j, t, p)
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _blend1(par, comp, reb, i, s, p):  # pragma: no cover - compiled
+    """``_blend`` of one-node tables (m = 1: the parameters do not depend on u)."""
+    return s * par[reb + i, p] + (1 - s) * par[comp + i, p]
+
+
+@numba.njit(error_model="numpy", inline="always")
+def generalized_bouc_wen_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+    """``generalized_bouc_wen_law`` over the batch (every row has the same table size m; scratch w of N_SCRATCH
+    rows). One node (m = 1): no look-up, the loop runs several candidates at once; more: the cell of u in the nodes
+    found once for the fourteen tables."""
+    q = P0
+    m = int(par[q, 0])
+    comp = q + 1 + m
+    reb = comp + 7 * m
+    _switches(d, par, w)
+    _controls(d, z, par, zd, w, 2)
+    if m == 1:
+        for p in range(f.shape[0]):
+            xb, vb, s = d[0, p], d[1, p], w[W_S, p]
+            force, ydot, zdot = _bouc_wen(
+                xb, vb, z[0, p], z[1, p], _blend1(par, comp, reb, 0, s, p), _blend1(par, comp, reb, 1, s, p),
+                _blend1(par, comp, reb, 2, s, p), _blend1(par, comp, reb, 3, s, p), _blend1(par, comp, reb, 4, s, p),
+                _blend1(par, comp, reb, 5, s, p), _blend1(par, comp, reb, 6, s, p),
+            )  # fmt: skip
+            zd[0, p] = ydot
+            zd[1, p] = zdot
+            f[p] = force + par[0, p] * (xb - par[1, p])
+        return
+    for p in range(f.shape[0]):
+        xb, vb, s = d[0, p], d[1, p], w[W_S, p]
+        j, t = _cell_of_u(par, q + 1, m, w, p)
+        force, ydot, zdot = _bouc_wen(
+            xb, vb, z[0, p], z[1, p], _blend(par, comp, reb, m, 0, j, t, s, p),
+            _blend(par, comp, reb, m, 1, j, t, s, p), _blend(par, comp, reb, m, 2, j, t, s, p),
+            _blend(par, comp, reb, m, 3, j, t, s, p), _blend(par, comp, reb, m, 4, j, t, s, p),
+            _blend(par, comp, reb, m, 5, j, t, s, p), _blend(par, comp, reb, m, 6, j, t, s, p),
+        )  # fmt: skip
+        zd[0, p] = ydot
+        zd[1, p] = zdot
+        f[p] = force + par[0, p] * (xb - par[1, p])
+
+
+@numba.njit(error_model="numpy", inline="always")
+def force_map_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+    """``force_map_law`` over the batch (every row has the same nv x nu table; scratch w of N_SCRATCH rows): the
+    velocity's interval (looked up again only when v changed), then the cell of u once for the interval's two rows."""
+    q = P0
+    nv, nu = int(par[q, 0]), int(par[q + 1, 0])
+    vn, un, F = q + 2, q + 2 + nv, q + 2 + nv + nu
+    _switches(d, par, w)
+    _controls(d, z, par, zd, w, 0)
+    for p in range(f.shape[0]):
+        vb = d[1, p]
+        if vb != w[W_V, p]:
+            j = 0
+            if vb >= par[vn + nv - 1, p]:
+                j = nv - 2
+            elif vb > par[vn, p]:
+                while par[vn + j + 1, p] < vb:
+                    j += 1
+            w[W_JV, p], w[W_V, p] = j, vb
+            w[W_TV, p] = (vb - par[vn + j, p]) / (par[vn + j + 1, p] - par[vn + j, p])
+        j, t = int(w[W_JV, p]), w[W_TV, p]
+        ju, tu = _cell_of_u(par, un, nu, w, p)
+        lo = _at(par, F + j * nu, ju, tu, p)
+        hi = _at(par, F + (j + 1) * nu, ju, tu, p)
+        f[p] = (1 - t) * lo + t * hi + par[0, p] * (d[0, p] - par[1, p])
+
+
 # ------------------------------------------------------------------------------------------ model catalogue
 
 
 @dataclass(frozen=True)
 class DamperModel:
-    """A damper model: its force law, its parameter names (after the front end) and internal states."""
+    """A damper model: its force law (per candidate, the reference path, and over a batch: ``lanes``), its
+    parameter names (after the front end) and internal states."""
 
     name: str
-    law: object  # numba dispatcher
+    law: object  # numba dispatcher: law(d, dd, z, params, f_out, zd_out), one candidate
+    lanes: object  # numba dispatcher: lanes(d, z, par, f, zd, w), the same law over a batch (inlined by the loop)
     parameters: tuple[str, ...]
     n_states: int  # internal states: Bouc-Wen's y and z first, then u_f when the model has a control input
     uses_control: bool
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)  # physical limits
+
+    @property
+    def scratch(self) -> int:
+        """Rows of scratch its batch law keeps from call to call (the control models' caches)."""
+        return N_SCRATCH if self.uses_control else 0
 
     def layout(self, table_shape: tuple[int, ...] = ()) -> tuple[str, ...]:
         """All parameter names of a row: the front end, then the model's own (tables expanded)."""
@@ -249,11 +450,12 @@ class DamperModel:
 MODELS = {
     m.name: m
     for m in (
-        DamperModel("gas_spring", gas_spring_law, (), 0, False),
-        DamperModel("viscous", viscous_law, ("c0",), 0, False, {"c0": (0.0, np.inf)}),
+        DamperModel("gas_spring", gas_spring_law, gas_spring_lanes, (), 0, False),
+        DamperModel("viscous", viscous_law, viscous_lanes, ("c0",), 0, False, {"c0": (0.0, np.inf)}),
         DamperModel(
             "bingham",
             bingham_law,
+            bingham_lanes,
             ("c0", "fc", "v_eps"),
             0,
             False,
@@ -262,13 +464,16 @@ MODELS = {
         DamperModel(
             "bouc_wen",
             bouc_wen_law,
+            bouc_wen_lanes,
             BW_SET,
             2,
             False,
             {"c0": (0.0, np.inf), "k0": (0.0, np.inf), "c1": (1e-9, np.inf), "delta": (0.0, np.inf)},
         ),
-        DamperModel("generalized_bouc_wen", generalized_bouc_wen_law, (), 2 + CONTROL_STATE, True),
-        DamperModel("force_map", force_map_law, (), CONTROL_STATE, True),
+        DamperModel(
+            "generalized_bouc_wen", generalized_bouc_wen_law, generalized_bouc_wen_lanes, (), 2 + CONTROL_STATE, True
+        ),
+        DamperModel("force_map", force_map_law, force_map_lanes, (), CONTROL_STATE, True),
     )  # fmt: skip
 }
 

@@ -1,4 +1,5 @@
-"""The damper on a virtual test bench: the bench adapter of the compiled kernel (``prescribed.integrate_bench``).
+"""The damper on a virtual test bench: the bench adapter of the compiled kernel (``prescribed.integrate_lanes``: every
+candidate of a batch at once through the model's batch law; ``integrate_bench``, the scalar law, is the reference).
 
 The motion x, v is prescribed; models with a control input get the command delayed per candidate
 (``delayed_controls``) and a backlash candidate sees the piston's motion through the play. The kernel
@@ -9,11 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from ..models.damper import N_FRONT, DamperModel, play
-from .prescribed import integrate_bench
+from .prescribed import integrate_bench, integrate_lanes
 
 
 def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray) -> NDArray:
@@ -37,22 +39,45 @@ def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray) -> NDA
     out[:, :, 0], out[:, :, 1] = u[0], 1.0  # before any change takes effect: the initial command
     if moved.size == 0:
         return out
-    for p in range(P):
-        tau = delays[p, which]
-        if moved.size > n // 10:  # a continuous command: shift it by its local delay
+    if moved.size > n // 10:  # a continuous command: shift it by its local delay
+        for p in range(P):
+            tau = delays[p, which]
             out[p, :, 0] = np.interp(t - tau, t, u)
-            out[p, :, 1] = np.where(change > 0, 1.0, np.where(change < 0, 0.0, np.nan))
-            out[p, :, 1] = _hold(out[p, :, 1])
-            continue
-        effective = np.maximum.accumulate(t[moved] - dt + tau[moved])  # the ramp of change i spans one step
-        level = np.full(n, u[0])
-        for e, jump in zip(effective, change[moved], strict=True):
-            level += jump * np.clip((t - e) / dt, 0.0, 1.0)
-        out[p, :, 0] = level
-        j = np.searchsorted(effective + dt, t, side="right") - 1  # the latest change completed by t
-        hit = j >= 0
-        out[p, hit, 1] = rising[moved[j[hit]]]
+            out[p, :, 1] = _hold(np.where(change > 0, 1.0, np.where(change < 0, 0.0, np.nan)))
+        return out
+    if np.all(delays == delays[:1]):  # the same delays for every candidate (they are not fitted): ramped once
+        _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays[:1], dt, out)
+        out[1:] = out[0]
+        return out
+    _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays, dt, out)
     return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _ramps(t, at, jumps, rising, which, delays, dt, out):  # pragma: no cover - compiled
+    """Each candidate p's delayed command out[p, :, 0] (the initial command, already there, plus each jump as a
+    one-sample ramp from its effective time at + delay - dt, never before an earlier change's: in order) and the
+    direction of the latest change completed by each sample out[p, :, 1] (left as it is before the first): as
+    ``level += jump * clip((t - e) / dt, 0, 1)`` and ``searchsorted(effective + dt, t, 'right') - 1`` compute
+    them, number for number."""
+    n, m = t.shape[0], at.shape[0]
+    effective = np.empty(m)
+    for p in range(delays.shape[0]):
+        for i in range(m):
+            effective[i] = at[i] - dt + delays[p, which[i]]
+            if i > 0:
+                effective[i] = max(effective[i], effective[i - 1])  # np.maximum.accumulate
+        for i in range(m):
+            e, jump = effective[i], jumps[i]
+            for k in range(n):
+                if t[k] > e:  # before e the ramp adds jump * 0: nothing (a -0.0 level aside)
+                    out[p, k, 0] += jump * min((t[k] - e) / dt, 1.0)
+        i = -1
+        for k in range(n):  # effective (and t) never decrease: walk them together
+            while i + 1 < m and effective[i + 1] + dt <= t[k]:
+                i += 1
+            if i >= 0:
+                out[p, k, 1] = rising[i]
 
 
 def _hold(flags: NDArray) -> NDArray:
@@ -67,17 +92,18 @@ def _hold(flags: NDArray) -> NDArray:
     return out
 
 
-def refine(t: NDArray, road: NDArray, substeps: int) -> NDArray:
-    """Bench channels (P, n, k) on the grid t, resampled at dt / substeps, linear between the samples."""
+def refine(t: NDArray, road: NDArray, substeps: int, time_axis: int = 1) -> NDArray:
+    """Bench channels on the grid t (its axis `time_axis`: (P, n, k) by default), resampled at dt / substeps, linear
+    between the samples."""
     if substeps <= 1:
         return road
-    P, n, k = road.shape
-    fine = np.linspace(t[0], t[-1], (n - 1) * substeps + 1)
-    out = np.empty((P, fine.size, k))
-    for r in range(P):
-        for c in range(k):
-            out[r, :, c] = np.interp(fine, t, road[r, :, c])
-    return out
+    a = np.moveaxis(road, time_axis, 0)
+    flat = a.reshape(a.shape[0], -1)
+    fine = np.linspace(t[0], t[-1], (t.size - 1) * substeps + 1)
+    out = np.empty((fine.size, flat.shape[1]))
+    for c in range(flat.shape[1]):
+        out[:, c] = np.interp(fine, t, flat[:, c])
+    return np.moveaxis(out.reshape((fine.size, *a.shape[1:])), 0, time_axis)
 
 
 @dataclass(frozen=True)
@@ -98,14 +124,51 @@ def simulate_damper(
     u: NDArray | None = None,
     substeps: int = 1,
     method: str = "rk4",
+    reference: bool = False,
 ) -> BenchForces:
     """Force of P candidates (rows (P, n_par) in `model.layout` order) on the bench history x, v, u.
 
     The kernel integrates at dt / substeps with every input linear between samples; the force is
     returned at the bench's samples. A candidate whose internal states blow up gets NaN forces and
-    stable = False.
+    stable = False. The model's batch law runs every candidate at once (``prescribed.integrate_lanes``);
+    `reference` runs its scalar law one candidate after the other instead (``integrate_bench``: the same
+    forces bit for bit, several times slower; for tests and the benchmark's anchor).
     """
     rows = np.atleast_2d(np.asarray(rows, dtype=float))
+    if reference:
+        return _simulate_reference(model, rows, t, x, v, u, substeps)
+    P, n = rows.shape[0], t.size
+    dt = float(t[1] - t[0])
+    u = np.zeros(n) if u is None else np.asarray(u, dtype=float)
+    road = np.empty((n, 4 if model.uses_control else 2, P))  # the candidates last: the kernel's lanes
+    road[:, 0, :], road[:, 1, :] = np.asarray(x, dtype=float)[:, None], np.asarray(v, dtype=float)[:, None]
+    for r in np.flatnonzero(rows[:, 2] > 0):  # backlash: the piston's motion through the play
+        road[:, 0, r], road[:, 1, r] = play(
+            np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float), rows[r, 2]
+        )
+    if model.uses_control:
+        road[:, 2:, :] = delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4]).transpose(1, 2, 0)
+    road = refine(t, road, substeps, time_axis=0)  # finer integration of the same inputs
+    z0 = np.zeros((model.n_states, P))
+    if model.uses_control:
+        z0[-1] = u[0]  # the lagged input starts at the command
+    if model.name in ("bouc_wen", "generalized_bouc_wen"):
+        z0[0] = x[0]  # Bouc-Wen internal displacement starts where the piston is: no initial spring force
+    with np.errstate(all="ignore"):
+        forces = integrate_lanes(model.lanes, rows, road, dt / substeps, z0, model.scratch)
+    return _checked(t, forces[::substeps].T)
+
+
+def _checked(t: NDArray, force: NDArray) -> BenchForces:
+    """The forces (P, n) with every candidate that did not stay finite NaN throughout."""
+    stable = np.all(np.isfinite(force), axis=1)
+    return BenchForces(t=t, force=np.where(stable[:, None], force, np.nan), stable=stable)
+
+
+def _simulate_reference(
+    model: DamperModel, rows: NDArray, t: NDArray, x: NDArray, v: NDArray, u: NDArray | None, substeps: int
+) -> BenchForces:
+    """``simulate_damper`` through the model's scalar law, one candidate after the other (the reference path)."""
     P, n = rows.shape[0], t.size
     dt = float(t[1] - t[0])
     u = np.zeros(n) if u is None else np.asarray(u, dtype=float)
@@ -126,7 +189,4 @@ def simulate_damper(
         z0[:, 0] = x[0]  # Bouc-Wen internal displacement starts where the piston is: no initial spring force
     with np.errstate(all="ignore"):
         forces = integrate_bench(model.law, rows, road, dt / substeps, z0)
-    force = forces[:, ::substeps, 0]
-    stable = np.all(np.isfinite(force), axis=1)
-    force = np.where(stable[:, None], force, np.nan)
-    return BenchForces(t=t, force=force, stable=stable)
+    return _checked(t, forces[:, ::substeps, 0])

@@ -47,16 +47,17 @@ class _KeyedCache(FunctionCache):
         return (sig, codegen.magic_tuple(), (hashlib.sha256(self._py_func.__code__.co_code).hexdigest(), self._key))
 
 
-def _cache_key(force, error_model: str, *sizes: int) -> str | None:
-    """A digest of what the compiled loop for `force` depends on: this file, the source file that defines the
-    law (its helpers too), what a composed law says it is made of (its `cache_salt`: the sources of the pieces it
-    was composed from), the error model and the sizes; None when the law's source cannot be read (then the loop is
-    compiled afresh in each process)."""
+def _cache_key(force, error_model: str, *sizes: int, loop_files: tuple[str, ...] = ()) -> str | None:
+    """A digest of what the compiled loop for `force` depends on: this file (or the loop's own files,
+    `loop_files`), the source file that defines the law (its helpers too), what a composed law says it is made of
+    (its `cache_salt`: the sources of the pieces it was composed from), the error model and the sizes; None when the
+    law's source cannot be read (then the loop is compiled afresh in each process)."""
     try:
         law_file = inspect.getsourcefile(force.py_func)
         if not law_file:
             return None
-        own = [Path(__file__).read_bytes(), Path(rates_module.__file__).read_bytes()]  # the loop and its rates
+        files = loop_files or (__file__, rates_module.__file__)  # the loop and its rates
+        own = [Path(f).read_bytes() for f in files]
         parts = [*own, Path(law_file).read_bytes(), force.py_func.__qualname__.encode()]
     except (AttributeError, OSError, TypeError):
         return None
