@@ -54,8 +54,16 @@ UNITS = {
 
 @numba.njit(error_model="numpy", inline="always")
 def _switch(v, eps):  # pragma: no cover - compiled
-    """Eq. 5: 0 in compression, 1 in rebound, smooth over |v| ~ eps."""
-    return 0.5 * math.tanh(v / eps) + 0.5
+    """Eq. 5: 0 in compression, 1 in rebound, smooth over |v| ~ eps: s = 0.5 tanh(v / eps) + 0.5, computed as the
+    logistic 1 / (1 + exp(-2 v / eps)) (the same function; an exp costs a third of a tanh, and the control models
+    evaluate it at every RK4 stage of every candidate)."""
+    return _logistic(v / eps)
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _logistic(x):  # pragma: no cover - compiled
+    """0.5 tanh(x) + 0.5 = 1 / (1 + exp(-2 x)) (within 2.3e-16)."""
+    return 1.0 / (1.0 + math.exp(-2.0 * x))
 
 
 @numba.njit(cache=True)
@@ -205,30 +213,31 @@ def force_map_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
 
 
 # ------------------------------------------------------------------------------------------ lane laws
-# The same laws over a whole batch of candidates at once (``lanes``): ``law(d, z, par, f, zd)`` with the bench's
-# channels d (n_u, P), the states z and their rates zd (n_z, P), the rows par (n_par, P, transposed) and the force
-# f (P,). The candidates are independent, so the compiled loop over them (innermost, ``sim.prescribed.lanes_loop``)
-# runs several at a time (SIMD where the law has no table look-up, overlapped latency chains where it has) instead
-# of one candidate's serial chain of RK4 stages. Each is the scalar law above, operation for operation: the forces
-# agree bit for bit (tests/test_damper_lanes.py), the scalar laws stay as the reference path.
+# The same laws over a whole batch of candidates at once (``lanes``): ``law(d, z, par, f, zd, w, fresh)`` with the
+# bench's channels d (n_u, P), the states z and their rates zd (n_z, P), the rows par (n_par, P, transposed), the force
+# f (P,), the law's scratch w and whether d is new since the call before (``sim.prescribed.lanes_loop``). The
+# candidates are independent, so the compiled loop over them (innermost) runs several at a time (SIMD, overlapped
+# latency chains) instead of one candidate's serial chain of RK4 stages; a table look-up runs as passes over the
+# batch. Each is the scalar law above, operation for operation: the forces agree bit for bit
+# (tests/test_damper_lanes.py); the scalar laws stay as the reference path.
 
 
 @numba.njit(error_model="numpy", inline="always")
-def viscous_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+def viscous_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``viscous_law`` over the batch."""
     for p in range(f.shape[0]):
         f[p] = par[P0, p] * d[1, p] + par[0, p] * (d[0, p] - par[1, p])
 
 
 @numba.njit(error_model="numpy", inline="always")
-def gas_spring_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+def gas_spring_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``gas_spring_law`` over the batch."""
     for p in range(f.shape[0]):
         f[p] = 0.0 + par[0, p] * (d[0, p] - par[1, p])
 
 
 @numba.njit(error_model="numpy", inline="always")
-def bingham_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+def bingham_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``bingham_law`` over the batch."""
     for p in range(f.shape[0]):
         vb = d[1, p]
@@ -237,7 +246,7 @@ def bingham_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def bouc_wen_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+def bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``bouc_wen_law`` over the batch: states z[0] = y, z[1] = z."""
     q = P0
     for p in range(f.shape[0]):
@@ -251,19 +260,19 @@ def bouc_wen_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
         f[p] = force + par[0, p] * (xb - par[1, p])
 
 
-# The control models' scratch (w, kept from call to call: RK4's stages 2 and 3, and its stage 4 and the output,
-# see the same inputs): the switch of Eq. 5 and the ratio v / v_switch it was computed at, the input the damper sees
-# (u), where u falls in the table's nodes and at which u that was found, and (the force map) the velocity's interval.
-W_S, W_X, W_U, W_J, W_T, W_AT, W_JV, W_TV, W_V = range(9)
-N_SCRATCH = 9
+# The control models' scratch (w): Eq. 5's switch and the ratio v / v_switch it was computed at (kept from call to
+# call: RK4's stages 2 and 3, and its stage 4 and the output, see the same inputs), the input the damper sees (u),
+# and (the force map) the velocity's interval in the table's nodes and the fraction in it.
+W_S, W_X, W_U, W_JV, W_TV = range(5)
+N_SCRATCH = 5
 
 
 @numba.njit(error_model="numpy", inline="always")
 def _switches(d, par, w):  # pragma: no cover - compiled
-    """w[W_S] = Eq. 5's switch of every candidate, s = 0.5 tanh(v / v_switch) + 0.5 as ``_switch`` computes it; the
-    tanh only where the ratio v / v_switch differs from the one it was last computed at for this candidate or for
-    the one before (the candidates of a batch mostly share the motion and v_switch): same numbers, a fraction of
-    the tanh calls, the most expensive step of the control models."""
+    """w[W_S] = Eq. 5's switch of every candidate as ``_switch`` computes it, only where the ratio v / v_switch
+    differs from the one it was last computed at for this candidate or for the one before (the candidates of a
+    batch mostly share the motion and v_switch): same numbers, a fraction of the exp calls, the most expensive step
+    of the control models."""
     for p in range(w.shape[1]):
         x = d[1, p] / par[7, p]
         if x == w[W_X, p]:
@@ -271,7 +280,7 @@ def _switches(d, par, w):  # pragma: no cover - compiled
         if p > 0 and x == w[W_X, p - 1]:
             w[W_S, p] = w[W_S, p - 1]
         else:
-            w[W_S, p] = 0.5 * math.tanh(x) + 0.5
+            w[W_S, p] = _logistic(x)
         w[W_X, p] = x
 
 
@@ -291,9 +300,9 @@ def _controls(d, z, par, zd, w, i):  # pragma: no cover - compiled
 
 @numba.njit(error_model="numpy", inline="always")
 def _cell(par, first, m, u, p):  # pragma: no cover - compiled
-    """Where u falls in the m nodes par[first : first + m, p], found as ``_table_1d`` finds it but once for every
-    table over the same nodes: (i, -1) for the value at node i itself (u at or outside the end nodes, or m = 1),
-    else the interval j and the fraction t in [0, 1) of it (NaN for a NaN u)."""
+    """Where candidate p's u falls in its m nodes par[first : first + m, p], found as ``_table_1d`` finds it but once
+    for every table over the same nodes: (i, -1) for the value at node i itself (u at or outside the end nodes, or
+    m = 1), else the interval j and the fraction t in [0, 1) of it (NaN for a NaN u)."""
     if m == 1 or u <= par[first, p]:
         return 0, -1.0
     if u >= par[first + m - 1, p]:
@@ -305,13 +314,20 @@ def _cell(par, first, m, u, p):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def _cell_of_u(par, first, m, w, p):  # pragma: no cover - compiled
-    """``_cell`` of candidate p's input w[W_U], looked up again only when u changed (a held command, a settled lag)."""
-    u = w[W_U, p]
-    if u != w[W_AT, p]:
-        j, t = _cell(par, first, m, u, p)
-        w[W_J, p], w[W_T, p], w[W_AT, p] = j, t, u
-    return int(w[W_J, p]), w[W_T, p]
+def _velocity_cells(d, par, first, nv, w):  # pragma: no cover - compiled
+    """The force map's interval of every candidate's velocity d[1] in its nv nodes par[first : first + nv] (the
+    first or last one outside them: extrapolated) into w[W_JV], the fraction into w[W_TV], as ``force_map_law``
+    finds them."""
+    for p in range(w.shape[1]):
+        vb = d[1, p]
+        j = 0
+        if vb >= par[first + nv - 1, p]:
+            j = nv - 2
+        elif vb > par[first, p]:
+            while par[first + j + 1, p] < vb:
+                j += 1
+        w[W_JV, p] = j
+        w[W_TV, p] = (vb - par[first + j, p]) / (par[first + j + 1, p] - par[first + j, p])
 
 
 @numba.njit(error_model="numpy", inline="always")
@@ -335,15 +351,15 @@ def _blend1(par, comp, reb, i, s, p):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def generalized_bouc_wen_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``generalized_bouc_wen_law`` over the batch (every row has the same table size m; scratch w of N_SCRATCH
-    rows). One node (m = 1): no look-up, the loop runs several candidates at once; more: the cell of u in the nodes
-    found once for the fourteen tables."""
+    rows). One node (m = 1): no look-up; more: the cell of u in the nodes found once for the fourteen tables."""
     q = P0
     m = int(par[q, 0])
     comp = q + 1 + m
     reb = comp + 7 * m
-    _switches(d, par, w)
+    if fresh:
+        _switches(d, par, w)
     _controls(d, z, par, zd, w, 2)
     if m == 1:
         for p in range(f.shape[0]):
@@ -359,7 +375,7 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w):  # pragma: no cover - compi
         return
     for p in range(f.shape[0]):
         xb, vb, s = d[0, p], d[1, p], w[W_S, p]
-        j, t = _cell_of_u(par, q + 1, m, w, p)
+        j, t = _cell(par, q + 1, m, w[W_U, p], p)
         force, ydot, zdot = _bouc_wen(
             xb, vb, z[0, p], z[1, p], _blend(par, comp, reb, m, 0, j, t, s, p),
             _blend(par, comp, reb, m, 1, j, t, s, p), _blend(par, comp, reb, m, 2, j, t, s, p),
@@ -372,27 +388,20 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w):  # pragma: no cover - compi
 
 
 @numba.njit(error_model="numpy", inline="always")
-def force_map_lanes(d, z, par, f, zd, w):  # pragma: no cover - compiled
+def force_map_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``force_map_law`` over the batch (every row has the same nv x nu table; scratch w of N_SCRATCH rows): the
-    velocity's interval (looked up again only when v changed), then the cell of u once for the interval's two rows."""
+    velocity's interval (only when the motion is new: twice per RK4 step), then the cell of u once for the
+    interval's two rows."""
     q = P0
     nv, nu = int(par[q, 0]), int(par[q + 1, 0])
     vn, un, F = q + 2, q + 2 + nv, q + 2 + nv + nu
-    _switches(d, par, w)
+    if fresh:  # what depends on the motion alone
+        _switches(d, par, w)
+        _velocity_cells(d, par, vn, nv, w)
     _controls(d, z, par, zd, w, 0)
     for p in range(f.shape[0]):
-        vb = d[1, p]
-        if vb != w[W_V, p]:
-            j = 0
-            if vb >= par[vn + nv - 1, p]:
-                j = nv - 2
-            elif vb > par[vn, p]:
-                while par[vn + j + 1, p] < vb:
-                    j += 1
-            w[W_JV, p], w[W_V, p] = j, vb
-            w[W_TV, p] = (vb - par[vn + j, p]) / (par[vn + j + 1, p] - par[vn + j, p])
         j, t = int(w[W_JV, p]), w[W_TV, p]
-        ju, tu = _cell_of_u(par, un, nu, w, p)
+        ju, tu = _cell(par, un, nu, w[W_U, p], p)
         lo = _at(par, F + j * nu, ju, tu, p)
         hi = _at(par, F + (j + 1) * nu, ju, tu, p)
         f[p] = (1 - t) * lo + t * hi + par[0, p] * (d[0, p] - par[1, p])
@@ -408,7 +417,7 @@ class DamperModel:
 
     name: str
     law: object  # numba dispatcher: law(d, dd, z, params, f_out, zd_out), one candidate
-    lanes: object  # numba dispatcher: lanes(d, z, par, f, zd, w), the same law over a batch (inlined by the loop)
+    lanes: object  # numba dispatcher: lanes(d, z, par, f, zd, w, fresh), the same law over a batch (inlined)
     parameters: tuple[str, ...]
     n_states: int  # internal states: Bouc-Wen's y and z first, then u_f when the model has a control input
     uses_control: bool

@@ -18,8 +18,9 @@ from ..models.damper import N_FRONT, DamperModel, play
 from .prescribed import integrate_bench, integrate_lanes
 
 
-def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray) -> NDArray:
-    """(P, n, 2): the delayed command and the direction of its latest change (1 rising, 0 falling), per candidate.
+def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray, out: NDArray | None = None) -> NDArray:
+    """(P, n, 2): the delayed command and the direction of its latest change (1 rising, 0 falling), per candidate
+    (written into `out` when given: any (P, n, 2) view, e.g. of the kernel's lanes).
 
     Each change of the command u (n,), between samples i-1 and i, takes effect at t_i + tau with tau the
     candidate's delay (P, 4: DELAYS order) for the change's direction and the stroke (sign of v) it happens in.
@@ -35,7 +36,7 @@ def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray) -> NDA
     rising = change > 0
     which = np.where(v > 0, 2, 0) + np.where(rising, 0, 1)  # tau_comp_rise, tau_comp_fall, tau_reb_rise, ..._fall
     moved = np.flatnonzero(change != 0)
-    out = np.empty((P, n, 2))
+    out = np.empty((P, n, 2)) if out is None else out
     out[:, :, 0], out[:, :, 1] = u[0], 1.0  # before any change takes effect: the initial command
     if moved.size == 0:
         return out
@@ -147,7 +148,7 @@ def simulate_damper(
             np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float), rows[r, 2]
         )
     if model.uses_control:
-        road[:, 2:, :] = delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4]).transpose(1, 2, 0)
+        delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4], out=road[:, 2:, :].transpose(2, 0, 1))
     road = refine(t, road, substeps, time_axis=0)  # finer integration of the same inputs
     z0 = np.zeros((model.n_states, P))
     if model.uses_control:
@@ -162,6 +163,8 @@ def simulate_damper(
 def _checked(t: NDArray, force: NDArray) -> BenchForces:
     """The forces (P, n) with every candidate that did not stay finite NaN throughout."""
     stable = np.all(np.isfinite(force), axis=1)
+    if stable.all():
+        return BenchForces(t=t, force=np.ascontiguousarray(force), stable=stable)
     return BenchForces(t=t, force=np.where(stable[:, None], force, np.nan), stable=stable)
 
 
