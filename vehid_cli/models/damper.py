@@ -262,9 +262,10 @@ def bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
 
 # The control models' scratch (w): Eq. 5's switch and the ratio v / v_switch it was computed at (kept from call to
 # call: RK4's stages 2 and 3, and its stage 4 and the output, see the same inputs), the input the damper sees (u),
-# and (the force map) the velocity's interval in the table's nodes and the fraction in it.
-W_S, W_X, W_U, W_JV, W_TV = range(5)
-N_SCRATCH = 5
+# (the force map) the velocity's interval in the table's nodes and the fraction in it, the u last looked up and
+# what was found there (the generalised model: its fourteen tables' values; the force map: the cell of u).
+W_S, W_X, W_U, W_JV, W_TV, W_AT, W_TAB = range(7)  # W_TAB..W_TAB + 13: the tables at u (compression, rebound)
+N_SCRATCH = W_TAB + 14
 
 
 @numba.njit(error_model="numpy", inline="always")
@@ -339,9 +340,10 @@ def _at(par, first, j, t, p):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def _blend(par, comp, reb, m, i, j, t, s, p):  # pragma: no cover - compiled
-    """Parameter i of the Bouc-Wen set at the cell (j, t) of u, compression and rebound blended by s (Eq. 4-5)."""
-    return s * _at(par, reb + i * m, j, t, p) + (1 - s) * _at(par, comp + i * m, j, t, p)
+def _blend_at(w, i, s, p):  # pragma: no cover - compiled
+    """Parameter i of the Bouc-Wen set at u (its compression and rebound tables' values there in w), blended by s
+    (Eq. 4-5) as ``generalized_bouc_wen_law`` blends them."""
+    return s * w[W_TAB + 7 + i, p] + (1 - s) * w[W_TAB + i, p]
 
 
 @numba.njit(error_model="numpy", inline="always")
@@ -353,7 +355,8 @@ def _blend1(par, comp, reb, i, s, p):  # pragma: no cover - compiled
 @numba.njit(error_model="numpy", inline="always")
 def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``generalized_bouc_wen_law`` over the batch (every row has the same table size m; scratch w of N_SCRATCH
-    rows). One node (m = 1): no look-up; more: the cell of u in the nodes found once for the fourteen tables."""
+    rows). One node (m = 1): no look-up; more: the cell of u in the nodes found once for the fourteen tables, and
+    only when u changed."""
     q = P0
     m = int(par[q, 0])
     comp = q + 1 + m
@@ -375,12 +378,15 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover 
         return
     for p in range(f.shape[0]):
         xb, vb, s = d[0, p], d[1, p], w[W_S, p]
-        j, t = _cell(par, q + 1, m, w[W_U, p], p)
+        if w[W_U, p] != w[W_AT, p]:  # the fourteen tables at a new u (a held command, a settled lag: at the same)
+            j, t = _cell(par, q + 1, m, w[W_U, p], p)
+            for i in range(7):
+                w[W_TAB + i, p] = _at(par, comp + i * m, j, t, p)
+                w[W_TAB + 7 + i, p] = _at(par, reb + i * m, j, t, p)
+            w[W_AT, p] = w[W_U, p]
         force, ydot, zdot = _bouc_wen(
-            xb, vb, z[0, p], z[1, p], _blend(par, comp, reb, m, 0, j, t, s, p),
-            _blend(par, comp, reb, m, 1, j, t, s, p), _blend(par, comp, reb, m, 2, j, t, s, p),
-            _blend(par, comp, reb, m, 3, j, t, s, p), _blend(par, comp, reb, m, 4, j, t, s, p),
-            _blend(par, comp, reb, m, 5, j, t, s, p), _blend(par, comp, reb, m, 6, j, t, s, p),
+            xb, vb, z[0, p], z[1, p], _blend_at(w, 0, s, p), _blend_at(w, 1, s, p), _blend_at(w, 2, s, p),
+            _blend_at(w, 3, s, p), _blend_at(w, 4, s, p), _blend_at(w, 5, s, p), _blend_at(w, 6, s, p),
         )  # fmt: skip
         zd[0, p] = ydot
         zd[1, p] = zdot
@@ -391,7 +397,7 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover 
 def force_map_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``force_map_law`` over the batch (every row has the same nv x nu table; scratch w of N_SCRATCH rows): the
     velocity's interval (only when the motion is new: twice per RK4 step), then the cell of u once for the
-    interval's two rows."""
+    interval's two rows (only when u changed)."""
     q = P0
     nv, nu = int(par[q, 0]), int(par[q + 1, 0])
     vn, un, F = q + 2, q + 2 + nv, q + 2 + nv + nu
@@ -400,8 +406,10 @@ def force_map_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
         _velocity_cells(d, par, vn, nv, w)
     _controls(d, z, par, zd, w, 0)
     for p in range(f.shape[0]):
-        j, t = int(w[W_JV, p]), w[W_TV, p]
-        ju, tu = _cell(par, un, nu, w[W_U, p], p)
+        if w[W_U, p] != w[W_AT, p]:  # the cell of a new u (a held command, a settled lag: the same)
+            w[W_TAB, p], w[W_TAB + 1, p] = _cell(par, un, nu, w[W_U, p], p)
+            w[W_AT, p] = w[W_U, p]
+        j, t, ju, tu = int(w[W_JV, p]), w[W_TV, p], int(w[W_TAB, p]), w[W_TAB + 1, p]
         lo = _at(par, F + j * nu, ju, tu, p)
         hi = _at(par, F + (j + 1) * nu, ju, tu, p)
         f[p] = (1 - t) * lo + t * hi + par[0, p] * (d[0, p] - par[1, p])
