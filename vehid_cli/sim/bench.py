@@ -68,11 +68,17 @@ def _ramps(t, at, jumps, rising, which, delays, dt, out):  # pragma: no cover - 
             effective[i] = at[i] - dt + delays[p, which[i]]
             if i > 0:
                 effective[i] = max(effective[i], effective[i - 1])  # np.maximum.accumulate
+        start = 0
         for i in range(m):
             e, jump = effective[i], jumps[i]
-            for k in range(n):
-                if t[k] > e:  # before e the ramp adds jump * 0: nothing (a -0.0 level aside)
-                    out[p, k, 0] += jump * min((t[k] - e) / dt, 1.0)
+            while start < n and not t[start] > e:  # before e the ramp adds jump * 0: nothing (a -0.0 level aside)
+                start += 1
+            after = start
+            while after < n and (t[after] - e) / dt < 1.0:  # on the ramp
+                out[p, after, 0] += jump * ((t[after] - e) / dt)
+                after += 1
+            for k in range(after, n):  # past it: jump * 1
+                out[p, k, 0] += jump
         i = -1
         for k in range(n):  # effective (and t) never decrease: walk them together
             while i + 1 < m and effective[i + 1] + dt <= t[k]:
