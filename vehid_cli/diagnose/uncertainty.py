@@ -101,9 +101,12 @@ class ModelUncertainty(Result):
     def summary(self) -> str:
         """One clause for the verdict."""
         where = f" on the strut {self.element}" if self.element else ""
-        how = (
-            "fit the residual" if self.trigger == "crowded" else "and the non-parametric strut force fit about equally"
-        )
+        better = self.fit_gap is not None and self.fit_margin is not None and self.fit_gap < -self.fit_margin
+        how = {
+            "crowded": "fit the residual",
+            "equal fit": "fit worse than the non-parametric strut force" if better
+            else "and the non-parametric strut force fit about equally",
+        }[self.trigger]  # fmt: skip
         return (
             f"{', '.join(self.terms)}{where} {how}, but the non-parametric strut "
             f"force puts the declared unknowns elsewhere (up to {float(np.max(self.separation)):.3g}x their "
