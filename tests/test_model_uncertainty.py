@@ -129,6 +129,17 @@ def test_every_output_marks_the_model_based_the_misfit_and_the_widened_intervals
     assert "(model unc.)" in html and "(misfit)" in html and "imitate a law they do not contain" in html
 
 
+def test_a_found_verdict_says_when_the_loop_stopped_on_two_candidates_it_could_not_tell_apart():
+    names = ("m",)
+    rep = ModelReport(("parameter:kf",), names, np.array([1300.0]), np.array([2.0]), 1.0, 1.0, 1.0, 0.1)
+    note = "cannot tell parameter:kr (LR 40) from parameter:ktr (LR 41) apart on these data: neither added"
+    d = Diagnosis(rep, rep, (), ("parameter:kf",), 0.05, "", "", 0.0, notes=(note,), chi2_limit=1.05)
+    assert d.verdict.startswith("found: parameter:kf; the residual is now at the noise")
+    assert d.verdict.endswith(f"(then stopped: {note})")
+    plain = Diagnosis(rep, rep, (), ("parameter:kf",), 0.05, "", "", 0.0, chi2_limit=1.05).verdict
+    assert plain.startswith("found") and "then stopped" not in plain
+
+
 def bench_run(amplitude, frequency, law, seed, n=2000, dt=0.005, noise=5.0):
     t = np.arange(n) * dt
     w = 2 * np.pi * frequency
