@@ -46,6 +46,13 @@ EFFECT_DEFAULTS: dict[str, dict[str, float]] = {
     "bump_stop": dict(k_stop_f=2e5, k_stop_r=2e5, gap_f=0.02, gap_r=0.02, compression_only=0.0),  # N/m, m, flag
 }
 EFFECTS = tuple(EFFECT_DEFAULTS)
+# Laws outside vehid's effect library (issue 25's held-back kinds), accepted like effects but not in EFFECTS.
+OUTSIDE_LIBRARY: dict[str, dict[str, float]] = {
+    "quadratic_damper": dict(c2_f=1500.0, c2_r=2000.0),  # N s^2/m^2: c2 |v| v
+    "digressive_damper": dict(v_knee=0.1, share=0.4),  # m/s, -: above the knee the damping falls to share * c
+    "stribeck_friction": dict(Fc=60.0, Fs=200.0, v_s=0.03, v_eps=0.005),  # N, N, m/s, m/s
+    "progressive_tyre": dict(k3t_f=3e7, k3t_r=3e7),  # N/m^3: the tyre force gains k3t (x - y)^3
+}
 BUMP_LENGTH = 0.1  # m
 DEFAULT_HEIGHTS = (0.05, 0.04, 0.04, 0.05)  # m, corners 1..4
 FRONT = np.array([True, True, False, False])  # corners 1, 2 front; 3, 4 rear
@@ -59,10 +66,11 @@ def per_corner(front: float, rear: float) -> np.ndarray:
 def effect_params(effects: Mapping[str, Mapping[str, float] | None] | None) -> dict[str, dict[str, float]]:
     """Complete each named effect's parameters with the defaults; refuses unknown effects and parameters."""
     out: dict[str, dict[str, float]] = {}
+    laws = {**EFFECT_DEFAULTS, **OUTSIDE_LIBRARY}
     for name, given in (effects or {}).items():
-        if name not in EFFECT_DEFAULTS:
-            raise ValueError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}")
-        p = dict(EFFECT_DEFAULTS[name])
+        if name not in laws:
+            raise ValueError(f"unknown effect {name!r}; known: {', '.join(laws)}")
+        p = dict(laws[name])
         for key, value in (given or {}).items():
             if key not in p:
                 raise ValueError(f"unknown parameter {key!r} of effect {name!r}; known: {', '.join(p)}")
@@ -105,7 +113,33 @@ def extra_strut_force(d, v, eff: dict[str, dict[str, float]], zeta=None):
         k, gap = per_corner(p["k_stop_f"], p["k_stop_r"]), per_corner(p["gap_f"], p["gap_r"])
         engaged = (d < -gap) if p["compression_only"] else (np.abs(d) > gap)
         f = f + np.where(engaged, k * (np.abs(d) - gap) * np.sign(d), 0.0)
+    return f + outside_strut_force(d, v, eff)
+
+
+def outside_strut_force(d, v, eff: dict[str, dict[str, float]], cs=None):
+    """Strut force [N] of the laws outside the library at deflection d [m], velocity v [m/s], shapes (4, k); `cs`
+    (4, 1) the linear damping [N s/m] a digressive damper loses above its knee (the paper car's by default)."""
+    f = np.zeros(np.broadcast(d, v).shape)
+    if "quadratic_damper" in eff:
+        p = eff["quadratic_damper"]
+        f = f + per_corner(p["c2_f"], p["c2_r"]) * np.abs(v) * v
+    if "digressive_damper" in eff:  # a blow-off knee: c v below v_knee, slope share * c above it
+        p = eff["digressive_damper"]
+        c = per_corner(PAPER_CAR["cf"], PAPER_CAR["cr"]) if cs is None else cs
+        f = f - (1.0 - p["share"]) * c * np.sign(v) * np.maximum(np.abs(v) - p["v_knee"], 0.0)
+    if "stribeck_friction" in eff:  # static friction Fs falling to Coulomb Fc beyond v_s (Gaussian Stribeck curve)
+        p = eff["stribeck_friction"]
+        level = p["Fc"] + (p["Fs"] - p["Fc"]) * np.exp(-((v / p["v_s"]) ** 2))
+        f = f + level * np.tanh(v / p["v_eps"])
     return f
+
+
+def outside_tyre_force(deflection, eff: dict[str, dict[str, float]]):
+    """Tyre force [N] (+ pushes the wheel down) beyond kt (x - y) of a law outside the library, deflection x - y [m]."""
+    if "progressive_tyre" not in eff:
+        return np.zeros_like(deflection)
+    p = eff["progressive_tyre"]
+    return per_corner(p["k3t_f"], p["k3t_r"]) * deflection**3
 
 
 def bump_road(t, heights, speed: float, wheelbase: float, start_time: float, length: float = BUMP_LENGTH):
@@ -168,7 +202,7 @@ class FullCar:
             damper = np.where(lagged, Fd, damper)
         extra = extra + damper - self.cs * v  # everything beyond ks d + cs v
         F = self.ks * d + self.cs * v + extra
-        Ft = self.kt * (xw - yr) + self.ct * (vw - dyr)
+        Ft = self.kt * (xw - yr) + self.ct * (vw - dyr) + outside_tyre_force(xw - yr, self.eff)
         r = q[1] - (q[3] - q[4]) / self.w  # anti-roll bar twist
         P = self.p
         acc = np.empty_like(q)

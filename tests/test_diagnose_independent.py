@@ -9,7 +9,6 @@ force estimated, never "found".
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from tests import independent_sim as S
@@ -82,15 +81,21 @@ def assert_honest(d, truth):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "off", [{"ktr": 0.9, "kR": 1.2}, {"ktr": 0.9, "kR": 1.2, "mr": 1.15}], ids=lambda o: "-".join(o)
+    ("off", "seed"),
+    [
+        ({"ktr": 0.9, "kR": 1.2}, 23),
+        ({"ktr": 0.9, "kR": 1.2, "mr": 1.15}, 23),
+        ({"kf": 1.15, "cr": 0.85, "ktf": 0.9}, 24),
+    ],
+    ids=["ktr-kR", "ktr-kR-mr", "kf-cr-ktf"],
 )
-def test_several_misset_known_parameters_reach_the_oracle_with_honest_intervals(tmp_path, off):
+def test_several_misset_known_parameters_reach_the_oracle_with_honest_intervals(tmp_path, off, seed):
     """Issue 25, acceptance 2: two or three known parameters off. A second one hardly shows in J once the first is
     freed (the residual is at the noise) but biases the unknowns: the loop still tests the known parameters, names
     each, and the final joint polish reaches the bound (NRE <= 1.5x the bound, <= 1/10 of before), every interval
     (from the joint covariance of the unknowns and the freed parameters) holding the truth."""
     params = {n: S.PAPER_CAR[n] * f for n, f in off.items()}
-    d = run(tmp_path, params, seed=23)
+    d = run(tmp_path, params, seed=seed)
     assert set(d.selected) == {f"parameter:{n}" for n in off}, (d.selected, d.notes)
     assert d.verdict.startswith("found"), d.verdict
     assert d.after.nre_percent <= 1.5 * d.after.nre_bound_percent, (d.after.nre_percent, d.after.nre_bound_percent)
@@ -98,42 +103,17 @@ def test_several_misset_known_parameters_reach_the_oracle_with_honest_intervals(
     assert_honest(d, {**{n: S.PAPER_CAR[n] for n in ("m", "Ix", "Iy", "a1", "b1")}, **params})
 
 
-def with_quadratic_damper(monkeypatch):
-    """A law outside the library, added to the independent simulator in this test only: damping force c2 |v| v."""
-    monkeypatch.setitem(S.EFFECT_DEFAULTS, "quadratic_damper", {"c2_f": 1500.0, "c2_r": 2000.0})
-    plain = S.extra_strut_force
-
-    def extra(d, v, eff, zeta=None):
-        f = plain(d, v, eff, zeta)
-        if "quadratic_damper" in eff:
-            p = eff["quadratic_damper"]
-            f = f + S.per_corner(p["c2_f"], p["c2_r"]) * np.abs(v) * v
-        return f
-
-    monkeypatch.setattr(S, "extra_strut_force", extra)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    ("effects", "seed"),
-    [
-        ({"sqrt_damper": {"c_sqrt_f": 300.0, "c_sqrt_r": 400.0}}, 31),
-        ({"quadratic_damper": None}, 32),
-    ],
-    ids=["weak-sqrt-damper", "quadratic-damper"],
-)
-def test_a_law_outside_the_library_is_never_found_with_unknowns_off(tmp_path, monkeypatch, effects, seed):
-    """Issue 25, acceptance 1: library terms can imitate a law outside the library to the noise (a weaker square-root
-    damper: Coulomb friction and both dampers). The verdict is then "incomplete" with the law shown, or a claim whose
-    declared unknowns are within their intervals of the truth; never "found" with unknowns off beyond them."""
-    with_quadratic_damper(monkeypatch)
-    d = run(tmp_path, effects=effects, seed=seed)
-    truth = {n: S.PAPER_CAR[n] for n in ("m", "Ix", "Iy", "a1", "b1")}
-    if d.verdict.startswith("found"):
+def assert_never_found_off(d, truth):
+    """Issue 25, acceptance 1: "incomplete" with the law shown (the non-parametric force in the JSON; where library
+    terms imitate it, the widened interval holding the model-based one, and the truth when they imitate it to the
+    noise: above it neither explanation holds the law, and the spread between them need not bound the bias), or a
+    claim (or "adequate") whose declared unknowns are within 3.3 standard errors of the truth; never "found" with
+    them off."""
+    if not d.verdict.startswith("incomplete"):
+        assert d.verdict.startswith(("found", "adequate")), d.verdict
         assert_honest(d, truth)
         return
-    assert d.verdict.startswith("incomplete"), d.verdict
-    assert d.unexplained is not None and d.unexplained.significant
+    assert d.unexplained is not None and d.unexplained.significant, d.verdict
     out = d.to_json()
     assert out["unexplained"] is not None
     if d.imitation:  # both intervals reported, the widened ones marked
@@ -143,3 +123,24 @@ def test_a_law_outside_the_library_is_never_found_with_unknowns_off(tmp_path, mo
         assert out["after"]["ci95_model_uncertainty"] == mu["ci95_model_uncertainty"]
         for n, (lo, hi) in mu["ci95_model_uncertainty"].items():
             assert lo <= out["after"]["ci95"][n][0] and hi >= out["after"]["ci95"][n][1]
+            assert d.at_noise is False or lo <= truth[n] <= hi, (n, lo, hi, truth[n])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("effects", "seed"),
+    [
+        ({"sqrt_damper": {"c_sqrt_f": 300.0, "c_sqrt_r": 400.0}}, 31),
+        ({"quadratic_damper": None}, 32),
+        ({"digressive_damper": None}, 33),
+        ({"stribeck_friction": None}, 34),
+        ({"progressive_tyre": None}, 35),
+    ],
+    ids=["weak-sqrt-damper", "quadratic-damper", "digressive-damper", "stribeck-friction", "progressive-tyre"],
+)
+def test_a_law_outside_the_library_is_never_found_with_unknowns_off(tmp_path, effects, seed):
+    """Issue 25, acceptance 1, over kinds of laws outside the library (tests/independent_sim.OUTSIDE_LIBRARY): library
+    terms can imitate them to the noise (a weak square-root damper: Coulomb friction and both dampers), bias the
+    unknowns, or leave the residual above the noise."""
+    d = run(tmp_path, effects=effects, seed=seed)
+    assert_never_found_off(d, {n: S.PAPER_CAR[n] for n in ("m", "Ix", "Iy", "a1", "b1")})

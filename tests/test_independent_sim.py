@@ -153,6 +153,31 @@ def test_effect_changes_response(name, short_linear):
     assert np.isfinite(sim["acc"]).all()
 
 
+@pytest.mark.parametrize("name", S.OUTSIDE_LIBRARY)
+def test_laws_outside_the_library_are_zero_at_rest_and_change_the_response(name, short_linear):
+    """Issue 25's held-back kinds (a quadratic and a digressive damper, Stribeck friction, a progressive tyre)."""
+    eff = S.effect_params({name: None})
+    zero = np.zeros((4, 1))
+    assert np.all(S.outside_strut_force(zero, zero, eff) == 0.0) and np.all(S.outside_tyre_force(zero, eff) == 0.0)
+    sim = S.simulate({}, {name: None}, duration=1.0)
+    change = rel_max(sim["acc"], short_linear["acc"]).max()
+    assert change > 0.02, f"{name} changed acc by only {change:.2%} of range"
+
+
+def test_the_digressive_damper_keeps_c_below_its_knee_and_share_c_above():
+    """The blow-off law's slope from central differences: the linear damper's c below the knee, share * c above."""
+    eff = S.effect_params({"digressive_damper": None})
+    c = S.per_corner(S.PAPER_CAR["cf"], S.PAPER_CAR["cr"])
+    knee, share = eff["digressive_damper"]["v_knee"], eff["digressive_damper"]["share"]
+    h = 1e-6
+    for v, slope in ((0.5 * knee, c), (3.0 * knee, share * c), (-3.0 * knee, share * c)):
+        vv = np.full((4, 1), v)
+        total = (c * (vv + h) + S.outside_strut_force(0.0, vv + h, eff)) - (
+            c * (vv - h) + S.outside_strut_force(0.0, vv - h, eff)
+        )
+        np.testing.assert_allclose(total / (2 * h), slope, rtol=1e-6)
+
+
 def test_effects_combine_and_laws_match_their_definitions():
     effects = {
         "hysteresis": dict(alpha_f=2e4, alpha_r=4e4, beta=5e3, gamma=1.5e4, A=0.8),

@@ -11,9 +11,19 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+from rich.console import Console
 
 from vehid_cli.diagnose.bench_law import bench_law, eq7
-from vehid_cli.diagnose.uncertainty import compare_explanations, crowded_element, elements_of
+from vehid_cli.diagnose.result import Diagnosis, ModelReport
+from vehid_cli.diagnose.uncertainty import (
+    compare_explanations,
+    crowded_element,
+    elements_of,
+    fit_about_equally,
+    widened,
+)
+from vehid_cli.report.diagnosis import diagnosis_tables
+from vehid_cli.report.html import diagnosis_page
 
 
 def test_each_term_acts_on_its_element_of_the_strut():
@@ -35,8 +45,9 @@ def test_terms_crowd_on_one_element_only_when_two_or_more_share_it():
     assert crowded_element(["hysteresis", "tyre_damping"]) is None
 
 
-def fake_unexplained(names, values, ci):
-    return SimpleNamespace(names=tuple(names), unknowns=np.asarray(values, float), dx_ci=np.asarray(ci, float))
+def fake_unexplained(names, values, ci, samples=None, chi2_after=None):
+    return SimpleNamespace(names=tuple(names), unknowns=np.asarray(values, float), dx_ci=np.asarray(ci, float),
+                           samples=samples, chi2_after=chi2_after)  # fmt: skip
 
 
 def test_explanations_that_disagree_beyond_their_intervals_widen_them_to_cover_both():
@@ -44,19 +55,89 @@ def test_explanations_that_disagree_beyond_their_intervals_widen_them_to_cover_b
     x, ci = np.array([1292.0, 517.0]), np.array([1.5, 5.0])
     alt = fake_unexplained(names, [1300.0, 519.0], [3.0, 6.0])
     mu = compare_explanations(["coulomb_friction", "parameter:cr", "parameter:cf"], names, x, ci, alt)
-    assert mu is not None and mu.imitates and mu.worst == "m"
+    assert mu is not None and mu.imitates and mu.worst == "m" and mu.trigger == "crowded"
     np.testing.assert_allclose(mu.separation, [8.0 / np.hypot(1.5, 3.0), 2.0 / np.hypot(5.0, 6.0)])
-    np.testing.assert_allclose(mu.low, [1290.5, 512.0])
-    np.testing.assert_allclose(mu.high, [1303.0, 525.0])
+    # the selected interval grown by the spread on either side, joined with the alternative's
+    np.testing.assert_allclose(mu.low, [1292.0 - 1.5 - 8.0, 517.0 - 5.0 - 2.0])
+    np.testing.assert_allclose(mu.high, [1300.0 + 3.0, 519.0 + 6.0])
     out = mu.to_json()
     assert out["reason"] == "library terms imitate a law they do not contain"
-    assert out["ci95_model_uncertainty"]["m"] == [1290.5, 1303.0]
+    assert out["ci95_model_uncertainty"]["m"] == [1282.5, 1303.0]
     misfit = compare_explanations(["coulomb_friction", "parameter:cr"], names, x, ci, alt, ci_misfit=[12.0, 1.0])
-    np.testing.assert_allclose(misfit.low, [1280.0, 512.0])  # the wider misfit interval of m, Ix's own
+    np.testing.assert_allclose(misfit.low, [1292.0 - 12.0 - 8.0, 510.0])  # the wider misfit interval of m, Ix's own
+    np.testing.assert_allclose(misfit.high, [1292.0 + 12.0 + 8.0, 525.0])
     np.testing.assert_allclose(misfit.separation, mu.separation)  # the test itself assumes the model
     agree = compare_explanations(["coulomb_friction", "parameter:cr"], names, x, ci, fake_unexplained(names, x, ci))
     assert agree is not None and not agree.imitates
     assert compare_explanations(["coulomb_friction"], names, x, ci, alt) is None  # one term: nothing to compare
+
+
+def test_the_widened_interval_holds_a_truth_that_both_explanations_miss():
+    """Two explanations biased the same way, each interval missing the truth (the weak square-root damper's m: 1303.6
+    ± 1.6 and 1307.5 ± 3.0 for 1300): the union misses it too, the widened interval holds it."""
+    truth, x, alt = 1300.0, np.array([1303.6]), np.array([1307.5])
+    ci, alt_ci = np.array([1.6]), np.array([3.0])
+    low, high = widened(x, ci, alt, alt_ci)
+    assert min(x - ci, alt - alt_ci)[0] > truth  # the union of the two intervals misses it
+    assert low[0] <= truth <= high[0]
+    assert low[0] <= (alt - alt_ci)[0] and high[0] >= (alt + alt_ci)[0] and high[0] >= (x + ci)[0]
+
+
+def test_one_term_is_compared_when_the_non_parametric_force_fits_about_as_well():
+    """The equal-fit trigger: the non-parametric force's excess R (J_alt - J_sel) against chi²(k) at 5 %; for k = 2
+    the critical value is -2 ln 0.05 (the chi²(2) survival function is exp(-x/2))."""
+    names = ("m",)
+    R, J = 20000, 1.01
+    margin = -2.0 * np.log(0.05)
+    for excess, equal in ((margin - 0.5, True), (margin + 0.5, False), (-40.0, True)):
+        alt = fake_unexplained(names, [1310.0], [3.0], samples=R, chi2_after=J + excess / R)
+        assert fit_about_equally(J, 2, alt)[0] is equal
+        np.testing.assert_allclose(fit_about_equally(J, 2, alt)[1:], [excess, margin], rtol=1e-9)
+        mu = compare_explanations(["sqrt_like_effect"], names, [1295.0], [2.0], alt, fit=(J, 2))
+        assert (mu is not None) is equal
+        if equal:
+            assert mu.trigger == "equal fit" and mu.imitates
+            assert ("fit worse than the non-parametric" if excess < -margin else "fit about equally") in mu.summary()
+            assert mu.to_json()["trigger"] == "equal fit"
+    assert compare_explanations([], names, [1295.0], [2.0], alt, fit=(J, 2)) is None  # nothing selected
+
+
+def test_every_output_marks_the_model_based_the_misfit_and_the_widened_intervals():
+    """A diagnosis whose selected terms imitate a law: the verdict says so, the JSON carries ci95 (the model assumed),
+    ci95_misfit and ci95_model_uncertainty side by side, the terminal table and the HTML page mark each kind."""
+    names = ("m", "Ix")
+    x, ci = np.array([1292.0, 517.0]), np.array([1.5, 5.0])
+    terms = ("coulomb_friction", "parameter:cr")
+    mu = compare_explanations(terms, names, x, ci, fake_unexplained(names, [1300.0, 519.0], [3.0, 6.0]))
+    before = ModelReport((), names, x - 10.0, ci, 4.0, 4.0, 4.1, 5.0)
+    after = ModelReport(terms, (*names, "cr"), np.append(x, 3800.0), np.append(ci, 20.0), 1.01, 1.01, 1.02, 0.5,
+                        ci_misfit=np.array([2.0, 6.0, 25.0]))  # fmt: skip
+    d = Diagnosis(before, after, (), terms, 0.05, "held-out blocks", "estimated", 1.0, chi2_limit=1.05,
+                  model_uncertainty=mu)  # fmt: skip
+    assert d.verdict.startswith("incomplete: library terms imitate a law they do not contain"), d.verdict
+    out = d.to_json()
+    assert out["after"]["ci95"]["m"] == [1290.5, 1293.5]
+    assert out["after"]["ci95_misfit"]["m"] == [1290.0, 1294.0]
+    assert out["after"]["ci95_model_uncertainty"]["m"] == [float(mu.low[0]), float(mu.high[0])]
+    assert out["model_uncertainty"]["trigger"] == "crowded"
+    console = Console(width=80, record=True)
+    console.print(diagnosis_tables(d))
+    text = console.export_text()
+    assert "m 95 % (misfit)" in text and "m 95 % (model unc.)" in text
+    assert "(model unc.): 95 % covering" in text and "assuming the model right" in text
+    html = diagnosis_page(d, {}, figures=False)
+    assert "(model unc.)" in html and "(misfit)" in html and "imitate a law they do not contain" in html
+
+
+def test_a_found_verdict_says_when_the_loop_stopped_on_two_candidates_it_could_not_tell_apart():
+    names = ("m",)
+    rep = ModelReport(("parameter:kf",), names, np.array([1300.0]), np.array([2.0]), 1.0, 1.0, 1.0, 0.1)
+    note = "cannot tell parameter:kr (LR 40) from parameter:ktr (LR 41) apart on these data: neither added"
+    d = Diagnosis(rep, rep, (), ("parameter:kf",), 0.05, "", "", 0.0, notes=(note,), chi2_limit=1.05)
+    assert d.verdict.startswith("found: parameter:kf; the residual is now at the noise")
+    assert d.verdict.endswith(f"(then stopped: {note})")
+    plain = Diagnosis(rep, rep, (), ("parameter:kf",), 0.05, "", "", 0.0, chi2_limit=1.05).verdict
+    assert plain.startswith("found") and "then stopped" not in plain
 
 
 def bench_run(amplitude, frequency, law, seed, n=2000, dt=0.005, noise=5.0):

@@ -98,6 +98,23 @@ def test_the_saved_config_keeps_the_wheelbase_and_takes_a_diagnosed_effect(tmp_p
     assert "interval unknown" in text
 
 
+def test_a_wrong_models_saved_config_marks_each_kind_of_interval(tmp_path):
+    """Issue 25: where the final model is wrong, each saved value's comment gives the interval assuming the model,
+    the one surviving the misfit and, where library terms imitate a law, the one covering the model uncertainty."""
+    after = SimpleNamespace(names=("m", "kf"), x=np.array([1310.0, 50000.0]), ci=np.array([2.0, 100.0]),
+                            ci_misfit=np.array([6.0, np.nan]))  # fmt: skip
+    mu = SimpleNamespace(imitates=True, names=("m",), low=np.array([1296.0]), high=np.array([1318.0]))
+    result = SimpleNamespace(after=after, selected=("parameter:kf",), model_uncertainty=mu)
+    found = diagnosis_found(result, ["run.csv"])
+    target = save_config(BASE_CONFIG, [], found, tmp_path / "saved.yaml", command="vehid diagnose")
+    m_line = next(line for line in target.read_text().splitlines() if line.strip().startswith("m:"))
+    assert "95 % interval [1308, 1312] kg; assuming the model right" in m_line
+    assert "surviving the misfit [1304, 1316]" in m_line
+    assert "covering the model uncertainty (library terms imitate a law) [1296, 1318]" in m_line
+    kf_line = next(line for line in target.read_text().splitlines() if line.strip().startswith("kf:"))
+    assert "misfit" not in kf_line and "assuming" not in kf_line  # one interval: nothing to tell apart
+
+
 def test_files_named_relative_to_the_config_stay_found(tmp_path):
     """A measured damper's data.file and data.validate are relative to its config: in the saved config they are
     relative to the saved file, wherever it goes."""

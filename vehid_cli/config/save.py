@@ -17,7 +17,7 @@ import copy
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ class Identified:
     provenance: str
     at_bound: Sequence[str] = ()
     label: str = ""  # the run in a few words, for each value's comment (the data file and the date)
+    notes: Mapping[str, str] = field(default_factory=dict)  # per value: other intervals, marked (misfit, model unc.)
 
 
 def save_config(
@@ -89,7 +90,8 @@ def _comment(edit: ConfigEdit, found: Identified, unit: str = "") -> str:
         ci = f"95 % interval [{pair[0]:.6g}, {pair[1]:.6g}]{unit_text}" if ok else "95 % interval unknown"
     value = "" if edit.key.endswith(edit.name) else f"{edit.name} = {found.values[edit.name]:.6g}, "
     run = f" ({found.label})" if found.label else ""
-    return f"identified{run}: {value}{ci}" + (f"; {edit.note}" if edit.note else "")
+    other = found.notes.get(edit.name)
+    return f"identified{run}: {value}{ci}" + (f"; {other}" if other else "") + (f"; {edit.note}" if edit.note else "")
 
 
 def _dump(cfg: SystemConfig) -> dict:

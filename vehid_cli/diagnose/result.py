@@ -159,8 +159,9 @@ class Diagnosis(Result):
                 noun = getattr(self.unexplained, "noun", "strut force")
                 out += f"; the unexplained {noun} {self.unexplained.summary()}"
             return out + (f" (then stopped: {ambiguous})" if ambiguous else "")
-        if self.selected:
-            return f"found: {found}; the residual is now at the noise{level}"
+        if self.selected:  # a rival pair the data could not tell apart is said: one of them may still be missing
+            then = f" (then stopped: {ambiguous})" if ambiguous else ""
+            return f"found: {found}; the residual is now at the noise{level}{then}"
         return f"adequate: nothing missing, the residual is at the noise{level}"
 
     def to_json(self) -> dict:

@@ -11,10 +11,14 @@ far outside their intervals). Two signs that the selected explanation is such an
   jointly with the declared unknowns (`unexplained.py`), puts the declared unknowns elsewhere: farther apart than
   the two fits' 95 % intervals together (sqrt(ci_a² + ci_b²)).
 
-Both together make the verdict "incomplete: library terms imitate a law they do not contain", and the declared
-unknowns' intervals are widened to the union of the two explanations' intervals (the final model's taken from its
-misfit-robust sandwich where that is wider; both reported, the widened ones marked as covering the model
-uncertainty).
+The comparison is made when the terms crowd on one element, or when the two explanations fit about equally
+(`fit_about_equally`: the non-parametric force fits the training data no worse than the selected terms, beyond what
+chance gives a chi²(k) of the terms' k parameters at ALPHA; whatever the number of terms). A disagreement makes the
+verdict "incomplete: library terms imitate a law they do not contain", and the declared unknowns' intervals are
+widened to cover both explanations (`widened`: the final model's interval, from its misfit-robust sandwich where
+that is wider, grown by the spread between the explanations on either side, joined with the alternative's: the
+spread is model uncertainty, not sampling error); both reported, the widened ones marked as covering the model
+uncertainty.
 """
 
 from __future__ import annotations
@@ -24,12 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from ..core.result import Result
 from ..models.effects import LIBRARY
 from .shapes import PARAMETER_AFFINITY, all_shapes
 
 IMITATION_TERMS = 2  # library terms on one element of the strut from which the explanation is compared
+ALPHA = 0.05  # level at which one explanation fits the training data significantly better than the other
 AXLE_SUFFIX = ("f", "r")
 
 
@@ -71,8 +77,11 @@ class ModelUncertainty(Result):
     selected_ci: NDArray  # 95 % half-widths
     alternative: NDArray  # their estimates beside the non-parametric force
     alternative_ci: NDArray
-    low: NDArray  # the widened 95 % interval: the union of both explanations' intervals
+    low: NDArray  # the widened 95 % interval, covering both explanations (`widened`)
     high: NDArray
+    trigger: str = "crowded"  # why the explanations were compared: "crowded" (terms on one element), "equal fit"
+    fit_gap: float | None = None  # R (J_alternative - J_selected): the alternative's excess chi² (negative: better)
+    fit_margin: float | None = None  # the chi²(k) critical value at ALPHA the excess stays under (equal fit)
 
     @property
     def separation(self) -> NDArray:
@@ -91,8 +100,15 @@ class ModelUncertainty(Result):
 
     def summary(self) -> str:
         """One clause for the verdict."""
+        where = f" on the strut {self.element}" if self.element else ""
+        better = self.fit_gap is not None and self.fit_margin is not None and self.fit_gap < -self.fit_margin
+        how = {
+            "crowded": "fit the residual",
+            "equal fit": "fit worse than the non-parametric strut force" if better
+            else "and the non-parametric strut force fit about equally",
+        }[self.trigger]  # fmt: skip
         return (
-            f"{', '.join(self.terms)} on the strut {self.element} fit the residual, but the non-parametric strut "
+            f"{', '.join(self.terms)}{where} {how}, but the non-parametric strut "
             f"force puts the declared unknowns elsewhere (up to {float(np.max(self.separation)):.3g}x their "
             f"intervals apart, {self.worst}); their 95 % intervals are widened to cover both"
         )
@@ -105,8 +121,11 @@ class ModelUncertainty(Result):
         return {
             "reason": "library terms imitate a law they do not contain",
             "imitates": self.imitates,
-            "element": f"strut {self.element}",
+            "trigger": self.trigger,
+            "element": f"strut {self.element}" if self.element else None,
             "terms": list(self.terms),
+            "fit_gap": self.fit_gap,
+            "fit_margin": self.fit_margin,
             "selected": {"estimates": dict(zip(self.names, map(float, sel), strict=True)),
                          "ci95": pairs(sel - self.selected_ci, sel + self.selected_ci)},
             "non_parametric": {"estimates": dict(zip(self.names, map(float, alt), strict=True)),
@@ -116,6 +135,27 @@ class ModelUncertainty(Result):
         }  # fmt: skip
 
 
+def fit_about_equally(J_selected: float, k: int, unexplained) -> tuple[bool, float, float]:
+    """Do the selected terms (training chi² per sample J_selected, k parameters beyond the declared model) and the
+    non-parametric strut force (`unexplained`: its chi² per sample after, over its R samples) fit the training data
+    about equally? The alternative's excess R (J_alt - J_sel) must stay under the chi²(k) critical value at ALPHA:
+    no worse than chance makes k parameters' worth of chi² (an alternative that fits better counts, all the more).
+    Returns (equal, excess, margin)."""
+    gap = float(unexplained.samples * (unexplained.chi2_after - J_selected))
+    margin = float(stats.chi2.isf(ALPHA, max(int(k), 1)))
+    return bool(np.isfinite(gap) and gap <= margin), gap, margin
+
+
+def widened(x: NDArray, wide: NDArray, alt: NDArray, alt_ci: NDArray) -> tuple[NDArray, NDArray]:
+    """The 95 % interval covering two explanations: the selected estimate x (half-width `wide`) and the alternative
+    alt (alt_ci). The spread s = |x - alt| is model uncertainty that neither's sampling interval holds, and the
+    selected terms' bias is at least that large in an unknown direction: x ± (wide + s), joined with the alternative's
+    own interval alt ± alt_ci. (The union of the two intervals alone misses a truth beyond both estimates: the weak
+    square-root damper put m 2.4 and 2.5 intervals' widths beyond its two estimates, on the same side.)"""
+    s = np.abs(x - alt)
+    return np.minimum(x - wide - s, alt - alt_ci), np.maximum(x + wide + s, alt + alt_ci)
+
+
 def compare_explanations(
     selected: Sequence[str],
     names: Sequence[str],
@@ -123,14 +163,23 @@ def compare_explanations(
     ci: NDArray,
     unexplained,
     ci_misfit: NDArray | None = None,
+    fit: tuple[float, int] | None = None,
 ) -> ModelUncertainty | None:
     """The declared unknowns `names` = x (95 % half-widths ci) of the final model with the `selected` terms against
     the non-parametric explanation (`unexplained`: an Unexplained fitted with the declared unknowns as nuisance),
-    when the selected terms crowd on one element of the strut; None when they do not, or nothing to compare. The
-    widened intervals take the final model's misfit intervals (`ci_misfit`, where the residual is above the noise)
-    where they are wider than ci."""
+    when the selected terms crowd on one element of the strut, or (`fit` = (the final model's training J, its
+    parameters beyond the declared ones)) when both explanations fit about equally; None when neither, nothing is
+    selected or nothing to compare. The widened intervals take the final model's misfit intervals (`ci_misfit`,
+    where the residual is above the noise) where they are wider than ci."""
+    if not selected or unexplained is None or unexplained.unknowns is None or unexplained.dx_ci is None:
+        return None
     crowd = crowded_element(selected)
-    if crowd is None or unexplained is None or unexplained.unknowns is None or unexplained.dx_ci is None:
+    trigger, gap, margin = "crowded", None, None
+    if fit is not None and getattr(unexplained, "samples", None):
+        equal, gap, margin = fit_about_equally(fit[0], fit[1], unexplained)
+        if crowd is None and equal:
+            trigger = "equal fit"
+    if crowd is None and trigger != "equal fit":
         return None
     idx = [list(unexplained.names).index(n) for n in names if n in unexplained.names]
     if len(idx) != len(names):
@@ -140,16 +189,17 @@ def compare_explanations(
     if not (np.all(np.isfinite(ci)) and np.all(np.isfinite(alt_ci))):
         return None
     wide = ci if ci_misfit is None else np.fmax(ci, np.asarray(ci_misfit, dtype=float))
-    low = np.minimum(x - wide, alt - alt_ci)
-    high = np.maximum(x + wide, alt + alt_ci)
-    return ModelUncertainty(crowd[0], crowd[1], tuple(names), x, ci, alt, alt_ci, low, high)
+    low, high = widened(x, wide, alt, alt_ci)
+    element, terms = crowd if crowd is not None else ("", tuple(selected))
+    return ModelUncertainty(element, terms, tuple(names), x, ci, alt, alt_ci, low, high, trigger, gap, margin)
 
 
 def compare_reports(selected: Sequence[str], names: Sequence[str], after, unexplained) -> ModelUncertainty | None:
-    """compare_explanations for the declared unknowns `names` in the final model's report `after` (its names, x, ci
-    and ci_misfit)."""
+    """compare_explanations for the declared unknowns `names` in the final model's report `after` (its names, x, ci,
+    ci_misfit, and its training J and parameter count beyond `names` for the equal-fit test)."""
     if unexplained is None or not all(n in after.names for n in names):
         return None
     idx = [list(after.names).index(n) for n in names]
     misfit = None if after.ci_misfit is None else np.asarray(after.ci_misfit)[idx]
-    return compare_explanations(selected, names, after.x[idx], after.ci[idx], unexplained, misfit)
+    k = len([n for n in after.names if n not in names and n not in after.fixed])
+    return compare_explanations(selected, names, after.x[idx], after.ci[idx], unexplained, misfit, (after.J, k))

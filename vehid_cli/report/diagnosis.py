@@ -60,9 +60,15 @@ def diagnosis_tables(result):
             ba.add_row(escape(f"{name} 95 % (misfit)"), "", "-" if not np.isfinite(a.ci_misfit[j]) else
                        f"{a.x[j]:.5g} ± {a.ci_misfit[j]:.2g}")  # fmt: skip
     mu = getattr(result, "model_uncertainty", None)
+    marks = ["estimates ± 95 % assuming the model right"]
+    if getattr(a, "ci_misfit", None) is not None:
+        marks.append("(misfit): 95 % surviving the misfit (sandwich)")
     if mu is not None and mu.imitates:  # the intervals that cover the explanations' spread, marked as such
         for name, lo, hi in zip(mu.names, mu.low, mu.high, strict=True):
             ba.add_row(escape(f"{name} 95 % (model unc.)"), "", f"[{lo:.5g}, {hi:.5g}]")
+        marks.append("(model unc.): 95 % covering the library terms and the non-parametric force")
+    if len(marks) > 1:
+        ba.caption = escape("; ".join(marks))
     return Group(table, ba)
 
 

@@ -50,14 +50,31 @@ def campaign_found(campaign: Campaign, results_file: str | Path | None = None) -
 
 def diagnosis_found(result, data: Sequence[str | Path]) -> Identified:
     """The diagnosis's final model (`result.after`): every estimate (declared unknowns, freed parameters, the
-    selected effects' parameters, shape parameters held fixed included) with its interval (none where fixed)."""
+    selected effects' parameters, shape parameters held fixed included) with its interval (none where fixed), which
+    assumes the model right; where the model is wrong the comments add, marked, the interval surviving the misfit
+    (`ci_misfit`) and the one covering the model uncertainty (library terms imitating a law)."""
     after = result.after
-    values, ci = {}, {}
-    for name, x, h in zip(after.names, after.x, after.ci, strict=True):
+    misfit = getattr(after, "ci_misfit", None)
+    mu = getattr(result, "model_uncertainty", None)
+    imitates = mu is not None and mu.imitates
+    widened = {n: (lo, hi) for n, lo, hi in zip(mu.names, mu.low, mu.high, strict=True)} if imitates else {}
+    values, ci, notes = {}, {}, {}
+    for j, (name, x, h) in enumerate(zip(after.names, after.x, after.ci, strict=True)):
         if is_sensor_unknown(name):
             continue
         values[name] = float(x)
         ci[name] = (float(x - h), float(x + h)) if np.isfinite(h) else None
+        other = []
+        if ci[name] is not None:
+            other.append("assuming the model right")
+        if misfit is not None and np.isfinite(misfit[j]):
+            other.append(f"surviving the misfit [{x - misfit[j]:.6g}, {x + misfit[j]:.6g}]")
+        if name in widened:
+            lo, hi = widened[name]
+            other.append(f"covering the model uncertainty (library terms imitate a law) [{lo:.6g}, {hi:.6g}]")
+        if len(other) > 1:
+            notes[name] = "; ".join(other)
     selected = ", ".join(result.selected) or "nothing"
     runs = " + ".join(Path(f).name for f in data) or "the config's data"
-    return Identified(values, ci, f"vehid diagnose on {runs} (selected: {selected}), {_now()}", (), _label(data))
+    return Identified(values, ci, f"vehid diagnose on {runs} (selected: {selected}), {_now()}", (), _label(data),
+                      notes)  # fmt: skip
