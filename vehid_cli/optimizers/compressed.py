@@ -29,18 +29,50 @@ BLOCK_ROWS = 8192  # rows of [J r] per step of the blocked QR: 0.7 MB for D = 9
 def compress(jt: NDArray, r: NDArray, block: int = BLOCK_ROWS) -> tuple[NDArray, NDArray, float]:
     """The compressed least-squares pair of the Jacobian `jt` (D, R) (transposed: row j is the residual's derivative
     by unknown j) and the residual r (R,): (Rj (D, D), z (D,), rho) with J'J = Rj'Rj, J'r = Rj'z and
-    r'r = z'z + rho². The QR runs over blocks of `block` rows (a tall-skinny QR), never on the whole (R, D + 1)."""
+    r'r = z'z + rho², the R factor of the QR of A = [J r] (R, D + 1).
+
+    CholeskyQR2 over blocks of `block` rows: the Cholesky factor R1 of A'A with A's columns scaled to unit norm,
+    then R2 of (A R1⁻¹)'(A R1⁻¹), R = R2 R1; as accurate as a Householder QR while A R1⁻¹ is well conditioned
+    (scaled condition of A below about 1e7), and a matrix product per pass instead of LAPACK's column by column
+    (0.06 s rather than 1.5 s for 768 000 x 10). Beyond that (the Cholesky fails, or A R1⁻¹ is still far from
+    orthonormal) it falls back to a blocked Householder QR (`_householder`)."""
+    D, R = jt.shape
+    gram = np.zeros((D + 1, D + 1))
+    for start in range(0, R, block):
+        a = _block(jt, r, start, min(start + block, R))
+        gram += a.T @ a
+    scale = np.sqrt(np.diag(gram))
+    scale[~(scale > 0)] = 1.0
+    try:
+        r1 = np.linalg.cholesky(gram / scale[:, None] / scale[None, :]).T * scale[None, :]
+        inverse = np.linalg.inv(r1)
+        second = np.zeros((D + 1, D + 1))
+        for start in range(0, R, block):
+            q = _block(jt, r, start, min(start + block, R)) @ inverse
+            second += q.T @ q
+        if not np.all(np.isfinite(second)) or np.max(np.abs(second - np.eye(D + 1))) > 1e-2:
+            raise np.linalg.LinAlgError("A R1^-1 is far from orthonormal")
+        top = np.linalg.cholesky(second).T @ r1
+    except np.linalg.LinAlgError:
+        top = _householder(jt, r, block)
+    return top[:D, :D], top[:D, D], float(abs(top[D, D]))
+
+
+def _block(jt: NDArray, r: NDArray, start: int, stop: int) -> NDArray:
+    """Rows start:stop of A = [J r] (stop - start, D + 1)."""
+    a = np.empty((stop - start, jt.shape[0] + 1))
+    a[:, :-1] = jt[:, start:stop].T
+    a[:, -1] = r[start:stop]
+    return a
+
+
+def _householder(jt: NDArray, r: NDArray, block: int) -> NDArray:
+    """The R factor (D + 1, D + 1) of [J r] by Householder QR over blocks of rows (a tall-skinny QR)."""
     D, R = jt.shape
     top = np.zeros((D + 1, D + 1))
-    part = np.empty((min(block, R) + D + 1, D + 1))
     for start in range(0, R, block):
-        stop = min(start + block, R)
-        rows = stop - start
-        part[: D + 1] = top
-        part[D + 1 : D + 1 + rows, :D] = jt[:, start:stop].T
-        part[D + 1 : D + 1 + rows, D] = r[start:stop]
-        top = np.linalg.qr(part[: D + 1 + rows], mode="r")
-    return top[:D, :D], top[:D, D], float(abs(top[D, D]))
+        top = np.linalg.qr(np.vstack([top, _block(jt, r, start, min(start + block, R))]), mode="r")
+    return top
 
 
 def trf_compressed(
