@@ -114,8 +114,7 @@ class Experiment:
         if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
             return self.read(self.simulate(values))
         (P,) = sizes
-        per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
-        chunk = max(1, CHUNK_BYTES // per_car)
+        chunk = self.cars_per_chunk
         if P <= chunk:
             return self.read(self.simulate(values))
         parts = []
@@ -123,6 +122,13 @@ class Experiment:
             part = {k: (v[start : start + chunk] if np.ndim(v) == 1 else v) for k, v in (values or {}).items()}
             parts.append(self.read(self.simulate(part)))
         return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
+
+    @property
+    def cars_per_chunk(self) -> int:
+        """How many cars `outputs` simulates at once: their full response (about 45 columns per sample) within
+        CHUNK_BYTES, at least one car."""
+        per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
+        return max(1, CHUNK_BYTES // per_car)
 
     @cached_property
     def noise(self) -> NoiseModel:

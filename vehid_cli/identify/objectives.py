@@ -98,8 +98,13 @@ class Objective:
             d -= np.mean(d, axis=-2, keepdims=True)
             return d
         m = self.observed[family]
-        d -= np.sum(d * m, axis=-2, keepdims=True) / np.sum(m, axis=0)
+        d -= np.sum(d * m, axis=-2, keepdims=True) / self._counts[family]
         return d
+
+    @cached_property
+    def _counts(self) -> dict[str, NDArray]:
+        """(k,) the number of observed samples of each channel, per family (counted once, not per evaluation)."""
+        return {f: np.sum(m, axis=0) for f, m in (self.observed or {}).items()}
 
     def _norms(self, family: str, d: NDArray) -> NDArray:
         """Norm over time of each channel (..., k), over the observed samples only."""
@@ -133,14 +138,25 @@ class Objective:
         return num / den
 
     def residuals(self, outputs: Mapping[str, NDArray]) -> NDArray:
-        """Weighted residuals (ref - sim) / sigma of all observed channel samples, flattened (..., R)."""
-        parts = []
+        """Weighted residuals (ref - sim) / sigma of all observed channel samples, flattened (..., R), each family's
+        written straight into its columns (no list of parts concatenated: a long record's residuals are tens of MB
+        per copy)."""
+        out = None
+        first = 0
         for family in self.reference:
             r = self.error(family, outputs[family])
-            r /= self.sigma[family]  # in place: a long record's residuals are tens of MB per copy
+            r /= self.sigma[family]  # in place
             r = r.reshape(r.shape[:-2] + (-1,))
-            parts.append(r[..., self._keep[family]] if family in self._keep else r)
-        return np.concatenate(parts, axis=-1)
+            if out is None:
+                out = np.empty(r.shape[:-1] + (self.size,))
+            keep = self._keep.get(family)
+            size = r.shape[-1] if keep is None else keep.size
+            if keep is None:
+                out[..., first : first + size] = r
+            else:
+                np.take(r, keep, axis=-1, out=out[..., first : first + size])
+            first += size
+        return out if out is not None else np.zeros(0)
 
     def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""

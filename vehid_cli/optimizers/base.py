@@ -121,7 +121,9 @@ class Search:
         bad = ~np.isfinite(costs) | ~np.all(np.isfinite(residuals), axis=1)
         self.penalised += int(bad.sum())
         costs = np.where(bad, self.problem.penalty, costs)
-        residuals = np.where(bad[:, None], np.sqrt(self.problem.penalty), residuals)
+        if bad.any():  # in place, and only then: a long record's residuals are tens of MB per copy
+            residuals = np.array(residuals)
+            residuals[bad] = np.sqrt(self.problem.penalty)
         self.evaluations += len(X)
         i = int(np.argmin(costs))
         if costs[i] < self.best_cost:
