@@ -142,6 +142,17 @@ class Objective:
             parts.append(r[..., self._keep[family]] if family in self._keep else r)
         return np.concatenate(parts, axis=-1)
 
+    def residual_jacobian(self, sens: Mapping[str, NDArray]) -> NDArray:
+        """(R, D) the weighted residuals' derivatives from the model channels' derivatives `sens` (family -> (n, k, D)):
+        -(d sim) / sigma, without what the profiled offsets absorb, at the observed entries, in `residuals`' order."""
+        parts = []
+        for family in self.reference:
+            d = np.moveaxis(np.asarray(sens[family], dtype=float), -1, 0)  # (D, n, k)
+            d = self.project(family, -d) / self.sigma[family]
+            d = d.reshape(d.shape[0], -1)
+            parts.append(d[:, self._keep[family]] if family in self._keep else d)
+        return np.concatenate(parts, axis=-1).T
+
     def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""
         residuals = self.residuals(outputs)
