@@ -18,7 +18,7 @@ from vehid_cli.identify.experiment import build_experiment
 from vehid_cli.identify.task import build_task
 from vehid_cli.optimizers import get_optimizer
 from vehid_cli.optimizers.base import Search
-from vehid_cli.optimizers.lsq import gauss_newton, polish
+from vehid_cli.optimizers.lsq import STEP_SD, gauss_newton, polish
 from vehid_cli.sim.modal import linear_foh
 from vehid_cli.sim.sensitivity import linear_sensitivities
 
@@ -141,8 +141,8 @@ def test_bound_from_exact_sensitivities_is_the_central_difference_bound():
 
 
 def test_levenberg_marquardt_reaches_the_trust_region_minimum():
-    """From the same random start, lsq on the exact linearisation stops within 1e-3 of a standard deviation (the
-    bound) of scipy's trust region on forward differences, run to 1e-12, in a handful of evaluations."""
+    """From the same random start, lsq on the exact linearisation stops within 2 STEP_SD standard deviations (the
+    bound's) of scipy's trust region on forward differences, run to 1e-12, in a handful of evaluations."""
     cfg = load_config(BASE_CONFIG, ["identify.algorithm.name=lsq", "identify.objective=wls"])
     task = build_task(cfg)
     sd = task.bound().sd
@@ -154,7 +154,7 @@ def test_levenberg_marquardt_reaches_the_trust_region_minimum():
     plain = dataclasses.replace(problem, linearised=None)
     plain_run = Search(problem=plain, rng=np.random.default_rng(0), budget=1000)
     polish(plain_run, x0)
-    assert np.all(np.abs(x_exact - plain_run.best_x) <= 1e-3 * sd)
+    assert np.all(np.abs(x_exact - plain_run.best_x) <= 2 * STEP_SD * sd)
     assert exact_run.evaluations <= 12 < plain_run.evaluations
     result = get_optimizer("lsq").minimize(problem, run_streams(cfg.identify.seed, 3).optimizer, budget=1000)
     assert np.array_equal(result.x, x_exact)

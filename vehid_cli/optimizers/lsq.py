@@ -55,7 +55,7 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
     return result.x
 
 
-STEP_SD = 1e-4  # gauss_newton stops when its step is below this many of the estimate's standard deviations
+STEP_SD = 1e-2  # gauss_newton stops when its step is below this many of the estimate's standard deviations
 MAX_STEPS = 200  # gauss_newton's steps (accepted or not) at most
 
 

@@ -153,7 +153,7 @@ def linear_sensitivities(
          np.concatenate([lanes(be[..., None] * bm), lanes(gb)], axis=1)]
     )  # fmt: skip
     steps = np.concatenate([u[:-1], u[1:]], axis=1)  # (n - 1, 2 nu)
-    drive = np.concatenate([steps @ gains.real, steps @ gains.imag], axis=1)
+    drive = steps @ np.concatenate([gains.real, gains.imag], axis=1)  # contiguous: BLAS
     zout = np.empty((n, P, 2 * m))
     wout = np.empty((P, n, D, 2 * m))
     _sensitivity_recursion(
@@ -169,9 +169,9 @@ def linear_sensitivities(
         Rg = np.concatenate([Gk[p].T.real, -Gk[p].T.imag])  # (2m, ny)
         np.matmul(wout[p].reshape(n * D, 2 * m), Rg, out=dY[p].reshape(n * D, ny))
         dY[p] += Z[:, ny:].reshape(n, D, ny)
-    Y += u @ np.swapaxes(Dy, -1, -2)
-    dY += (u @ dDy.transpose(0, 3, 1, 2).reshape(P, nu, D * ny)).reshape(P, n, D, ny)
-    return Y, np.swapaxes(dY, -1, -2), ok
+        Y[p] += u @ Dy[p].T
+        dY[p] += (u @ dDy[p].transpose(2, 0, 1).reshape(nu, D * ny)).reshape(n, D, ny)
+    return Y, np.ascontiguousarray(np.swapaxes(dY, -1, -2)), ok
 
 
 def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, NDArray]:
