@@ -158,6 +158,23 @@ class Objective:
             first += size
         return out if out is not None else np.zeros(0)
 
+    def residual_jacobian(self, sens: Mapping[str, NDArray]) -> NDArray:
+        """(R, D) the weighted residuals' derivatives from the model channels' derivatives `sens` (family -> (n, k, D)):
+        -(d sim) / sigma, without what the profiled offsets absorb, at the observed entries, in `residuals`' order."""
+        parts = []
+        for family in self.reference:
+            d = np.asarray(sens[family], dtype=float)
+            d = d / -np.asarray(self.sigma[family], dtype=float)[:, None]  # (n, k, D), a new C-ordered array
+            if self.offsets:  # the residual's mean over each channel's samples is profiled out: so is its derivative
+                if self.observed is None:
+                    d -= d.mean(axis=0)
+                else:
+                    m = np.asarray(self.observed[family], dtype=float)[:, :, None]
+                    d -= np.sum(d * m, axis=0) / np.sum(m, axis=0)
+            d = d.reshape(-1, d.shape[-1])  # rows time-major, like the residuals
+            parts.append(d[self._keep[family]] if family in self._keep else d)
+        return np.concatenate(parts, axis=0)
+
     def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""
         residuals = self.residuals(outputs)

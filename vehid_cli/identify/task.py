@@ -195,7 +195,18 @@ class Task:
         def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
             return chunked_residuals(objective.costs_and_residuals, simulate, X, self.experiment.cars_per_chunk)
 
-        return Problem(self.lower, self.upper, cost, cost_and_residuals, names=names)
+        def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
+            with np.errstate(all="ignore"):
+                got = self.experiment.exact_sensitivities(names, x)
+                if got is None:
+                    return None
+                costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()})
+                return float(costs[0]), residuals[0], objective.residual_jacobian(got[1])
+
+        exact = not self.corrections and self.experiment.exact_applies(names)
+        return Problem(
+            self.lower, self.upper, cost, cost_and_residuals, names=names, linearised=linearised if exact else None
+        )
 
     def outputs(self, values: Mapping[str, NDArray]) -> dict[str, NDArray]:
         """The model's channels (family -> (P, n, k)) for a batch of the unknowns' values, as the measurement chain

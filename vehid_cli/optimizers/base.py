@@ -8,6 +8,7 @@ replaces non-finite costs by a finite penalty, and records the best-cost history
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -19,6 +20,8 @@ from numpy.typing import NDArray
 
 BatchCost = Callable[[NDArray], NDArray]  # (P, D) -> (P,)
 CostAndResiduals = Callable[[NDArray], tuple[NDArray, NDArray]]  # (P, D) -> costs (P,), residuals (P, R)
+# x (D,) -> cost, residuals (R,) and their exact derivatives d r / dx (R, D) from one simulation; None where unavailable
+Linearised = Callable[[NDArray], "tuple[float, NDArray, NDArray] | None"]
 
 
 @dataclass(frozen=True)
@@ -37,6 +40,7 @@ class Problem:
     residuals: CostAndResiduals | None = None
     penalty: float = 1e10
     names: tuple[str, ...] = ()
+    linearised: Linearised | None = None  # cost, residuals and their exact Jacobian at one point (None: not known)
 
     @property
     def dim(self) -> int:
@@ -103,6 +107,30 @@ class Search:
         if take < len(X):
             raise BudgetExhausted
         return costs
+
+    def evaluate_linearised(self, x: NDArray) -> tuple[NDArray, NDArray, NDArray] | None:
+        """Cost, residuals (R,) and their exact Jacobian (R, D) at x (clipped into the box) from the problem's
+        `linearised` (one simulation of the response and its sensitivities), counted as one evaluation and tracked
+        like ``evaluate``; None when the problem has none or its numbers there are not finite. Raises
+        BudgetExhausted when no evaluation is left."""
+        if self.problem.linearised is None:
+            return None
+        if self.remaining < 1:
+            raise BudgetExhausted
+        x = np.clip(np.asarray(x, dtype=float), self.problem.lower, self.problem.upper)
+        got = self.problem.linearised(x)
+        if got is None:
+            return None
+        cost, r, J = got
+        self.evaluations += 1
+        ok = np.isfinite(cost) and np.all(np.isfinite(r)) and np.all(np.isfinite(J))
+        if not ok:
+            self.penalised += 1
+        elif cost < self.best_cost:
+            self.best_cost, self.best_x = float(cost), x.copy()
+        self.history_evals.append(self.evaluations)
+        self.history_cost.append(self.best_cost)
+        return (np.asarray(cost), r, J) if ok else None
 
     def evaluate_residuals(self, X: NDArray) -> NDArray:
         """Residual vectors (P, R) of a population, counted and tracked like ``evaluate``.
@@ -174,7 +202,7 @@ class Optimizer(ABC):
         lo, hi = np.asarray(problem.lower, dtype=float), np.asarray(problem.upper, dtype=float)
         if lo.shape != hi.shape or lo.ndim != 1 or np.any(~(lo < hi)):
             raise ValueError("bounds must be 1-D with lower < upper")
-        problem = Problem(lo, hi, problem.cost, problem.residuals, problem.penalty, problem.names)
+        problem = dataclasses.replace(problem, lower=lo, upper=hi)
         run = Search(problem=problem, rng=rng, budget=int(budget if budget is not None else self.default_budget()))
         start = time.perf_counter()
         iterations, message = 0, "iterations done"

@@ -1,10 +1,14 @@
 """Trust-region least squares (scipy's 'trf') on the weighted residual vector, inside the box.
 
 Minimising the sum of squared weighted residuals is the Gaussian maximum-likelihood estimate, which is
-what reaches the Cramér–Rao bound. The Jacobian is a forward difference computed in ONE batched
-evaluation of the D perturbed points (counted as D evaluations), reusing the residual at the centre.
-A Jacobian above LONG_JACOBIAN_BYTES (a long record) is fitted compressed (`compressed.py`): the same steps on
-D + 1 rows, without scipy's copies of the (R, D) matrix.
+what reaches the Cramér–Rao bound. A problem that gives its residuals with their exact Jacobian from one
+simulation (`Problem.linearised`: the linear car's sensitivities through the same modal solution) is solved by
+Levenberg–Marquardt on them (`gauss_newton`), one evaluation per step, stopping once the step is a negligible
+fraction of the estimate's own standard deviation; otherwise scipy's trust-region least squares, whose Jacobian is
+a forward difference computed in ONE batched evaluation of the D perturbed points (counted as D evaluations),
+reusing the residual at the centre.
+A forward-difference Jacobian above LONG_JACOBIAN_BYTES (a long record) is fitted compressed (`compressed.py`):
+the same steps on D + 1 rows, without scipy's copies of the (R, D) matrix.
 """
 
 from __future__ import annotations
@@ -63,6 +67,55 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
     return result.x
 
 
+STEP_SD = 1e-2  # gauss_newton stops when its step is below this many of the estimate's standard deviations
+MAX_STEPS = 200  # gauss_newton's steps (accepted or not) at most
+MU_GIVE_UP = 1e12  # damping beyond which a rejected step means no step helps (its length is ~1e-12 of Newton's)
+
+
+def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
+    """Levenberg–Marquardt from x0 on the problem's exact linearisation, inside the box; the final point, or None
+    when the problem has no linearisation at x0 (the caller falls back to `polish`).
+
+    Each step solves (H + mu diag H) s = -g with H = J'J, g = J'r in box-width units and evaluates the residuals and
+    Jacobian at the (clipped) new point together: accepted when the sum of squares falls (mu shrinks), else mu grows
+    and the step is retried. It stops when the proposed step's squared length in the metric H, over the residual
+    variance, is below STEP_SD²: the step is then STEP_SD standard deviations of the estimate (H / s² is its Fisher
+    information), far below what the data can tell."""
+    lo, hi = run.problem.lower, run.problem.upper
+    width = hi - lo
+    x = np.clip(np.asarray(x0, dtype=float), lo, hi)
+    got = run.evaluate_linearised(x)
+    if got is None:
+        return None
+    _, r, J = got
+    ssq = float(r @ r)
+    mu = 0.0
+    for _ in range(MAX_STEPS):
+        Js = J * width
+        H = Js.T @ Js
+        g = Js.T @ r
+        d = np.diag(H)
+        try:
+            s = np.linalg.solve(H + mu * np.diag(d), -g)
+        except np.linalg.LinAlgError:
+            s = -g / np.where(d > 0, d, 1.0)
+        x_new = np.clip(x + s * width, lo, hi)
+        step = (x_new - x) / width
+        variance = max(ssq / max(r.size - x.size, 1), 1e-300)
+        if float(step @ H @ step) / variance < STEP_SD**2:
+            break
+        got = run.evaluate_linearised(x_new)
+        ssq_new = float(got[1] @ got[1]) if got is not None else np.inf
+        if ssq_new < ssq:
+            x, (_, r, J), ssq = x_new, got, ssq_new
+            mu = mu / 4 if mu > 1e-6 else 0.0
+        else:
+            mu = max(4 * mu, 1e-3)
+            if mu > MU_GIVE_UP:  # no step of any length lowers the cost: x is the minimum to round-off
+                break
+    return x
+
+
 @register
 class LeastSquares(Optimizer):
     """Local trust-region least squares from x0 (or a random point in the box), until converged or out of budget."""
@@ -74,7 +127,8 @@ class LeastSquares(Optimizer):
 
     def _step(self, run: Search, state: Any) -> bool | None:
         try:
-            state["x"] = polish(run, state["x"])
+            x = gauss_newton(run, state["x"]) if run.problem.linearised is not None else None
+            state["x"] = polish(run, state["x"]) if x is None else x
         except BudgetExhausted:
             pass
         return False

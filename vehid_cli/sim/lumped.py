@@ -35,8 +35,21 @@ def lumped_outputs(
     """Displacement outputs Sq q (P, n, kd) and acceleration outputs Sa qdd (P, n, ka) of P systems.
 
     M, C, K (P, d, d); B0, B1 (P, d, nu); u (n, nu) one input for all or (P, n, nu); Sq (P, kd, d), Sa (P, ka, d)."""
-    P, d = M.shape[0], M.shape[-1]
     u = np.asarray(u, dtype=float)
+    A, Bs, s0, Cy, Dy, Ey = lumped_state_space(M, C, K, B0, B1, u[..., 0, :], Sq, Sa)
+    kd = Sq.shape[-2]
+    Y = linear_foh(A, Bs, np.ascontiguousarray(s0), u, dt, Cy, Dy)
+    acc = Y[..., kd:] + sample_slopes(u, dt) @ np.swapaxes(Ey, -1, -2)
+    return Y[..., :kd], acc
+
+
+def lumped_state_space(
+    M: NDArray, C: NDArray, K: NDArray, B0: NDArray, B1: NDArray, u0: NDArray, Sq: NDArray, Sa: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """The state equation of P systems (module docstring): A (P, 2d, 2d), Bs (P, 2d, nu), the start s0 (P, 2d) at
+    rest on the first input u0 ((nu,) or (P, nu)), the outputs [Sq q, Sa qdd] = Cy s + Dy u + Ey ud: Cy (P, k, 2d),
+    Dy (P, k, nu), and Ey (P, ka, nu) (accelerations only) on the input's slope."""
+    P, d = M.shape[0], M.shape[-1]
     Minv = np.linalg.inv(M)
     MB1 = Minv @ B1
     Ak, Ac = -Minv @ K, -Minv @ C
@@ -46,12 +59,9 @@ def lumped_outputs(
     A[:, d:, d:] = Ac
     Bu = Minv @ (B0 - C @ MB1)
     Bs = np.concatenate([MB1, Bu], axis=1)
-    u0 = u[..., 0, :]
     q0 = np.linalg.solve(K, (B0 @ u0[..., :, None]))[..., 0]
     s0 = np.concatenate([np.broadcast_to(q0, (P, d)), -(MB1 @ u0[..., :, None])[..., 0]], axis=1)
     kd = Sq.shape[-2]
     Cy = np.concatenate([np.concatenate([Sq, np.zeros_like(Sq)], axis=-1), Sa @ np.concatenate([Ak, Ac], -1)], 1)
-    Dy = np.concatenate([np.zeros((P, kd, u.shape[-1])), Sa @ Bu], axis=1)
-    Y = linear_foh(A, Bs, np.ascontiguousarray(s0), u, dt, Cy, Dy)
-    acc = Y[..., kd:] + sample_slopes(u, dt) @ np.swapaxes(Sa @ MB1, -1, -2)
-    return Y[..., :kd], acc
+    Dy = np.concatenate([np.zeros((P, kd, B0.shape[-1])), Sa @ Bu], axis=1)
+    return A, Bs, s0, Cy, Dy, Sa @ MB1

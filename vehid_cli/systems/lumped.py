@@ -35,10 +35,12 @@ from ..models.noise import NoiseModel
 from ..models.road import RandomProfile, bump_unit, chirp
 from ..optimizers.base import Problem
 from ..sim.lumped import lumped_outputs
+from ..sim.sensitivity import lumped_sensitivities
 from .base import Box, Simulated, System
 
 FAMILIES = ("acc", "disp")  # channel order: accelerations, then displacements (noise draws, residuals)
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode
+EXACT_ASSEMBLY_STEP = 1e-6  # relative step of the central differences of the rig's matrices (exact_sensitivities)
 NULL_RATIO = 1e-9  # eigenvalue of the correlation-scaled information, relative to the largest, that is a free direction
 
 
@@ -197,6 +199,34 @@ class LumpedSystem(System):
         out = {"acc": acc, "disp": disp}
         return {f: out[f] for f in self.families}
 
+    def exact_sensitivities(
+        self, values: NDArray, run: int = 0, names: tuple[str, ...] | None = None
+    ) -> tuple[dict[str, NDArray], dict[str, NDArray]] | None:
+        """The layout's channels of run `run` at `values` of `names` (default the unknowns), family -> (n, k), and
+        their derivatives family -> (n, k, D) per unit of each parameter, through the same modal solution as the
+        simulation (`sim.sensitivity.lumped_sensitivities`); None where that does not apply (effects, the kernel,
+        nearly repeated modes)."""
+        names = tuple(names or self.names)
+        rig = self.rigs[run]
+        if self.kernel or any("." in n for n in names) or np.ndim(rig.u) != 2:
+            return None
+        values = np.asarray(values, dtype=float)
+        D = values.size
+        h = EXACT_ASSEMBLY_STEP * np.maximum(np.abs(values), 1e-12)
+        X = np.repeat(values[None, :], 2 * D + 1, axis=0)  # the rig, then +h_j, then -h_j on parameter j
+        X[1 + np.arange(D), np.arange(D)] += h
+        X[1 + D + np.arange(D), np.arange(D)] -= h
+        p = self.parameters(X, names)
+        with np.errstate(all="ignore"):
+            got = lumped_sensitivities(
+                *self.matrices(p), np.asarray(rig.u, dtype=float), rig.dt, *self.sensor_rows(p), h
+            )
+        if got is None:
+            return None
+        disp, acc, ddisp, dacc = got
+        out, sens = {"acc": acc, "disp": disp}, {"acc": dacc, "disp": ddisp}
+        return {f: out[f] for f in self.families}, {f: sens[f] for f in self.families}
+
     @property
     def channel_names(self) -> tuple[str, ...]:
         return tuple(s.name for f in self.families for s in self.config.layout if s.family == f)
@@ -233,14 +263,38 @@ class LumpedSystem(System):
             r = residuals(X)
             return np.mean(r**2, axis=-1), r
 
+        def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
+            rs, Js = [], []
+            for i, o in enumerate(objectives):
+                got = self.exact_sensitivities(x, i, box.names)
+                if got is None:
+                    return None
+                rs.append(o.residuals({f: v[None] for f, v in got[0].items()})[0])
+                Js.append(o.residual_jacobian(got[1]))
+            r = np.concatenate(rs)
+            return float(np.mean(r**2)), r, np.concatenate(Js)
+
+        exact = not self.kernel and not any("." in n for n in box.names)
         return Problem(box.lower, box.upper, lambda X: cost_and_residuals(X)[0], cost_and_residuals,
-                       names=box.names)  # fmt: skip
+                       names=box.names, linearised=linearised if exact else None)  # fmt: skip
 
     # ------------------------------------------------------------------ the bound and identifiability
     def information(self, at: NDArray, rel_step: float = 1e-5) -> NDArray:
-        """Fisher information (D, D) of the relative unknowns at `at`, summed over the runs (central differences)."""
+        """Fisher information (D, D) of the relative unknowns at `at`, summed over the runs: exact sensitivities
+        (`exact_sensitivities`) where they apply, else central differences of the simulation."""
         at = np.asarray(at, dtype=float)
         D = at.size
+        exact = [self.exact_sensitivities(at, run) for run in range(len(self.weights))]
+        if all(e is not None for e in exact):
+            F = np.zeros((D, D))
+            for (_, sens), w in zip(exact, self.weights, strict=True):
+                for f, dz in sens.items():
+                    S = np.moveaxis(dz, -1, 0) * np.abs(at)[:, None, None] / w[f][None, None, :]
+                    if self.config.data.offsets == "identify":  # what the profiled offsets leave (Schur complement)
+                        S = S - S.mean(axis=1, keepdims=True)
+                    S = S.reshape(D, -1)
+                    F += S @ S.T
+            return F
         h = rel_step * np.maximum(np.abs(at), 1e-12)
         X = np.repeat(at[None, :], 2 * D, axis=0)
         X[np.arange(D), np.arange(D)] += h

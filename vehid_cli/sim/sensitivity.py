@@ -1,0 +1,220 @@
+"""Exact sensitivities of the first-order-hold simulation of a linear system: d output / d parameter.
+
+For sd = A s + Bs u, y = Cy s + Dy u, the derivative s' = ds/dtheta obeys the same dynamics,
+s'd = A s' + A' s + Bs' u, s'(0) = s0'. In the modal coordinates of A = V diag(lam) W (zeta = W s', z = W s):
+
+    zeta_j' = lam_j zeta_j + sum_i F_ji z_i + (W Bs')_j u,   F = W A' V,
+
+whose solution is a combination of a few signals per mode j (all of them first-order-hold exact, because the
+simulator's recursion is the continuous solution for an input linear between samples):
+
+* xi_jc, mode j's response to a unit of input c from rest, and f_j = exp(lam_j t), its free response;
+* d xi_jc / d lam_j and d f_j / d lam_j (the scalar recursion differentiated: d[k+1] = e d[k] + e' z[k] +
+  a'.y[k] + b'.y[k+1], e' = dt e);
+* for i != j, mode i driving mode j gives F_ji / (lam_i - lam_j) (z_i - x_ji), where x_ji is mode j run with
+  mode i's input row and start (the eigenvector derivative of first-order perturbation theory); for i = j it
+  gives F_jj dz_j / dlam_j.
+
+So the cost is (inputs + 1) pairs of scalar recursions per mode whatever the number of parameters, and every
+output's derivative is one real matrix product of these signals. The output matrices' derivatives (Cy', Dy')
+and the start's (s0') come from the caller. A candidate whose eigenvalues nearly coincide (the perturbation
+formulas divide by their gaps) or whose eigenvector matrix is ill conditioned is flagged, for the caller's
+central differences.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from ..models.fullcar import N_DOF
+from .lumped import lumped_state_space, sample_slopes
+from .modal import _kept_modes, _phi12
+
+GAP_MIN = 1e-6  # smallest |lam_i - lam_j| relative to max |lam| the perturbation formulas are trusted at
+_SERIES_BELOW = 1e-2  # |lam dt| below which the derivatives of phi1, phi2 come from Taylor series
+
+
+def _dphi12(x: NDArray) -> tuple[NDArray, NDArray]:
+    """phi1'(x) = (e^x - phi1)/x and phi2'(x) = (phi1 - 2 phi2)/x, accurate near x = 0 (series)."""
+    phi1, phi2 = _phi12(x)
+    small = np.abs(x) < _SERIES_BELOW
+    xs = np.where(small, 1.0, x)
+    d1 = np.where(small, 1 / 2 + x / 3 + x**2 / 8 + x**3 / 30 + x**4 / 144 + x**5 / 840, (np.exp(xs) - phi1) / xs)
+    d2 = np.where(small, 1 / 6 + x / 12 + x**2 / 40 + x**3 / 180 + x**4 / 1008 + x**5 / 6720, (phi1 - 2 * phi2) / xs)
+    return d1, d2
+
+
+@numba.njit(cache=True)
+def _sensitivity_recursion(e, z0, w0, cz, drive, zout, wout):  # pragma: no cover - compiled
+    """Each mode's recursion z[k+1] = e z[k] + drive_z[k] (lane l = p m + j: mode j of candidate p; e, z0 (P m,))
+    and, driven by it, D lanes per mode w[k+1] = e w[k] + drive_w[k] + cz z[k] (lane q = (p D + d) m + j; cz, w0
+    (P D m,)). drive (n - 1, 2 (P m + P D m)): [Re, Im] of each lane's input term (the gains times y[k] and
+    y[k + 1], one matrix product outside), z lanes first.
+
+    zout (n, P, 2 m) gets [Re z, Im z] of the candidate's m modes, wout (P, n, D, 2 m) [Re w, Im w] of each
+    parameter's."""
+    n = zout.shape[0]
+    L = e.shape[0]
+    P = zout.shape[1]
+    m = L // P
+    Q = cz.shape[0]
+    D = Q // L
+    N = L + Q  # lanes; drive's real parts in columns 0..N-1, imaginary parts in N..2N-1
+    er, ei = e.real.copy(), e.imag.copy()
+    zr, zi = z0.real.copy(), z0.imag.copy()
+    wr, wi = w0.real.copy(), w0.imag.copy()
+    cr, ci = cz.real.copy(), cz.imag.copy()
+    for k in range(n):
+        for p in range(P):
+            for j in range(m):
+                zout[k, p, j] = zr[p * m + j]
+                zout[k, p, m + j] = zi[p * m + j]
+            for d in range(D):
+                for j in range(m):
+                    q = (p * D + d) * m + j
+                    wout[p, k, d, j] = wr[q]
+                    wout[p, k, d, m + j] = wi[q]
+        if k == n - 1:
+            break
+        for q in range(Q):
+            l = (q // (D * m)) * m + q % m
+            a = er[l]
+            b = ei[l]
+            fr = cr[q] * zr[l] - ci[q] * zi[l] + drive[k, L + q]
+            fi = cr[q] * zi[l] + ci[q] * zr[l] + drive[k, N + L + q]
+            new = a * wr[q] - b * wi[q] + fr
+            wi[q] = a * wi[q] + b * wr[q] + fi
+            wr[q] = new
+        for l in range(L):
+            a = er[l]
+            b = ei[l]
+            new = a * zr[l] - b * zi[l] + drive[k, l]
+            zi[l] = a * zi[l] + b * zr[l] + drive[k, N + l]
+            zr[l] = new
+
+
+def linear_sensitivities(
+    A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: NDArray, Dy: NDArray,
+    dA: NDArray, dBs: NDArray, ds0: NDArray, dCy: NDArray, dDy: NDArray,
+) -> tuple[NDArray, NDArray, NDArray]:  # fmt: skip
+    """Outputs y = Cy s + Dy u (P, n, ny) of sd = A s + Bs u (exact first-order hold, like ``modal.linear_foh``)
+    and their derivatives (P, n, ny, D) with respect to D parameters, and which candidates (P,) they hold for.
+
+    A (P, ns, ns), Bs (P, ns, nu), s0 (P, ns), u (n, nu) one input for all, Cy (P, ny, ns), Dy (P, ny, nu), and the
+    derivatives dA (P, D, ns, ns), dBs (P, D, ns, nu), ds0 (P, D, ns), dCy (P, D, ny, ns), dDy (P, D, ny, nu). A
+    candidate with an ill-conditioned eigenvector matrix or nearly repeated eigenvalues gets False: its numbers are
+    not to be used (central differences instead)."""
+    lam, w, V, W, good = _kept_modes(A)  # (P, m), (P, m), (P, ns, m), (P, m, ns), (P,)
+    P, m = lam.shape
+    nu, D, ny = Bs.shape[-1], dA.shape[1], Cy.shape[1]
+    bm = W @ Bs  # (P, m, nu)
+    z0 = (W @ s0[:, :, None])[..., 0]  # (P, m)
+    valid, pair = w > 0, w == 2
+    lamF = np.concatenate([lam, lam.conj()], axis=-1)  # every mode: the kept ones, then the conjugates of pairs
+    validF = np.concatenate([valid, pair], axis=-1)
+    bmF = np.concatenate([bm, bm.conj()], axis=1)
+    z0F = np.concatenate([z0, z0.conj()], axis=1)
+    VF = np.concatenate([V, V.conj()], axis=-1)
+    Fk = W[:, None] @ dA @ VF[:, None]  # (P, D, m, 2m): F = W A' V, rows of the kept modes
+    gap = lamF[:, None, :] - lam[:, :, None]  # (P, m, 2m) lam_i - lam_j
+    couple = validF[:, None, :] & valid[:, :, None]
+    couple[:, np.arange(m), np.arange(m)] = False
+    scale = np.abs(lam).max(axis=-1)
+    close = couple & (np.abs(gap) <= GAP_MIN * scale[:, None, None])
+    ok = good & ~np.any(close, axis=(1, 2))
+    couple &= ~close  # a refused candidate's numbers stay finite (and unused)
+    kappa = np.where(couple[:, None], Fk / np.where(couple, gap, 1.0)[:, None], 0.0)  # (P, D, m, 2m)
+    Fjj = Fk[..., np.arange(m), np.arange(m)] * valid[:, None]  # (P, D, m)
+
+    coef_u = W[:, None] @ dBs - kappa @ bmF[:, None]  # (P, D, m, nu): on xi_jc
+    coef_f = (W[:, None] @ ds0[..., None])[..., 0] - (kappa @ z0F[:, None, :, None])[..., 0]  # (P, D, m): on f_j
+    Gk = (Cy @ V) * w[:, None, :]  # (P, ny, m)
+    Q = Gk[:, None] @ kappa  # (P, D, ny, 2m): through z_i of every mode i
+    Qt = Q[..., :m] + Q[..., m:].conj() + (dCy @ V[:, None]) * w[:, None, None, :]  # + Cy' s
+    # Parameter d's lane of mode j: w = sum_c coef_u xi_jc + coef_f f_j + F_jj dz_j/dlam_j, one recursion driven
+    # by z_j (the lam-derivative's de z term); then dy = Re(Gk w) + Re(Qt z) + dDy u.
+    x = lam * dt
+    phi1, phi2 = _phi12(x)
+    d1, d2 = _dphi12(x)
+    e = np.exp(x)
+    al, be = dt * (phi1 - phi2), dt * phi2  # (P, m) FOH gains per unit input on y[k], y[k + 1]
+    dal, dbe = dt * dt * (d1 - d2), dt * dt * d2  # and their lam-derivatives
+    ga = al[:, None, :, None] * coef_u + (Fjj * dal[:, None])[..., None] * bm[:, None]  # (P, D, m, nu)
+    gb = be[:, None, :, None] * coef_u + (Fjj * dbe[:, None])[..., None] * bm[:, None]
+    n = u.shape[0]
+
+    def lanes(g: NDArray) -> NDArray:  # (..., nu) -> (nu, lanes) contiguous
+        return np.ascontiguousarray(np.moveaxis(g, -1, 0).reshape(nu, -1))
+
+    gains = np.concatenate(  # (2 nu, lanes): on y[k], then on y[k + 1]; the z lanes, then the parameters'
+        [np.concatenate([lanes(al[..., None] * bm), lanes(ga)], axis=1),
+         np.concatenate([lanes(be[..., None] * bm), lanes(gb)], axis=1)]
+    )  # fmt: skip
+    steps = np.concatenate([u[:-1], u[1:]], axis=1)  # (n - 1, 2 nu)
+    drive = steps @ np.concatenate([gains.real, gains.imag], axis=1)  # contiguous: BLAS
+    zout = np.empty((n, P, 2 * m))
+    wout = np.empty((P, n, D, 2 * m))
+    _sensitivity_recursion(
+        e.reshape(-1), z0.reshape(-1).astype(complex), coef_f.reshape(-1).astype(complex),
+        (Fjj * (dt * e)[:, None]).reshape(-1), drive, zout, wout,
+    )  # fmt: skip
+    Y = np.empty((P, n, ny))
+    dY = np.empty((P, n, D, ny))
+    for p in range(P):  # Re(c z) = Re c Re z - Im c Im z
+        Rz = np.concatenate([Gk[p], Qt[p].reshape(D * ny, m)]).T  # (m, ny (1 + D)): the outputs, then dy (d, o)
+        Z = zout[:, p] @ np.concatenate([Rz.real, -Rz.imag])
+        Y[p] = Z[:, :ny]
+        Rg = np.concatenate([Gk[p].T.real, -Gk[p].T.imag])  # (2m, ny)
+        np.matmul(wout[p].reshape(n * D, 2 * m), Rg, out=dY[p].reshape(n * D, ny))
+        dY[p] += Z[:, ny:].reshape(n, D, ny)
+        Y[p] += u @ Dy[p].T
+        dY[p] += (u @ dDy[p].transpose(2, 0, 1).reshape(nu, D * ny)).reshape(n, D, ny)
+    return Y, np.ascontiguousarray(np.swapaxes(dY, -1, -2)), ok
+
+
+def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, NDArray]:
+    """The full car's response columns [q, qd, qdd, disp, acc] (21 + 2 nb, like ``modal_foh``) as Cy s + Dy y:
+    Cy (..., 21 + 2 nb, 14), Dy (..., 21 + 2 nb, 4), from A, Bs and the body points' rows G (..., nb, 3)."""
+    batch, nb = A.shape[:-2], G.shape[-2]
+    ns, nu = A.shape[-1], Bs.shape[-1]
+    Cy = np.zeros(batch + (3 * N_DOF + 2 * nb, ns))
+    Dy = np.zeros(batch + (3 * N_DOF + 2 * nb, nu))
+    Cy[..., : 2 * N_DOF, :] = np.eye(ns)
+    Cy[..., 2 * N_DOF : 3 * N_DOF, :] = A[..., N_DOF:, :]
+    Dy[..., 2 * N_DOF : 3 * N_DOF, :] = Bs[..., N_DOF:, :]
+    Cy[..., 3 * N_DOF : 3 * N_DOF + nb, :3] = G
+    Cy[..., 3 * N_DOF + nb :, :] = G @ A[..., N_DOF : N_DOF + 3, :]
+    Dy[..., 3 * N_DOF + nb :, :] = G @ Bs[..., N_DOF : N_DOF + 3, :]
+    return Cy, Dy
+
+
+def central_slopes(Z: NDArray, h: NDArray) -> NDArray:
+    """(1, D, ...) derivatives from a stack Z (2D + 1, ...) of the centre, then +h_j, then -h_j on parameter j."""
+    D = h.size
+    return ((Z[1 : D + 1] - Z[D + 1 :]) / (2 * h.reshape((D,) + (1,) * (Z.ndim - 1))))[None]
+
+
+def lumped_sensitivities(
+    M: NDArray, C: NDArray, K: NDArray, B0: NDArray, B1: NDArray, u: NDArray, dt: float, Sq: NDArray, Sa: NDArray,
+    h: NDArray,
+) -> tuple[NDArray, NDArray, NDArray, NDArray] | None:  # fmt: skip
+    """A lumped rig's displacement and acceleration outputs (n, kd), (n, ka) (``lumped.lumped_outputs``) and their
+    derivatives (n, kd, D), (n, ka, D) with respect to D parameters; None where the modal formulas do not hold.
+
+    The matrices M, C, K, B0, B1 (2D + 1, d, ...) and sensor rows Sq, Sa are those of the rig, then with +h_j, then
+    -h_j on parameter j: their derivatives are central differences of the (cheap) assembly, the dynamics' are exact.
+    u (n, nu) one input."""
+    A, Bs, s0, Cy, Dy, Ey = lumped_state_space(M, C, K, B0, B1, u[0], Sq, Sa)
+    Y, dY, ok = linear_sensitivities(
+        A[:1], Bs[:1], s0[:1], u, dt, Cy[:1], Dy[:1], central_slopes(A, h), central_slopes(Bs, h),
+        central_slopes(s0, h), central_slopes(Cy, h), central_slopes(Dy, h),
+    )  # fmt: skip
+    if not ok[0]:
+        return None
+    kd = Sq.shape[-2]
+    slopes = sample_slopes(u, dt)  # (n, nu)
+    acc = Y[0, :, kd:] + slopes @ Ey[0].T
+    dacc = dY[0, :, kd:] + np.einsum("nc,doc->nod", slopes, central_slopes(Ey, h)[0])
+    return Y[0, :, :kd], acc, dY[0, :, :kd], dacc
