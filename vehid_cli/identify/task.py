@@ -239,9 +239,10 @@ class Task:
 
     def information(self, at: NDArray) -> NDArray:
         """Fisher information (D, D) of the relative unknowns at `at` (crlb.information; a long record's a parameter
-        at a time, `information_by_parameter`)."""
+        at a time, `information_by_parameter`, unless exact sensitivities apply: they never hold the perturbed cars)."""
         at = np.asarray(at, dtype=float)
-        if 2 * at.size * self.residual_samples * 8 > LONG_INFORMATION_BYTES:
+        long = 2 * at.size * self.residual_samples * 8 > LONG_INFORMATION_BYTES
+        if long and not self.experiment.exact_applies(self.names):  # exact sensitivities hold no perturbed cars
             return information_by_parameter(self.experiment, self.names, at, self.sigma, self.observed, self.offsets)
         return information(self.experiment, self.names, at, self.sigma, self.observed, self.offsets)
 
