@@ -15,7 +15,7 @@ body points above the corners.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
@@ -128,6 +128,38 @@ class Layout:
             if s.kind.startswith("body"):
                 ox, oy = _origin(s.origin, p)
                 out[s.name] = (float(ox) + s.x, float(oy) + s.y)
+        return out
+
+    @cached_property
+    def column_groups(self) -> tuple[tuple[tuple[str, int], ...], ...]:
+        """The response columns (field, index) the channels are read from: one group per family in `families` order
+        (channel j of the family from its column j; a deflection from its body point's disp), then one group of the
+        wheel hops the deflections subtract (empty without deflections). A simulator that computes only these
+        (sim.linear.simulate_columns) skips the rest of the response; `read_columns` makes the channels."""
+        index = {pt: i for i, pt in enumerate(self._points)}
+        source = {"body_acc": "acc", "body_disp": "disp", "deflection": "disp", "wheel_acc": "qdd", "wheel_disp": "q"}
+        groups, wheels = [], []
+        for family in self.families:
+            group = []
+            for s in self.of(family):
+                at = index[s.point] if s.point is not None else 2 + s.corner
+                group.append((source[s.kind], at))
+                if s.kind == "deflection":
+                    wheels.append(("q", 2 + s.corner))
+            groups.append(tuple(group))
+        return (*groups, tuple(wheels))
+
+    def read_columns(self, columns: Sequence[NDArray]) -> dict[str, NDArray]:
+        """Family -> (..., n, k) from arrays (..., n, len(group)) holding `column_groups`' columns, the same numbers
+        as `read` (the arrays are used in place: a deflection's wheel hop is subtracted from its column)."""
+        *families, wheels = columns
+        out = dict(zip(self.families, families, strict=True))
+        j = 0
+        for family, values in out.items():
+            for col, s in enumerate(self.of(family)):
+                if s.kind == "deflection":
+                    values[..., col] -= wheels[..., j]
+                    j += 1
         return out
 
     def read(self, response) -> dict[str, NDArray]:

@@ -17,6 +17,7 @@ road that starts at zero).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -24,9 +25,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_DOF, FullCarMatrices
-from .modal import foh_discretisation, modal_foh
+from .modal import column_index, foh_discretisation, modal_columns, modal_foh
 
 Integrator = Literal["exact", "exact-reference", "newmark"]
+Column = tuple[str, int]  # a Response field (q, qd, qdd, disp, acc) and the index of its last axis
 
 
 @dataclass(frozen=True)
@@ -62,9 +64,7 @@ def simulate(
     """Respond to the road (n, 4) [m] sampled every dt [s]: one call for the whole batch of cars. `points`
     (..., nb, 3), rows [1, y, -x], are the body points whose motion `disp` and `acc` give (default the corners',
     mats.G; models.sensors.Layout.points)."""
-    road = np.asarray(road, dtype=float)
-    if road.ndim < 2 or road.shape[-1] != 4:
-        raise ValueError(f"road must be (..., n, 4), got {road.shape}")
+    road = _checked(road)
     n = road.shape[-2]
     t = np.arange(n) * dt
     if integrator == "exact":
@@ -81,6 +81,37 @@ def simulate(
     disp = (q[..., None, :3] @ Gt)[..., 0, :]
     acc = (qdd[..., None, :3] @ Gt)[..., 0, :]
     return Response(t=t, q=q, qd=qd, qdd=qdd, disp=disp, acc=acc)
+
+
+def simulate_columns(
+    mats: FullCarMatrices,
+    road: NDArray,
+    dt: float,
+    groups: Sequence[Sequence[Column]],
+    integrator: Integrator = "exact",
+    points: NDArray | None = None,
+) -> list[NDArray]:
+    """Some columns of `simulate`'s response, the same numbers: one array (..., n, len(group)) per group of
+    (field, index) pairs, e.g. [("acc", 0), ("disp", 2)] for acc[..., 0] and disp[..., 2].
+
+    The exact integrator computes only these (projecting its modal coordinates onto every column of the response
+    is most of its work; an identification reads a few channels: models.sensors.Layout.column_groups); the
+    other integrators pick them from the whole response."""
+    road = _checked(road)
+    if integrator == "exact":
+        nb = (mats.G if points is None else np.asarray(points)).shape[-2]
+        return modal_columns(mats, road, dt, [[column_index(f, i, nb) for f, i in g] for g in groups], points)
+    response = simulate(mats, road, dt, integrator, points)
+    empty = np.empty(response.q.shape[:-1] + (0,))
+    return [np.stack([getattr(response, f)[..., i] for f, i in g], axis=-1) if g else empty for g in groups]
+
+
+def _checked(road: NDArray) -> NDArray:
+    """The road as floats (..., n, 4) [m], or ValueError."""
+    road = np.asarray(road, dtype=float)
+    if road.ndim < 2 or road.shape[-1] != 4:
+        raise ValueError(f"road must be (..., n, 4), got {road.shape}")
+    return road
 
 
 def static_equilibrium(mats: FullCarMatrices, y: NDArray) -> NDArray:

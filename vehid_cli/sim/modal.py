@@ -21,6 +21,8 @@ NumPy reference in ``sim.linear``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numba
 import numpy as np
 import scipy.linalg
@@ -236,26 +238,122 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray |
     real state-space recursion instead; the answer is the same discretisation either way.
     """
     batch, A, Bs, G, q0, u = _flatten(mats, road, points)
+    (Y,) = _modal_columns(A, Bs, G, q0, u, dt, [np.arange(_n_out(G))])
+    return _split(Y, batch)
+
+
+def modal_columns(
+    mats: FullCarMatrices, road: NDArray, dt: float, groups: Sequence[Sequence[int]], points: NDArray | None = None
+) -> list[NDArray]:
+    """Only some output columns of ``modal_foh``, the same numbers: one array (batch..., n, len(group)) per group of
+    column indices into [q (7), qd (7), qdd (7), disp (nb), acc (nb)] (``column_index``).
+
+    An identification reads a few channels (the paper's: 8 of 29 columns), and projecting the modal coordinates
+    onto the columns is most of the work: each group is computed straight into its own contiguous array."""
+    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
+    Ys = _modal_columns(A, Bs, G, q0, u, dt, [np.asarray(g, dtype=int) for g in groups])
+    return [Y.reshape(batch + Y.shape[-2:]) for Y in Ys]
+
+
+FIELD_OFFSETS = {"q": 0, "qd": N_DOF, "qdd": 2 * N_DOF, "disp": 3 * N_DOF}  # acc follows disp's nb columns
+
+
+def column_index(field: str, index: int, nb: int) -> int:
+    """The column of ``field`` (q, qd, qdd, disp, acc) [index] among [q, qd, qdd, disp, acc] for nb body points."""
+    return 3 * N_DOF + nb + index if field == "acc" else FIELD_OFFSETS[field] + index
+
+
+def _modal_columns(
+    A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDArray, dt: float, groups: list[NDArray]
+) -> list[NDArray]:
+    """(P, n, len(group)) for each group of output columns of P cars: modal recursions, then the projection."""
     P, n = A.shape[0], u.shape[1]
     lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, 14, m), (P, m, 14), (P,)
     m = lam_k.shape[1]
     bm = W_k @ Bs  # (P, m, 4): modal input matrix
     z0 = (W_k[:, :, :N_DOF] @ q0[:, :, None])[..., 0]  # (P, m)
     decay, a, b = _foh_gains(lam_k, bm, dt)
-    out = np.empty((n, P, 2 * m + N_CORNERS))
-    _modal_recursion(decay, a, b, z0.reshape(P * m), u, out)
 
     # Output j-th mode column: w_j [V_j, lam_j V_j[7:], G V_j[:3], G lam_j V_j[7:10]]; Re(c z) = Re c Re z - Im c Im z.
     qdd_modes = lam_k[:, None, :] * V_k[:, N_DOF:, :]
     c = np.concatenate([V_k, qdd_modes, G @ V_k[:, :3, :], G @ qdd_modes[:, :3, :]], axis=1) * w_k[:, None, :]
     ct = np.swapaxes(c, -1, -2)  # (P, m, 21 + 2 nb)
     proj = np.concatenate([ct.real, -ct.imag, _input_rows(Bs, G)], axis=1)
-    Y = np.matmul(out.transpose(1, 0, 2), proj)  # (P, n, 21 + 2 nb); each car's rows are strided views, BLAS takes them
+    columns, views = _gemm_columns(groups, proj.shape[-1])
+    projs = proj if columns is None else np.ascontiguousarray(proj[:, :, columns])
+    Y = np.empty((P, n, projs.shape[-1]))
+    _modal_blocks(decay, a, b, z0.reshape(P * m), u, [projs], [Y])
     if not good.all():
-        bad = np.flatnonzero(~good)
-        ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[bad])
-        Y[bad] = _statespace_outputs(A[bad], Bs[bad], G[bad], q0[bad], ub, dt)
-    return _split(Y, batch)
+        for block in _blocks(np.flatnonzero(~good), n, N_STATE + N_CORNERS):
+            ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[block])
+            full = _statespace_outputs(A[block], Bs[block], G[block], q0[block], ub, dt)
+            Y[block] = full if columns is None else full[..., columns]
+    return [Y[..., view] for view in views]
+
+
+GEMM_WIDTH = 8  # the projection's columns are padded to a multiple of this (see _gemm_columns)
+
+
+def _gemm_columns(groups: list[NDArray], n_out: int) -> tuple[NDArray | None, list[slice]]:
+    """The columns one projection computes for all `groups` (None: all n_out of them, in order) and each group's
+    slice of them.
+
+    One product for every group, padded (with copies of its last column) to a multiple of GEMM_WIDTH columns:
+    OpenBLAS sums each entry of the product in the same order as for the whole response then, so a group's
+    numbers are those of ``modal_foh`` bit for bit; a product of 1-4 columns (mod 8) sums in another order
+    (round-off apart, measured with OpenBLAS 0.3.31, Haswell kernels)."""
+    stops = np.cumsum([g.size for g in groups])
+    views = [slice(stop - g.size, stop) for g, stop in zip(groups, stops, strict=True)]
+    columns = np.concatenate(groups) if groups else np.zeros(0, dtype=int)
+    if np.array_equal(columns, np.arange(n_out)):
+        return None, views
+    if columns.size:
+        columns = np.concatenate([columns, np.full(-columns.size % GEMM_WIDTH, columns[-1])])
+    return columns, views
+
+
+SCRATCH_BYTES = 32 * 2**20  # a block's modal coordinates over the whole record, at most (long records: fewer cars)
+CARS_PER_BLOCK = 8  # cars whose recursions run together (see _modal_blocks)
+
+
+def _block_size(n: int, width: int) -> int:
+    """Cars per block for n samples of `width` columns each: CARS_PER_BLOCK, fewer when their scratch would pass
+    SCRATCH_BYTES."""
+    return int(np.clip(SCRATCH_BYTES // (8 * n * width), 1, CARS_PER_BLOCK))
+
+
+def _blocks(cars: NDArray, n: int, width: int) -> list[NDArray]:
+    """`cars` (indices) in blocks of _block_size."""
+    size = _block_size(n, width)
+    return [cars[i : i + size] for i in range(0, cars.size, size)]
+
+
+def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, projs, outs) -> None:
+    """Run the modal recursions (`_modal_recursion`'s decay, gains a, b, start z0 over P m lanes, roads u) a block
+    of cars at a time and project each block at once: outs[i][p] = [Re z, Im z, y] @ projs[i][p] (P, K, ncol_i),
+    K = 2 m + inputs, or 2 m to leave the inputs out.
+
+    Why blocks: the lane loop needs several cars to fill its SIMD vectors (one car, 7 lanes, ran 3x slower per
+    car), but all of a batch's modal coordinates at once (100 cars: 43 MB) fall out of cache between the
+    recursion that writes them and the projection that reads them: batch 100 ran 2x slower per car than batch
+    20 did. CARS_PER_BLOCK = 8 (56 lanes, 3.5 MB for 3000 samples) was the fastest of 2 to 100 at 8 and 29
+    columns. Each car's numbers are the same whatever the block."""
+    P = outs[0].shape[0]
+    n, width = u.shape[1], 2 * (decay.size // P) + a.shape[0]
+    m = decay.size // P
+    size = _block_size(n, width)
+    scratch = np.empty((n, min(P, size), width))
+    for start in range(0, P, size):
+        stop = min(P, start + size)
+        lanes = slice(start * m, stop * m)
+        block = scratch if stop - start == scratch.shape[1] else np.empty((n, stop - start, width))
+        ub = u if u.shape[0] == 1 else u[start:stop]
+        _modal_recursion(
+            decay[lanes], np.ascontiguousarray(a[:, lanes]), np.ascontiguousarray(b[:, lanes]), z0[lanes], ub, block
+        )
+        modal = block.transpose(1, 0, 2)  # each car's rows are strided views, BLAS takes them
+        for proj, out in zip(projs, outs, strict=True):
+            np.matmul(modal[..., : proj.shape[1]], proj[start:stop], out=out[start:stop])
 
 
 def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
@@ -316,15 +414,14 @@ def linear_foh(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: 
     decay, a, b = _foh_gains(lam_k, bm, dt)
     padded = np.zeros(u3.shape[:2] + (MAX_MODAL_INPUTS,))
     padded[..., :nu] = u3
-    out = np.empty((n, P, 2 * m + MAX_MODAL_INPUTS))
-    _modal_recursion(decay, a, b, z0.reshape(P * m), padded, out)
     ct = np.swapaxes((Cy @ V_k) * w_k[:, None, :], -1, -2)  # (P, m, ny)
-    proj = np.concatenate([ct.real, -ct.imag], axis=1)
-    Y = np.matmul(out.transpose(1, 0, 2)[..., : 2 * m], proj)
+    proj = np.concatenate([ct.real, -ct.imag], axis=1)  # the inputs enter through `drive`
+    Y = np.empty((P, n, proj.shape[-1]))
+    _modal_blocks(decay, a, b, z0.reshape(P * m), padded, [proj], [Y])
     if not good.all():
-        bad = np.flatnonzero(~good)
-        ub = u3 if u3.shape[0] == 1 else np.ascontiguousarray(u3[bad])
-        Y[bad] = _statespace_linear(A[bad], Bs[bad], s0[bad], ub, dt, Cy[bad])
+        for block in _blocks(np.flatnonzero(~good), n, A.shape[-1] + nu):
+            ub = u3 if u3.shape[0] == 1 else np.ascontiguousarray(u3[block])
+            Y[block] = _statespace_linear(A[block], Bs[block], s0[block], ub, dt, Cy[block])
     return Y + drive
 
 
