@@ -302,14 +302,16 @@ def _gemm_columns(groups: list[NDArray], n_out: int) -> tuple[NDArray | None, li
     OpenBLAS sums each entry of the product in the same order as for the whole response then, so a group's
     numbers are those of ``modal_foh`` bit for bit; a product of 1-4 columns (mod 8) sums in another order
     (round-off apart, measured with OpenBLAS 0.3.31, Haswell kernels)."""
-    stops = np.cumsum([g.size for g in groups])
-    views = [slice(stop - g.size, stop) for g, stop in zip(groups, stops, strict=True)]
-    columns = np.concatenate(groups) if groups else np.zeros(0, dtype=int)
-    if np.array_equal(columns, np.arange(n_out)):
+    views, start = [], 0
+    for g in groups:
+        views.append(slice(start, start + g.size))
+        start += g.size
+    columns = [int(c) for g in groups for c in g]
+    if columns == list(range(n_out)):
         return None, views
-    if columns.size:
-        columns = np.concatenate([columns, np.full(-columns.size % GEMM_WIDTH, columns[-1])])
-    return columns, views
+    if columns:
+        columns += [columns[-1]] * (-len(columns) % GEMM_WIDTH)
+    return np.array(columns, dtype=int), views
 
 
 SCRATCH_BYTES = 32 * 2**20  # a block's modal coordinates over the whole record, at most (long records: fewer cars)
@@ -319,7 +321,7 @@ CARS_PER_BLOCK = 8  # cars whose recursions run together (see _modal_blocks)
 def _block_size(n: int, width: int) -> int:
     """Cars per block for n samples of `width` columns each: CARS_PER_BLOCK, fewer when their scratch would pass
     SCRATCH_BYTES."""
-    return int(np.clip(SCRATCH_BYTES // (8 * n * width), 1, CARS_PER_BLOCK))
+    return max(1, min(CARS_PER_BLOCK, SCRATCH_BYTES // (8 * n * width)))
 
 
 def _blocks(cars: NDArray, n: int, width: int) -> list[NDArray]:
