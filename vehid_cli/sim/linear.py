@@ -5,7 +5,9 @@ Integrators, all taking plain arrays so later code can batch and compile them:
 * ``exact``: the exact discretisation of M qdd + C qd + K q = B y(t) for a road that is linear between
   samples (first-order hold). With a piecewise-linear road it is exact to round-off; this is also what
   ``scipy.signal.lsim`` assumes. Runs through the compiled modal recursions of ``sim.modal`` (same
-  discretisation, mode by mode; about 2000+ cars per second on one core for 3000 samples).
+  discretisation, mode by mode, 8 cars at a time); ``simulate_columns`` computes only the columns a
+  layout reads (the identification's path, several thousand cars per second on one core for 3000 samples:
+  ``benchmarks/bench_simulation.py``).
 * ``exact-reference``: the same discretisation from one matrix exponential of an augmented matrix and
   a NumPy loop over time: slow, simple, kept as the reference the fast path is tested against.
 * ``newmark``: Newmark-beta with average acceleration (gamma = 1/2, beta = 1/4), as in the paper;

@@ -17,6 +17,10 @@ same discretisation via scipy's ``expm``, also compiled), so every candidate get
 
 Both paths start from static equilibrium on the first road sample, s0 = [K^-1 B y0, 0], like the
 NumPy reference in ``sim.linear``.
+
+The recursions run a block of cars at a time (``_modal_blocks``), and one matrix product per block turns the
+block's modal coordinates into the output columns asked for: all of them for ``modal_foh`` (q, qd, qdd and every
+body point), a layout's channels for ``modal_columns`` (identification reads 8 of 29), with the same numbers.
 """
 
 from __future__ import annotations
@@ -150,8 +154,8 @@ def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None
 
     A, Bs = mats.state_space()
     A, Bs, G, K, B = flat(A), flat(Bs), flat(G), flat(mats.K), flat(mats.B)
-    # A writeable C-contiguous copy whatever the caller passed: one array type for numba to compile.
-    u = np.array(road.reshape(1, n, N_CORNERS) if road.ndim == 2 else flat(road), dtype=float, order="C")
+    # Writeable and C-contiguous (copied if it is not): one array type for numba to compile.
+    u = np.require(road.reshape(1, n, N_CORNERS) if road.ndim == 2 else flat(road), float, ["C", "W"])
     q0 = np.broadcast_to(np.linalg.solve(K, B @ u[:, 0, :, None])[..., 0], (P, N_DOF))  # static equilibrium
     return batch, A, Bs, G, q0, u
 
@@ -343,7 +347,8 @@ def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArra
     P = outs[0].shape[0]
     n, width = u.shape[1], 2 * (decay.size // P) + a.shape[0]
     m = decay.size // P
-    size = _block_size(n, width)
+    count = -(-P // _block_size(n, width))
+    size = -(-P // count)  # blocks of nearly equal size: 20 cars run as 7, 7, 6 rather than 8, 8, 4
     scratch = np.empty((n, min(P, size), width))
     for start in range(0, P, size):
         stop = min(P, start + size)
@@ -364,7 +369,7 @@ def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray
     their eigenvalues (P, m), weights (P, m), eigenvectors (P, ns, m), rows of the inverse (P, m, ns), and whether
     the eigenvector matrix is well conditioned (P,). LAPACK returns conjugate pairs exactly conjugate."""
     lam, V = np.linalg.eig(A)
-    lam, V = lam.astype(complex), V.astype(complex)
+    lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
     W = np.linalg.inv(V)
     cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(W).sum(axis=-2).max(axis=-1)
     good = np.isfinite(cond) & (cond < COND_MAX)
@@ -372,6 +377,10 @@ def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray
     weight = np.where(lam.imag > 0, 2.0, 1.0) * keep
     m = int(keep.sum(axis=-1).max())
     idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]  # kept modes first; padding has weight 0
+    if (idx == idx[0]).all():  # the same places in every car (LAPACK orders each conjugate pair alike): one index
+        i = idx[0]
+        lam_k, w_k, V_k, W_k = lam[:, i], weight[:, i], np.ascontiguousarray(V[:, :, i]), W[:, i, :]
+        return lam_k, w_k, V_k, W_k, good
     lam_k = np.take_along_axis(lam, idx, axis=-1)
     w_k = np.take_along_axis(weight, idx, axis=-1)
     V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)
