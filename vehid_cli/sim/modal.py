@@ -379,8 +379,8 @@ def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray
     idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]  # kept modes first; padding has weight 0
     if (idx == idx[0]).all():  # the same places in every car (LAPACK orders each conjugate pair alike): one index
         i = idx[0]
-        lam_k, w_k, V_k, W_k = lam[:, i], weight[:, i], np.ascontiguousarray(V[:, :, i]), W[:, i, :]
-        return lam_k, w_k, V_k, W_k, good
+        picked = (lam[:, i], weight[:, i], V[:, :, i], W[:, i, :])
+        return (*(np.ascontiguousarray(x) for x in picked), good)  # C-contiguous, as take_along_axis gives
     lam_k = np.take_along_axis(lam, idx, axis=-1)
     w_k = np.take_along_axis(weight, idx, axis=-1)
     V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)
