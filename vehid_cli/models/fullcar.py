@@ -70,13 +70,20 @@ class FullCarMatrices:
 
     def state_space(self) -> tuple[NDArray, NDArray]:
         """A (..., 14, 14), Bs (..., 14, 4) for s = [q, qd]: sd = A s + Bs y."""
-        Minv = np.linalg.inv(self.M)
         batch = self.batch_shape
         A = np.zeros(batch + (2 * N_DOF, 2 * N_DOF))
         A[..., :N_DOF, N_DOF:] = np.eye(N_DOF)
+        Bs = np.zeros(batch + (2 * N_DOF, N_CORNERS))
+        diagonal = np.diagonal(self.M, axis1=-2, axis2=-1)
+        if np.count_nonzero(self.M) == np.count_nonzero(diagonal):  # M diagonal (assemble's): rows scaled, the
+            inv = (1.0 / diagonal)[..., :, None]  # same numbers as inv(M) @ X (LAPACK inverts a diagonal exactly)
+            np.multiply(-inv, self.K, out=A[..., N_DOF:, :N_DOF])
+            np.multiply(-inv, self.C, out=A[..., N_DOF:, N_DOF:])
+            np.multiply(inv, self.B, out=Bs[..., N_DOF:, :])
+            return A, Bs
+        Minv = np.linalg.inv(self.M)
         A[..., N_DOF:, :N_DOF] = -Minv @ self.K
         A[..., N_DOF:, N_DOF:] = -Minv @ self.C
-        Bs = np.zeros(batch + (2 * N_DOF, N_CORNERS))
         Bs[..., N_DOF:, :] = Minv @ self.B
         return A, Bs
 

@@ -7,7 +7,9 @@ coordinates of A = V diag(lam) V^-1: each mode is a scalar complex recursion
     g1 = dt phi1(lam dt) b,   g2 = dt phi2(lam dt) b,   b = row of V^-1 Bs,
     phi1(x) = (e^x - 1) / x,   phi2(x) = (e^x - 1 - x) / x^2,
 
-which is the same update as ``foh_discretisation`` (the Van Loan matrix exponential), only cheaper:
+which is the same update as ``foh_discretisation`` (the Van Loan matrix exponential), only cheaper. The
+compiled loop runs it in x = z - g2 . y, which needs one input sample per step (x[k+1] = e x[k] + (g1 +
+(e - 1) g2) . y[k]; ``_shifted``), and the projection adds the g2 . y back:
 7 complex scalar recursions per car instead of a 14 x 14 matrix-vector product per step, and one
 14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential. A real system has
 conjugate pairs, so only modes with Im(lam) >= 0 run, conjugates counted twice. Round-off grows with
@@ -50,13 +52,13 @@ def _phi12(x: NDArray) -> tuple[NDArray, NDArray]:
 
 
 @numba.njit(cache=True)
-def _modal_recursion(e, a, b, z0, u, out):  # pragma: no cover - compiled
-    """Run the modal recursions of P cars; out (n, P, 2m + 4) gets [Re z (m), Im z (m), y (4)] at each step.
+def _modal_recursion(e, g, x0, u, out):  # pragma: no cover - compiled
+    """Run the modal recursions of P cars; out (n, P, 2m + 4) gets [Re x (m), Im x (m), y (4)] at each step.
 
-    Lane l = p m + j is mode j of car p: e (P m,) = exp(lam dt), a and b (4, P m) the coefficients of
-    y[k] and y[k + 1] (a = g1 - g2, b = g2), z0 (P m,) the start. u (R, n, 4), R = 1 (one road for all
-    cars) or P. Time outside, all lanes of all cars inside: with one road the lane loop is a plain
-    vector loop (SIMD), and the independent recursions overlap their latencies.
+    Lane l = p m + j is mode j of car p: x[k+1] = e x[k] + g . y[k], e (P m,) = exp(lam dt), g (4, P m) the
+    gains of y[k] (``_shifted_gains``), x0 (P m,) the start. u (R, n, 4), R = 1 (one road for all cars) or P.
+    Time outside, all lanes of all cars inside: with one road the lane loop is a plain vector loop (SIMD), and
+    the independent recursions overlap their latencies.
     """
     P = out.shape[1]
     L = e.shape[0]
@@ -64,46 +66,34 @@ def _modal_recursion(e, a, b, z0, u, out):  # pragma: no cover - compiled
     n = u.shape[1]
     one_road = u.shape[0] == 1
     er, ei = e.real.copy(), e.imag.copy()
-    ar, ai = a.real.copy(), a.imag.copy()
-    br, bi = b.real.copy(), b.imag.copy()
-    zr, zi = z0.real.copy(), z0.imag.copy()
-    yk = np.empty((4, L))  # road under lane l at k and k + 1 (per car roads only)
-    yn = np.empty((4, L))
+    gr, gi = g.real.copy(), g.imag.copy()
+    xr, xi = x0.real.copy(), x0.imag.copy()
     for k in range(n):
         for p in range(P):
             r = 0 if one_road else p
             for j in range(m):
-                out[k, p, j] = zr[p * m + j]
-                out[k, p, m + j] = zi[p * m + j]
+                out[k, p, j] = xr[p * m + j]
+                out[k, p, m + j] = xi[p * m + j]
             for c in range(4):
                 out[k, p, 2 * m + c] = u[r, k, c]
         if k == n - 1:
             break
         if one_road:
             y0, y1, y2, y3 = u[0, k, 0], u[0, k, 1], u[0, k, 2], u[0, k, 3]
-            w0, w1, w2, w3 = u[0, k + 1, 0], u[0, k + 1, 1], u[0, k + 1, 2], u[0, k + 1, 3]
             for l in range(L):
-                dr = (ar[0, l] * y0 + ar[1, l] * y1 + ar[2, l] * y2 + ar[3, l] * y3
-                      + br[0, l] * w0 + br[1, l] * w1 + br[2, l] * w2 + br[3, l] * w3)  # fmt: skip
-                di = (ai[0, l] * y0 + ai[1, l] * y1 + ai[2, l] * y2 + ai[3, l] * y3
-                      + bi[0, l] * w0 + bi[1, l] * w1 + bi[2, l] * w2 + bi[3, l] * w3)  # fmt: skip
-                zr_new = er[l] * zr[l] - ei[l] * zi[l] + dr
-                zi[l] = er[l] * zi[l] + ei[l] * zr[l] + di
-                zr[l] = zr_new
+                dr = gr[0, l] * y0 + gr[1, l] * y1 + gr[2, l] * y2 + gr[3, l] * y3
+                di = gi[0, l] * y0 + gi[1, l] * y1 + gi[2, l] * y2 + gi[3, l] * y3
+                xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
+                xi[l] = er[l] * xi[l] + ei[l] * xr[l] + di
+                xr[l] = xr_new
         else:
             for l in range(L):
-                for c in range(4):
-                    yk[c, l] = u[l // m, k, c]
-                    yn[c, l] = u[l // m, k + 1, c]
-            for l in range(L):
-                dr = 0.0
-                di = 0.0
-                for c in range(4):
-                    dr += ar[c, l] * yk[c, l] + br[c, l] * yn[c, l]
-                    di += ai[c, l] * yk[c, l] + bi[c, l] * yn[c, l]
-                zr_new = er[l] * zr[l] - ei[l] * zi[l] + dr
-                zi[l] = er[l] * zi[l] + ei[l] * zr[l] + di
-                zr[l] = zr_new
+                r = l // m
+                dr = gr[0, l] * u[r, k, 0] + gr[1, l] * u[r, k, 1] + gr[2, l] * u[r, k, 2] + gr[3, l] * u[r, k, 3]
+                di = gi[0, l] * u[r, k, 0] + gi[1, l] * u[r, k, 1] + gi[2, l] * u[r, k, 2] + gi[3, l] * u[r, k, 3]
+                xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
+                xi[l] = er[l] * xi[l] + ei[l] * xr[l] + di
+                xr[l] = xr_new
 
 
 @numba.njit(cache=True)
@@ -286,7 +276,7 @@ def _modal_columns(
     columns, views = _gemm_columns(groups, proj.shape[-1])
     projs = proj if columns is None else np.ascontiguousarray(proj[:, :, columns])
     Y = np.empty((P, n, projs.shape[-1]))
-    _modal_blocks(decay, a, b, z0.reshape(P * m), u, [projs], [Y])
+    _modal_blocks(decay, a, b, z0.reshape(P * m), u, projs, Y)
     if not good.all():
         for block in _blocks(np.flatnonzero(~good), n, N_STATE + N_CORNERS):
             ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[block])
@@ -334,17 +324,32 @@ def _blocks(cars: NDArray, n: int, width: int) -> list[NDArray]:
     return [cars[i : i + size] for i in range(0, cars.size, size)]
 
 
-def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, projs, outs) -> None:
-    """Run the modal recursions (`_modal_recursion`'s decay, gains a, b, start z0 over P m lanes, roads u) a block
-    of cars at a time and project each block at once: outs[i][p] = [Re z, Im z, y] @ projs[i][p] (P, K, ncol_i),
-    K = 2 m + inputs, or 2 m to leave the inputs out.
+def _shifted(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray):
+    """The recursion in x = z - b . y, which needs one input sample per step: x[k+1] = e x[k] + g . y[k],
+    g = e b + a (from z[k+1] = e z[k] + a . y[k] + b . y[k+1]). Returns g (4, P m), x0 (P m,) and the projection
+    `proj` (P, 2 m + 4, ncol) onto [Re x, Im x, y]: z = x + b . y adds Re(c b) to the rows of y."""
+    P, m = proj.shape[0], decay.size // proj.shape[0]
+    g = decay * b + a
+    y0 = u[:, 0, :] if u.shape[0] == 1 else np.repeat(u[:, 0, :], m, axis=0)  # (1 or P m, 4)
+    x0 = z0 - (b.T * y0).sum(axis=-1)
+    bc = b.reshape(b.shape[0], P, m).transpose(1, 0, 2)  # (P, 4, m)
+    shifted = proj.copy()
+    shifted[:, 2 * m :, :] += bc.real @ proj[:, :m, :] + bc.imag @ proj[:, m : 2 * m, :]
+    return g, x0, shifted
+
+
+def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray, out) -> None:
+    """Run the modal recursions (`_foh_gains`' decay, gains a, b, start z0 over P m lanes, roads u) a block of cars
+    at a time and project each block at once: out[p] = [Re z, Im z, y] @ proj[p], proj (P, 2 m + 4, ncol) (the
+    recursion runs in x = z - b . y: ``_shifted``).
 
     Why blocks: the lane loop needs several cars to fill its SIMD vectors (one car, 7 lanes, ran 3x slower per
     car), but all of a batch's modal coordinates at once (100 cars: 43 MB) fall out of cache between the
     recursion that writes them and the projection that reads them: batch 100 ran 2x slower per car than batch
     20 did. CARS_PER_BLOCK = 8 (56 lanes, 3.5 MB for 3000 samples) was the fastest of 2 to 100 at 8 and 29
     columns. Each car's numbers are the same whatever the block."""
-    P = outs[0].shape[0]
+    P = out.shape[0]
+    g, x0, proj = _shifted(decay, a, b, z0, u, proj)
     n, width = u.shape[1], 2 * (decay.size // P) + a.shape[0]
     m = decay.size // P
     count = -(-P // _block_size(n, width))
@@ -355,12 +360,9 @@ def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArra
         lanes = slice(start * m, stop * m)
         block = scratch if stop - start == scratch.shape[1] else np.empty((n, stop - start, width))
         ub = u if u.shape[0] == 1 else u[start:stop]
-        _modal_recursion(
-            decay[lanes], np.ascontiguousarray(a[:, lanes]), np.ascontiguousarray(b[:, lanes]), z0[lanes], ub, block
-        )
+        _modal_recursion(decay[lanes], np.ascontiguousarray(g[:, lanes]), x0[lanes], ub, block)
         modal = block.transpose(1, 0, 2)  # each car's rows are strided views, BLAS takes them
-        for proj, out in zip(projs, outs, strict=True):
-            np.matmul(modal[..., : proj.shape[1]], proj[start:stop], out=out[start:stop])
+        np.matmul(modal, proj[start:stop], out=out[start:stop])
 
 
 def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
@@ -426,9 +428,10 @@ def linear_foh(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: 
     padded = np.zeros(u3.shape[:2] + (MAX_MODAL_INPUTS,))
     padded[..., :nu] = u3
     ct = np.swapaxes((Cy @ V_k) * w_k[:, None, :], -1, -2)  # (P, m, ny)
-    proj = np.concatenate([ct.real, -ct.imag], axis=1)  # the inputs enter through `drive`
+    proj = np.zeros((P, 2 * m + MAX_MODAL_INPUTS, ct.shape[-1]))  # Dy u enters through `drive`
+    proj[:, :m], proj[:, m : 2 * m] = ct.real, -ct.imag
     Y = np.empty((P, n, proj.shape[-1]))
-    _modal_blocks(decay, a, b, z0.reshape(P * m), padded, [proj], [Y])
+    _modal_blocks(decay, a, b, z0.reshape(P * m), padded, proj, Y)
     if not good.all():
         for block in _blocks(np.flatnonzero(~good), n, A.shape[-1] + nu):
             ub = u3 if u3.shape[0] == 1 else np.ascontiguousarray(u3[block])
