@@ -140,7 +140,8 @@ def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None
     n = road.shape[-2]
 
     def flat(X: NDArray) -> NDArray:
-        return np.broadcast_to(X, batch + X.shape[-2:]).reshape((P,) + X.shape[-2:])
+        Y = X if X.shape[:-2] == batch else np.broadcast_to(X, batch + X.shape[-2:])
+        return Y.reshape((P,) + X.shape[-2:])
 
     A, Bs = mats.state_space()
     A, Bs, G, K, B = flat(A), flat(Bs), flat(G), flat(mats.K), flat(mats.B)
