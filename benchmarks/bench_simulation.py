@@ -6,6 +6,10 @@ The nonlinear car: the paper's car with Bouc-Wen hysteresis in every strut (conf
 through the library path (``Experiment.simulate``: matrices, effect rows, compiled RK4 over the 3000
 samples, responses), candidates varying the car and the Bouc-Wen force; the issue's target is >= 500/s
 at a population of 20 on one core.
+The linear car (issue 26): `integrator: exact` through the identification's path (``Experiment.outputs``: only
+the layout's channels) and through the full ``Response`` (every coordinate, velocity, acceleration and body point),
+at batch 1, 20 and 100, each beside the scipy.signal.lsim loop at the same batch in the same run; the target is
+>= 8000/s at batch 20 and 100 on one core.
 Each figure is the median of several repeats; the machine is noisy, so compare medians of one run only.
 Threads are pinned to one (numba, OpenBLAS/MKL/OpenMP) before numpy loads, for the one-core figure.
 Run: make bench   (or: python benchmarks/bench_simulation.py --repeats 7)
@@ -110,11 +114,12 @@ def main() -> None:
         return values
 
     paths = [
-        ("exact (modal, numba)", lambda v: exp.simulate(v).acc, (1, 20, 100)),
+        ("exact: channels (identify)", exp.outputs, (1, 20, 100)),
+        ("exact: full Response", lambda v: exp.simulate(v).acc, (1, 20, 100)),
         ("state-space FOH (numba)", lambda v: statespace_foh(exp.matrices(v), road, dt), (1, 20, 100)),
         ("exact-reference (numpy)", lambda v: simulate(exp.matrices(v), road, dt, "exact-reference"), (1, 20)),
         ("newmark (numpy)", lambda v: simulate(exp.matrices(v), road, dt, "newmark"), (1, 20)),
-        ("scipy.signal.lsim (loop)", lsim_loop, (1, 20)),
+        ("scipy.signal.lsim (loop)", lsim_loop, (1, 20, 100)),
         ("kernel rk4, linear car", kernel("rk4"), (1, 20)),
         ("kernel newmark, linear car", kernel("newmark"), (1, 20)),
         ("kernel rk4, cubic strut", kernel("rk4", cubic_spring, 5e7), (20,)),
@@ -143,16 +148,35 @@ def main() -> None:
             values = bouc_wen_candidates(batch) if "Bouc-Wen" in name else candidates(batch)
             seconds = timed(lambda f=fn, v=values: f(v), args.repeats)
             rows.append((name, batch, seconds, batch / seconds))
-    lsim_rate = next(rate for name, batch, _, rate in rows if name.startswith("scipy") and batch == 1)
-    print(f"{'path':<30} {'batch':>5} {'median s/call':>14} {'evals/s':>10} {'x lsim':>8}")
+    lsim = {batch: rate for name, batch, _, rate in rows if name.startswith("scipy")}
+    print(f"{'path':<30} {'batch':>5} {'median s/call':>14} {'evals/s':>10} {'lsim evals/s':>13} {'x lsim':>8}")
     for name, batch, seconds, rate in rows:
-        print(f"{name:<30} {batch:>5} {seconds:>14.5f} {rate:>10.1f} {rate / lsim_rate:>8.1f}")
+        anchor = lsim.get(batch, lsim[1])  # the lsim loop at the same batch, measured in this run
+        print(f"{name:<30} {batch:>5} {seconds:>14.5f} {rate:>10.1f} {anchor:>13.1f} {rate / anchor:>8.1f}")
+    linear_car(rows, lsim, exp.t.size)
     bouc_wen = next(rate for name, batch, _, rate in rows if "Bouc-Wen" in name and batch == 20)
     verdict = "meets" if bouc_wen >= 500 else "MISSES"
     print(
         f"# nonlinear car, Bouc-Wen struts, RK4 over {exp.t.size} samples, population 20, one core: "
         f"{bouc_wen:.0f} evaluations/s ({verdict} the target of 500/s)"
     )
+
+
+def linear_car(rows: list[tuple[str, int, float, float]], lsim: dict[int, float], samples: int) -> None:
+    """The linear car's lines (issue 26): each path at batch 1, 20, 100 beside the lsim loop of this run at the
+    same batch; the batch-size cliff (batch 100 at least as fast as batch 20); the identification's path against
+    the target of 8000/s at batch 20 and 100."""
+    for name in ("exact: channels (identify)", "exact: full Response"):
+        rate = {batch: r for n, batch, _, r in rows if n == name}
+        parts = [f"batch {b}: {rate[b]:.0f}/s ({rate[b] / lsim[b]:.0f}x lsim's {lsim[b]:.0f}/s)" for b in (1, 20, 100)]
+        line = f"# linear car, {name}, {samples} samples, one core: " + "; ".join(parts)
+        line += (
+            "; no batch-size cliff" if rate[100] >= rate[20] else f"; batch 100 at {rate[100] / rate[20]:.2f}x batch 20"
+        )
+        if name.startswith("exact: channels"):
+            verdict = "meets" if min(rate[20], rate[100]) >= 8000 else "MISSES"
+            line += f"; {verdict} the target of 8000/s at batch 20 and 100"
+        print(line)
 
 
 if __name__ == "__main__":

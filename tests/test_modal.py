@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -9,10 +11,15 @@ import scipy.linalg
 from tests.conftest import PAPER_CAR
 from tests.reference import rel_rms
 from tests.test_linear import paper_road
+from vehid_cli.config import load_config
+from vehid_cli.identify.experiment import build_experiment
 from vehid_cli.io.measurement import time_grid
 from vehid_cli.models.fullcar import VEHICLE_PARAMETERS, assemble
+from vehid_cli.models.sensors import Layout, Sensor, corner_layout
 from vehid_cli.sim import modal
-from vehid_cli.sim.linear import simulate
+from vehid_cli.sim.linear import simulate, simulate_columns
+
+ROOT = Path(__file__).resolve().parents[1]
 
 FIELDS = ("q", "qd", "qdd", "disp", "acc")
 
@@ -85,3 +92,99 @@ def test_phi_functions_match_van_loan_matrix_exponential(x):
     phi1, phi2 = modal._phi12(np.array([x]))
     for column, phi in ((E[:n, n], phi1[0]), (E[:n, n + 1], phi2[0])):
         assert abs(complex(*column) - dt * phi) < 1e-13 * abs(dt * phi), (column, dt * phi)
+
+
+MIXED_LAYOUT = Layout((
+    Sensor("roof", "body_acc", x=0.4, y=-0.3),
+    Sensor("boot", "body_disp", x=0.2, y=0.1, origin="corner3"),
+    Sensor("hub2", "wheel_acc", corner=2),
+    Sensor("hop4", "wheel_disp", corner=4),
+    Sensor("pot1", "deflection", corner=1),
+    Sensor("pot3", "deflection", corner=3),
+))  # fmt: skip
+
+
+def _split_by_condition(cars: dict[str, np.ndarray], monkeypatch) -> np.ndarray:
+    """Set COND_MAX between the candidates' eigenvector conditions so that about half of them take the state-space
+    fallback, scattered over the blocks of cars; return which ones do."""
+    A = assemble(cars).state_space()[0]
+    V = np.linalg.eig(A)[1]
+    cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(np.linalg.inv(V)).sum(axis=-2).max(axis=-1)
+    monkeypatch.setattr(modal, "COND_MAX", float(np.median(cond)))
+    good = modal._kept_modes(A)[-1]
+    return ~good
+
+
+@pytest.mark.parametrize("batch", [1, 20, 100])
+def test_fast_paths_agree_with_the_reference_at_any_batch_with_fallback_candidates(batch, monkeypatch):
+    """The full response (modal_foh) and the layout's channels alone (simulate_columns) against the NumPy
+    reference (a matrix exponential and a loop over time, sim.linear._exact_foh) to round-off, 3000 samples, with
+    candidates through the modal recursions and the state-space fallback mixed in one batch (blocks of 8 cars)."""
+    t = time_grid(3.0, 1e-3)
+    road = paper_road(t) + 0.01
+    cars = random_cars(batch, seed=batch)
+    fallback = _split_by_condition(cars, monkeypatch)
+    if batch > 1:
+        assert fallback.any() and not fallback.all()
+    mats = assemble(cars)
+    points = MIXED_LAYOUT.points(cars)
+    ref = simulate(mats, road, 1e-3, "exact-reference", points)
+    fast = simulate(mats, road, 1e-3, "exact", points)
+    assert fast.acc.shape == (batch, t.size, 4)  # four body points: roof, boot, corners 1 and 3
+    for i in range(batch):  # car by car: a car's error does not hide in the batch's RMS
+        for field in FIELDS:
+            assert rel_rms(getattr(fast, field)[i], getattr(ref, field)[i]) < 1e-9, (i, field)
+    columns = simulate_columns(mats, road, 1e-3, MIXED_LAYOUT.column_groups, "exact", points)
+    channels = MIXED_LAYOUT.read_columns(columns)
+    expected = MIXED_LAYOUT.read(ref)
+    for family, values in channels.items():
+        assert values.shape == expected[family].shape
+        for i in range(batch):
+            assert rel_rms(values[i], expected[family][i]) < 1e-9, (family, i)
+
+
+MIXED_YAML = (
+    "layout=[{name: roof, kind: body_acc, x: 0.4, y: -0.3}, {name: boot, kind: body_disp, x: 0.2, y: 0.1, "
+    "origin: corner3}, {name: hub2, kind: wheel_acc, corner: 2}, {name: hop4, kind: wheel_disp, corner: 4}, "
+    "{name: pot1, kind: deflection, corner: 1}, {name: pot3, kind: deflection, corner: 3}]"
+)
+
+
+@pytest.mark.parametrize("overrides", [[], [MIXED_YAML]], ids=["paper", "mixed"])
+def test_the_channels_alone_are_the_full_responses_channels(overrides):
+    """Experiment.outputs (the identification's path: only the layout's columns projected) against the channels
+    read from the whole response (Experiment.simulate), batch 1, 20 and 100 and one car without a batch axis; the
+    same numbers (to the last bit here; asked to round-off, which another BLAS may reach in another order)."""
+    cfg = load_config(ROOT / "configs" / "gokdag2015" / "base.yaml", overrides)
+    exp = build_experiment(cfg)
+    assert exp.layout.channel_names == (MIXED_LAYOUT if overrides else corner_layout()).channel_names
+    rng = np.random.default_rng(7)
+    base = cfg.vehicle.values()
+    batches = [{k: base[k] * rng.uniform(0.7, 1.3, b) for k in ("m", "Ix", "a1", "cf")} for b in (1, 20, 100)]
+    for values in [None, *batches]:
+        fast = exp.outputs(values)
+        full = exp.read(exp.simulate(values))
+        assert fast.keys() == full.keys() == set(exp.layout.families)
+        for family in fast:
+            assert fast[family].shape == full[family].shape
+            scale = np.max(np.abs(full[family]))
+            np.testing.assert_allclose(fast[family], full[family], rtol=0, atol=1e-13 * scale)
+
+
+def test_columns_of_the_other_integrators_are_picked_from_the_response():
+    t = time_grid(0.5, 1e-3)
+    mats = assemble(random_cars(3))
+    groups = [[("acc", 1), ("q", 4)], [], [("qd", 0)]]
+    got = simulate_columns(mats, paper_road(t), 1e-3, groups, "newmark")
+    r = simulate(mats, paper_road(t), 1e-3, "newmark")
+    np.testing.assert_array_equal(got[0], np.stack([r.acc[..., 1], r.q[..., 4]], axis=-1))
+    assert got[1].shape == (3, t.size, 0)
+    np.testing.assert_array_equal(got[2][..., 0], r.qd[..., 0])
+
+
+def test_long_records_run_fewer_cars_at_once():
+    """A block's modal coordinates over the whole record stay within SCRATCH_BYTES (at least one car)."""
+    assert modal._block_size(3000, 18) == modal.CARS_PER_BLOCK
+    for n in (60_000, 600_000, 10**8):
+        size = modal._block_size(n, 18)
+        assert size >= 1 and (size == 1 or size * n * 18 * 8 <= modal.SCRATCH_BYTES)

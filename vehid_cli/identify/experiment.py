@@ -27,7 +27,7 @@ from ..models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
 from ..models.noise import NoiseModel, add_channel_noise
 from ..models.road import road_function
 from ..models.sensors import Layout
-from ..sim.linear import Response, simulate
+from ..sim.linear import Response, simulate, simulate_columns
 from ..sim.nonlinear import simulate_effects
 from ..sim.sensitivity import car_output_matrices, linear_sensitivities
 
@@ -88,18 +88,22 @@ class Experiment:
         """
         sim = self.config.simulation
         effects = self.effects(values)
-        substeps = sim.substeps or 1
         p = self.parameters(values)
         points = self.layout.points(p)
-        if not effects and sim.integrator != "rk4" and substeps == 1:
+        if self._linear(effects):
             return simulate(assemble(p), self.road, self.dt, sim.integrator, points)
         if sim.integrator not in ("rk4", "newmark"):
             raise ValueError(
                 f"effects {sorted(effects)} need simulation.integrator rk4 or newmark, not '{sim.integrator}'"
             )
         return simulate_effects(
-            assemble(p), p["cf"], p["cr"], effects, self.road, self.dt, sim.integrator, substeps, points
+            assemble(p), p["cf"], p["cr"], effects, self.road, self.dt, sim.integrator, sim.substeps or 1, points
         )
+
+    def _linear(self, effects: Mapping[str, object]) -> bool:
+        """Whether a batch with these effects runs on the linear path of ``sim.linear``."""
+        sim = self.config.simulation
+        return not effects and sim.integrator != "rk4" and (sim.substeps or 1) == 1
 
     def read(self, response: Response) -> dict[str, NDArray]:
         """The layout's channels of a response: family (acc, disp) -> (..., n, k)."""
@@ -110,7 +114,15 @@ class Experiment:
 
         A long record simulates a one-dimensional batch in chunks of cars, so that the full response of a chunk
         (coordinates, velocities, accelerations and every body point, about 45 columns per sample) stays within
-        CHUNK_BYTES: a 60 s run at 1 kHz holds 20 MB of it per car. Each car's numbers are the same either way."""
+        CHUNK_BYTES: a 60 s run at 1 kHz holds 20 MB of it per car. Each car's numbers are the same either way.
+        The exact linear car (what identification runs most) computes only the layout's channels, the same numbers
+        as `read(simulate(values))` at a fraction of the cost (sim.linear.simulate_columns)."""
+        if self.config.simulation.integrator == "exact" and self._linear(self.effects(values)):
+            p = self.parameters(values)
+            columns = simulate_columns(
+                assemble(p), self.road, self.dt, self.layout.column_groups, "exact", self.layout.points(p)
+            )
+            return self.layout.read_columns(columns)
         arrays = [np.asarray(v) for v in (values or {}).values()]
         sizes = {a.shape[0] for a in arrays if a.ndim == 1}
         if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):

@@ -15,7 +15,7 @@ body points above the corners.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
@@ -59,6 +59,11 @@ class Sensor:
 
 def _origin(name: str, p: Mapping[str, ArrayLike]) -> tuple[NDArray, NDArray]:
     """(x, y) [m] of a reference point from the CG, for a batch of cars (a1, a2, b1, b2 arrays)."""
+    return _origins(p)[name]
+
+
+def _origins(p: Mapping[str, ArrayLike]) -> dict[str, tuple[NDArray, NDArray]]:
+    """(x, y) [m] of every reference point from the CG, for a batch of cars (a1, a2, b1, b2 arrays)."""
     a1, a2, b1, b2 = np.broadcast_arrays(*(np.asarray(p[k], dtype=float) for k in ("a1", "a2", "b1", "b2")))
     zero = np.zeros_like(a1)
     return {
@@ -69,7 +74,7 @@ def _origin(name: str, p: Mapping[str, ArrayLike]) -> tuple[NDArray, NDArray]:
         "corner4": (-a2, b1),
         "front_axle": (a1, (b1 - b2) / 2),
         "rear_axle": (-a2, (b1 - b2) / 2),
-    }[name]
+    }
 
 
 @dataclass(frozen=True)
@@ -112,14 +117,17 @@ class Layout:
     def points(self, p: Mapping[str, ArrayLike]) -> NDArray:
         """Rows (..., nb, 3) mapping [x_b, phi, theta] to the vertical motion of each body point, for a batch of
         cars (parameter arrays of one batch shape): [1, y, -x] with (x, y) from the CG."""
-        rows = []
-        for origin, dx, dy in self._points:
-            ox, oy = _origin(origin, p)
-            rows.append(np.stack([np.ones_like(ox), oy + dy, -(ox + dx)], axis=-1))
-        if not rows:
+        if not self._points:
             a1 = np.asarray(p["a1"], dtype=float)
             return np.zeros(a1.shape + (0, 3))
-        return np.stack(rows, axis=-2)
+        origins = _origins(p)  # once for every point: the simulation asks for them on every batch
+        rows = np.empty(origins["cg"][0].shape + (len(self._points), 3))
+        rows[..., 0] = 1.0
+        for i, (origin, dx, dy) in enumerate(self._points):
+            ox, oy = origins[origin]
+            rows[..., i, 1] = oy + dy
+            rows[..., i, 2] = -(ox + dx)
+        return rows
 
     def body_xy(self, p: Mapping[str, float]) -> dict[str, tuple[float, float]]:
         """(x, y) [m] from the CG of each body sensor's point (x forward, y toward side 1), for one car."""
@@ -128,6 +136,38 @@ class Layout:
             if s.kind.startswith("body"):
                 ox, oy = _origin(s.origin, p)
                 out[s.name] = (float(ox) + s.x, float(oy) + s.y)
+        return out
+
+    @cached_property
+    def column_groups(self) -> tuple[tuple[tuple[str, int], ...], ...]:
+        """The response columns (field, index) the channels are read from: one group per family in `families` order
+        (channel j of the family from its column j; a deflection from its body point's disp), then one group of the
+        wheel hops the deflections subtract (empty without deflections). A simulator that computes only these
+        (sim.linear.simulate_columns) skips the rest of the response; `read_columns` makes the channels."""
+        index = {pt: i for i, pt in enumerate(self._points)}
+        source = {"body_acc": "acc", "body_disp": "disp", "deflection": "disp", "wheel_acc": "qdd", "wheel_disp": "q"}
+        groups, wheels = [], []
+        for family in self.families:
+            group = []
+            for s in self.of(family):
+                at = index[s.point] if s.point is not None else 2 + s.corner
+                group.append((source[s.kind], at))
+                if s.kind == "deflection":
+                    wheels.append(("q", 2 + s.corner))
+            groups.append(tuple(group))
+        return (*groups, tuple(wheels))
+
+    def read_columns(self, columns: Sequence[NDArray]) -> dict[str, NDArray]:
+        """Family -> (..., n, k) from arrays (..., n, len(group)) holding `column_groups`' columns, the same numbers
+        as `read` (the arrays are used in place: a deflection's wheel hop is subtracted from its column)."""
+        *families, wheels = columns
+        out = dict(zip(self.families, families, strict=True))
+        j = 0
+        for family, values in out.items():
+            for col, s in enumerate(self.of(family)):
+                if s.kind == "deflection":
+                    values[..., col] -= wheels[..., j]
+                    j += 1
         return out
 
     def read(self, response) -> dict[str, NDArray]:

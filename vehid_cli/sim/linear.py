@@ -5,7 +5,9 @@ Integrators, all taking plain arrays so later code can batch and compile them:
 * ``exact``: the exact discretisation of M qdd + C qd + K q = B y(t) for a road that is linear between
   samples (first-order hold). With a piecewise-linear road it is exact to round-off; this is also what
   ``scipy.signal.lsim`` assumes. Runs through the compiled modal recursions of ``sim.modal`` (same
-  discretisation, mode by mode; about 2000+ cars per second on one core for 3000 samples).
+  discretisation, mode by mode, 8 cars at a time); ``simulate_columns`` computes only the columns a
+  layout reads (the identification's path, several thousand cars per second on one core for 3000 samples:
+  ``benchmarks/bench_simulation.py``).
 * ``exact-reference``: the same discretisation from one matrix exponential of an augmented matrix and
   a NumPy loop over time: slow, simple, kept as the reference the fast path is tested against.
 * ``newmark``: Newmark-beta with average acceleration (gamma = 1/2, beta = 1/4), as in the paper;
@@ -17,6 +19,7 @@ road that starts at zero).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -24,9 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_DOF, FullCarMatrices
-from .modal import foh_discretisation, modal_foh
+from .modal import column_index, foh_discretisation, modal_columns, modal_foh
 
 Integrator = Literal["exact", "exact-reference", "newmark"]
+Column = tuple[str, int]  # a Response field (q, qd, qdd, disp, acc) and the index of its last axis
 
 
 @dataclass(frozen=True)
@@ -62,9 +66,7 @@ def simulate(
     """Respond to the road (n, 4) [m] sampled every dt [s]: one call for the whole batch of cars. `points`
     (..., nb, 3), rows [1, y, -x], are the body points whose motion `disp` and `acc` give (default the corners',
     mats.G; models.sensors.Layout.points)."""
-    road = np.asarray(road, dtype=float)
-    if road.ndim < 2 or road.shape[-1] != 4:
-        raise ValueError(f"road must be (..., n, 4), got {road.shape}")
+    road = _checked(road)
     n = road.shape[-2]
     t = np.arange(n) * dt
     if integrator == "exact":
@@ -81,6 +83,37 @@ def simulate(
     disp = (q[..., None, :3] @ Gt)[..., 0, :]
     acc = (qdd[..., None, :3] @ Gt)[..., 0, :]
     return Response(t=t, q=q, qd=qd, qdd=qdd, disp=disp, acc=acc)
+
+
+def simulate_columns(
+    mats: FullCarMatrices,
+    road: NDArray,
+    dt: float,
+    groups: Sequence[Sequence[Column]],
+    integrator: Integrator = "exact",
+    points: NDArray | None = None,
+) -> list[NDArray]:
+    """Some columns of `simulate`'s response, the same numbers: one array (..., n, len(group)) per group of
+    (field, index) pairs, e.g. [("acc", 0), ("disp", 2)] for acc[..., 0] and disp[..., 2].
+
+    The exact integrator computes only these (projecting its modal coordinates onto every column of the response
+    is most of its work; an identification reads a few channels: models.sensors.Layout.column_groups); the
+    other integrators pick them from the whole response."""
+    road = _checked(road)
+    if integrator == "exact":
+        nb = (mats.G if points is None else np.asarray(points)).shape[-2]
+        return modal_columns(mats, road, dt, [[column_index(f, i, nb) for f, i in g] for g in groups], points)
+    response = simulate(mats, road, dt, integrator, points)
+    empty = np.empty(response.q.shape[:-1] + (0,))
+    return [np.stack([getattr(response, f)[..., i] for f, i in g], axis=-1) if g else empty for g in groups]
+
+
+def _checked(road: NDArray) -> NDArray:
+    """The road as floats (..., n, 4) [m], or ValueError."""
+    road = np.asarray(road, dtype=float)
+    if road.ndim < 2 or road.shape[-1] != 4:
+        raise ValueError(f"road must be (..., n, 4), got {road.shape}")
+    return road
 
 
 def static_equilibrium(mats: FullCarMatrices, y: NDArray) -> NDArray:

@@ -7,7 +7,9 @@ coordinates of A = V diag(lam) V^-1: each mode is a scalar complex recursion
     g1 = dt phi1(lam dt) b,   g2 = dt phi2(lam dt) b,   b = row of V^-1 Bs,
     phi1(x) = (e^x - 1) / x,   phi2(x) = (e^x - 1 - x) / x^2,
 
-which is the same update as ``foh_discretisation`` (the Van Loan matrix exponential), only cheaper:
+which is the same update as ``foh_discretisation`` (the Van Loan matrix exponential), only cheaper. The
+compiled loop runs it in x = z - g2 . y, which needs one input sample per step (x[k+1] = e x[k] + (g1 +
+(e - 1) g2) . y[k]; ``_shifted``), and the projection adds the g2 . y back:
 7 complex scalar recursions per car instead of a 14 x 14 matrix-vector product per step, and one
 14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential. A real system has
 conjugate pairs, so only modes with Im(lam) >= 0 run, conjugates counted twice. Round-off grows with
@@ -17,9 +19,15 @@ same discretisation via scipy's ``expm``, also compiled), so every candidate get
 
 Both paths start from static equilibrium on the first road sample, s0 = [K^-1 B y0, 0], like the
 NumPy reference in ``sim.linear``.
+
+The recursions run a block of cars at a time (``_modal_blocks``), and one matrix product per block turns the
+block's modal coordinates into the output columns asked for: all of them for ``modal_foh`` (q, qd, qdd and every
+body point), a layout's channels for ``modal_columns`` (identification reads 8 of 29), with the same numbers.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numba
 import numpy as np
@@ -44,13 +52,13 @@ def _phi12(x: NDArray) -> tuple[NDArray, NDArray]:
 
 
 @numba.njit(cache=True)
-def _modal_recursion(e, a, b, z0, u, out):  # pragma: no cover - compiled
-    """Run the modal recursions of P cars; out (n, P, 2m + 4) gets [Re z (m), Im z (m), y (4)] at each step.
+def _modal_recursion(e, g, x0, u, out):  # pragma: no cover - compiled
+    """Run the modal recursions of P cars; out (n, P, 2m + 4) gets [Re x (m), Im x (m), y (4)] at each step.
 
-    Lane l = p m + j is mode j of car p: e (P m,) = exp(lam dt), a and b (4, P m) the coefficients of
-    y[k] and y[k + 1] (a = g1 - g2, b = g2), z0 (P m,) the start. u (R, n, 4), R = 1 (one road for all
-    cars) or P. Time outside, all lanes of all cars inside: with one road the lane loop is a plain
-    vector loop (SIMD), and the independent recursions overlap their latencies.
+    Lane l = p m + j is mode j of car p: x[k+1] = e x[k] + g . y[k], e (P m,) = exp(lam dt), g (4, P m) the
+    gains of y[k] (``_shifted_gains``), x0 (P m,) the start. u (R, n, 4), R = 1 (one road for all cars) or P.
+    Time outside, all lanes of all cars inside: with one road the lane loop is a plain vector loop (SIMD), and
+    the independent recursions overlap their latencies.
     """
     P = out.shape[1]
     L = e.shape[0]
@@ -58,46 +66,34 @@ def _modal_recursion(e, a, b, z0, u, out):  # pragma: no cover - compiled
     n = u.shape[1]
     one_road = u.shape[0] == 1
     er, ei = e.real.copy(), e.imag.copy()
-    ar, ai = a.real.copy(), a.imag.copy()
-    br, bi = b.real.copy(), b.imag.copy()
-    zr, zi = z0.real.copy(), z0.imag.copy()
-    yk = np.empty((4, L))  # road under lane l at k and k + 1 (per car roads only)
-    yn = np.empty((4, L))
+    gr, gi = g.real.copy(), g.imag.copy()
+    xr, xi = x0.real.copy(), x0.imag.copy()
     for k in range(n):
         for p in range(P):
             r = 0 if one_road else p
             for j in range(m):
-                out[k, p, j] = zr[p * m + j]
-                out[k, p, m + j] = zi[p * m + j]
+                out[k, p, j] = xr[p * m + j]
+                out[k, p, m + j] = xi[p * m + j]
             for c in range(4):
                 out[k, p, 2 * m + c] = u[r, k, c]
         if k == n - 1:
             break
         if one_road:
             y0, y1, y2, y3 = u[0, k, 0], u[0, k, 1], u[0, k, 2], u[0, k, 3]
-            w0, w1, w2, w3 = u[0, k + 1, 0], u[0, k + 1, 1], u[0, k + 1, 2], u[0, k + 1, 3]
             for l in range(L):
-                dr = (ar[0, l] * y0 + ar[1, l] * y1 + ar[2, l] * y2 + ar[3, l] * y3
-                      + br[0, l] * w0 + br[1, l] * w1 + br[2, l] * w2 + br[3, l] * w3)  # fmt: skip
-                di = (ai[0, l] * y0 + ai[1, l] * y1 + ai[2, l] * y2 + ai[3, l] * y3
-                      + bi[0, l] * w0 + bi[1, l] * w1 + bi[2, l] * w2 + bi[3, l] * w3)  # fmt: skip
-                zr_new = er[l] * zr[l] - ei[l] * zi[l] + dr
-                zi[l] = er[l] * zi[l] + ei[l] * zr[l] + di
-                zr[l] = zr_new
+                dr = gr[0, l] * y0 + gr[1, l] * y1 + gr[2, l] * y2 + gr[3, l] * y3
+                di = gi[0, l] * y0 + gi[1, l] * y1 + gi[2, l] * y2 + gi[3, l] * y3
+                xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
+                xi[l] = er[l] * xi[l] + ei[l] * xr[l] + di
+                xr[l] = xr_new
         else:
             for l in range(L):
-                for c in range(4):
-                    yk[c, l] = u[l // m, k, c]
-                    yn[c, l] = u[l // m, k + 1, c]
-            for l in range(L):
-                dr = 0.0
-                di = 0.0
-                for c in range(4):
-                    dr += ar[c, l] * yk[c, l] + br[c, l] * yn[c, l]
-                    di += ai[c, l] * yk[c, l] + bi[c, l] * yn[c, l]
-                zr_new = er[l] * zr[l] - ei[l] * zi[l] + dr
-                zi[l] = er[l] * zi[l] + ei[l] * zr[l] + di
-                zr[l] = zr_new
+                r = l // m
+                dr = gr[0, l] * u[r, k, 0] + gr[1, l] * u[r, k, 1] + gr[2, l] * u[r, k, 2] + gr[3, l] * u[r, k, 3]
+                di = gi[0, l] * u[r, k, 0] + gi[1, l] * u[r, k, 1] + gi[2, l] * u[r, k, 2] + gi[3, l] * u[r, k, 3]
+                xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
+                xi[l] = er[l] * xi[l] + ei[l] * xr[l] + di
+                xr[l] = xr_new
 
 
 @numba.njit(cache=True)
@@ -144,12 +140,13 @@ def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None
     n = road.shape[-2]
 
     def flat(X: NDArray) -> NDArray:
-        return np.broadcast_to(X, batch + X.shape[-2:]).reshape((P,) + X.shape[-2:])
+        Y = X if X.shape[:-2] == batch else np.broadcast_to(X, batch + X.shape[-2:])
+        return Y.reshape((P,) + X.shape[-2:])
 
     A, Bs = mats.state_space()
     A, Bs, G, K, B = flat(A), flat(Bs), flat(G), flat(mats.K), flat(mats.B)
-    # A writeable C-contiguous copy whatever the caller passed: one array type for numba to compile.
-    u = np.array(road.reshape(1, n, N_CORNERS) if road.ndim == 2 else flat(road), dtype=float, order="C")
+    # Writeable and C-contiguous (copied if it is not): one array type for numba to compile.
+    u = np.require(road.reshape(1, n, N_CORNERS) if road.ndim == 2 else flat(road), float, ["C", "W"])
     q0 = np.broadcast_to(np.linalg.solve(K, B @ u[:, 0, :, None])[..., 0], (P, N_DOF))  # static equilibrium
     return batch, A, Bs, G, q0, u
 
@@ -236,26 +233,138 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray |
     real state-space recursion instead; the answer is the same discretisation either way.
     """
     batch, A, Bs, G, q0, u = _flatten(mats, road, points)
+    (Y,) = _modal_columns(A, Bs, G, q0, u, dt, [np.arange(_n_out(G))])
+    return _split(Y, batch)
+
+
+def modal_columns(
+    mats: FullCarMatrices, road: NDArray, dt: float, groups: Sequence[Sequence[int]], points: NDArray | None = None
+) -> list[NDArray]:
+    """Only some output columns of ``modal_foh``, the same numbers: one array (batch..., n, len(group)) per group of
+    column indices into [q (7), qd (7), qdd (7), disp (nb), acc (nb)] (``column_index``).
+
+    An identification reads a few channels (the paper's: 8 of 29 columns), and projecting the modal coordinates
+    onto the columns is most of the work: each group is computed straight into its own contiguous array."""
+    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
+    Ys = _modal_columns(A, Bs, G, q0, u, dt, [np.asarray(g, dtype=int) for g in groups])
+    return [Y.reshape(batch + Y.shape[-2:]) for Y in Ys]
+
+
+FIELD_OFFSETS = {"q": 0, "qd": N_DOF, "qdd": 2 * N_DOF, "disp": 3 * N_DOF}  # acc follows disp's nb columns
+
+
+def column_index(field: str, index: int, nb: int) -> int:
+    """The column of ``field`` (q, qd, qdd, disp, acc) [index] among [q, qd, qdd, disp, acc] for nb body points."""
+    return 3 * N_DOF + nb + index if field == "acc" else FIELD_OFFSETS[field] + index
+
+
+def _modal_columns(
+    A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDArray, dt: float, groups: list[NDArray]
+) -> list[NDArray]:
+    """(P, n, len(group)) for each group of output columns of P cars: modal recursions, then the projection."""
     P, n = A.shape[0], u.shape[1]
     lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, 14, m), (P, m, 14), (P,)
     m = lam_k.shape[1]
     bm = W_k @ Bs  # (P, m, 4): modal input matrix
     z0 = (W_k[:, :, :N_DOF] @ q0[:, :, None])[..., 0]  # (P, m)
     decay, a, b = _foh_gains(lam_k, bm, dt)
-    out = np.empty((n, P, 2 * m + N_CORNERS))
-    _modal_recursion(decay, a, b, z0.reshape(P * m), u, out)
 
     # Output j-th mode column: w_j [V_j, lam_j V_j[7:], G V_j[:3], G lam_j V_j[7:10]]; Re(c z) = Re c Re z - Im c Im z.
     qdd_modes = lam_k[:, None, :] * V_k[:, N_DOF:, :]
     c = np.concatenate([V_k, qdd_modes, G @ V_k[:, :3, :], G @ qdd_modes[:, :3, :]], axis=1) * w_k[:, None, :]
     ct = np.swapaxes(c, -1, -2)  # (P, m, 21 + 2 nb)
     proj = np.concatenate([ct.real, -ct.imag, _input_rows(Bs, G)], axis=1)
-    Y = np.matmul(out.transpose(1, 0, 2), proj)  # (P, n, 21 + 2 nb); each car's rows are strided views, BLAS takes them
+    columns, views = _gemm_columns(groups, proj.shape[-1])
+    projs = proj if columns is None else np.ascontiguousarray(proj[:, :, columns])
+    Y = np.empty((P, n, projs.shape[-1]))
+    _modal_blocks(decay, a, b, z0.reshape(P * m), u, projs, Y)
     if not good.all():
-        bad = np.flatnonzero(~good)
-        ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[bad])
-        Y[bad] = _statespace_outputs(A[bad], Bs[bad], G[bad], q0[bad], ub, dt)
-    return _split(Y, batch)
+        for block in _blocks(np.flatnonzero(~good), n, N_STATE + N_CORNERS):
+            ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[block])
+            full = _statespace_outputs(A[block], Bs[block], G[block], q0[block], ub, dt)
+            Y[block] = full if columns is None else full[..., columns]
+    return [Y[..., view] for view in views]
+
+
+GEMM_WIDTH = 8  # the projection's columns are padded to a multiple of this (see _gemm_columns)
+
+
+def _gemm_columns(groups: list[NDArray], n_out: int) -> tuple[NDArray | None, list[slice]]:
+    """The columns one projection computes for all `groups` (None: all n_out of them, in order) and each group's
+    slice of them.
+
+    One product for every group, padded (with copies of its last column) to a multiple of GEMM_WIDTH columns:
+    OpenBLAS sums each entry of the product in the same order as for the whole response then, so a group's
+    numbers are those of ``modal_foh`` bit for bit; a product of 1-4 columns (mod 8) sums in another order
+    (round-off apart, measured with OpenBLAS 0.3.31, Haswell kernels)."""
+    views, start = [], 0
+    for g in groups:
+        views.append(slice(start, start + g.size))
+        start += g.size
+    columns = [int(c) for g in groups for c in g]
+    if columns == list(range(n_out)):
+        return None, views
+    if columns:
+        columns += [columns[-1]] * (-len(columns) % GEMM_WIDTH)
+    return np.array(columns, dtype=int), views
+
+
+SCRATCH_BYTES = 32 * 2**20  # a block's modal coordinates over the whole record, at most (long records: fewer cars)
+CARS_PER_BLOCK = 8  # cars whose recursions run together (see _modal_blocks)
+
+
+def _block_size(n: int, width: int) -> int:
+    """Cars per block for n samples of `width` columns each: CARS_PER_BLOCK, fewer when their scratch would pass
+    SCRATCH_BYTES."""
+    return max(1, min(CARS_PER_BLOCK, SCRATCH_BYTES // (8 * n * width)))
+
+
+def _blocks(cars: NDArray, n: int, width: int) -> list[NDArray]:
+    """`cars` (indices) in blocks of _block_size."""
+    size = _block_size(n, width)
+    return [cars[i : i + size] for i in range(0, cars.size, size)]
+
+
+def _shifted(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray):
+    """The recursion in x = z - b . y, which needs one input sample per step: x[k+1] = e x[k] + g . y[k],
+    g = e b + a (from z[k+1] = e z[k] + a . y[k] + b . y[k+1]). Returns g (4, P m), x0 (P m,) and the projection
+    `proj` (P, 2 m + 4, ncol) onto [Re x, Im x, y]: z = x + b . y adds Re(c b) to the rows of y."""
+    P, m = proj.shape[0], decay.size // proj.shape[0]
+    g = decay * b + a
+    y0 = u[:, 0, :] if u.shape[0] == 1 else np.repeat(u[:, 0, :], m, axis=0)  # (1 or P m, 4)
+    x0 = z0 - (b.T * y0).sum(axis=-1)
+    bc = b.reshape(b.shape[0], P, m).transpose(1, 0, 2)  # (P, 4, m)
+    shifted = proj.copy()
+    shifted[:, 2 * m :, :] += bc.real @ proj[:, :m, :] + bc.imag @ proj[:, m : 2 * m, :]
+    return g, x0, shifted
+
+
+def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray, out) -> None:
+    """Run the modal recursions (`_foh_gains`' decay, gains a, b, start z0 over P m lanes, roads u) a block of cars
+    at a time and project each block at once: out[p] = [Re z, Im z, y] @ proj[p], proj (P, 2 m + 4, ncol) (the
+    recursion runs in x = z - b . y: ``_shifted``).
+
+    Why blocks: the lane loop needs several cars to fill its SIMD vectors (one car, 7 lanes, ran 3x slower per
+    car), but all of a batch's modal coordinates at once (100 cars: 43 MB) fall out of cache between the
+    recursion that writes them and the projection that reads them: batch 100 ran 2x slower per car than batch
+    20 did. CARS_PER_BLOCK = 8 (56 lanes, 3.5 MB for 3000 samples) was the fastest of 2 to 100 at 8 and 29
+    columns. Each car's numbers are the same whatever the block."""
+    P = out.shape[0]
+    g, x0, proj = _shifted(decay, a, b, z0, u, proj)
+    n, width = u.shape[1], 2 * (decay.size // P) + a.shape[0]
+    m = decay.size // P
+    count = -(-P // _block_size(n, width))
+    size = -(-P // count)  # blocks of nearly equal size: 20 cars run as 7, 7, 6 rather than 8, 8, 4
+    scratch = np.empty((n, min(P, size), width))
+    for start in range(0, P, size):
+        stop = min(P, start + size)
+        lanes = slice(start * m, stop * m)
+        block = scratch[:, : stop - start]  # a smaller last block in the same memory: a new 3 MB array each call
+        # cost its page faults (20 cars as 7, 7, 6 ran 2x slower per car than 21 as 7, 7, 7)
+        ub = u if u.shape[0] == 1 else u[start:stop]
+        _modal_recursion(decay[lanes], np.ascontiguousarray(g[:, lanes]), x0[lanes], ub, block)
+        modal = block.transpose(1, 0, 2)  # each car's rows are strided views, BLAS takes them
+        np.matmul(modal, proj[start:stop], out=out[start:stop])
 
 
 def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
@@ -264,7 +373,7 @@ def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray
     their eigenvalues (P, m), weights (P, m), eigenvectors (P, ns, m), rows of the inverse (P, m, ns), and whether
     the eigenvector matrix is well conditioned (P,). LAPACK returns conjugate pairs exactly conjugate."""
     lam, V = np.linalg.eig(A)
-    lam, V = lam.astype(complex), V.astype(complex)
+    lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
     W = np.linalg.inv(V)
     cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(W).sum(axis=-2).max(axis=-1)
     good = np.isfinite(cond) & (cond < COND_MAX)
@@ -272,6 +381,10 @@ def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray
     weight = np.where(lam.imag > 0, 2.0, 1.0) * keep
     m = int(keep.sum(axis=-1).max())
     idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]  # kept modes first; padding has weight 0
+    if (idx == idx[0]).all():  # the same places in every car (LAPACK orders each conjugate pair alike): one index
+        i = idx[0]
+        picked = (lam[:, i], weight[:, i], V[:, :, i], W[:, i, :])
+        return (*(np.ascontiguousarray(x) for x in picked), good)  # C-contiguous, as take_along_axis gives
     lam_k = np.take_along_axis(lam, idx, axis=-1)
     w_k = np.take_along_axis(weight, idx, axis=-1)
     V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)
@@ -316,15 +429,15 @@ def linear_foh(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: 
     decay, a, b = _foh_gains(lam_k, bm, dt)
     padded = np.zeros(u3.shape[:2] + (MAX_MODAL_INPUTS,))
     padded[..., :nu] = u3
-    out = np.empty((n, P, 2 * m + MAX_MODAL_INPUTS))
-    _modal_recursion(decay, a, b, z0.reshape(P * m), padded, out)
     ct = np.swapaxes((Cy @ V_k) * w_k[:, None, :], -1, -2)  # (P, m, ny)
-    proj = np.concatenate([ct.real, -ct.imag], axis=1)
-    Y = np.matmul(out.transpose(1, 0, 2)[..., : 2 * m], proj)
+    proj = np.zeros((P, 2 * m + MAX_MODAL_INPUTS, ct.shape[-1]))  # Dy u enters through `drive`
+    proj[:, :m], proj[:, m : 2 * m] = ct.real, -ct.imag
+    Y = np.empty((P, n, proj.shape[-1]))
+    _modal_blocks(decay, a, b, z0.reshape(P * m), padded, proj, Y)
     if not good.all():
-        bad = np.flatnonzero(~good)
-        ub = u3 if u3.shape[0] == 1 else np.ascontiguousarray(u3[bad])
-        Y[bad] = _statespace_linear(A[bad], Bs[bad], s0[bad], ub, dt, Cy[bad])
+        for block in _blocks(np.flatnonzero(~good), n, A.shape[-1] + nu):
+            ub = u3 if u3.shape[0] == 1 else np.ascontiguousarray(u3[block])
+            Y[block] = _statespace_linear(A[block], Bs[block], s0[block], ub, dt, Cy[block])
     return Y + drive
 
 
