@@ -42,7 +42,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm
@@ -50,6 +49,7 @@ from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import polish
 from ..sim.kernel import available_cores
+from .tails import chi2_isf, chi2_sf
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
 CANDIDATE_BUDGET = 150  # model evaluations of one candidate's fit (after the screening of its starts)
@@ -433,7 +433,7 @@ def rank_candidates(
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
         k = cand.df if cand.df is not None else len(added) - len(fit.fixed)
-        p = float(stats.chi2.sf(lr, k))
+        p = float(chi2_sf(lr, k))
         vJ, per = validation_J(names, fit.x) if fit.J < base.J else (base_vJ, base_per)
         better = lowers_validation(vJ, per, base_vJ, base_per, min_gain)
         return Ranked(
@@ -469,7 +469,7 @@ def undistinguished(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) ->
     one significantly), unless the validation data prefer the best clearly (its validation J
     DISTINCT_VALIDATION lower). A parameter and an effect are not rivals: parsimony decides (``parsimonious``)."""
     level = alpha / max(len(ranked), 1)
-    margin = float(stats.chi2.isf(level, max(best.k, 1)))
+    margin = float(chi2_isf(level, max(best.k, 1)))
     for r in ranked:
         if r is best or r.p_value >= level or r.kind != best.kind:
             continue
@@ -488,7 +488,7 @@ def parsimonious(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ra
     if best.kind != "effect":
         return None
     level = alpha / max(len(ranked), 1)
-    margin = float(stats.chi2.isf(level, max(best.k, 1)))
+    margin = float(chi2_isf(level, max(best.k, 1)))
     rivals = [
         r for r in ranked if r.kind == "parameter" and r.accepted
         and (best.statistic - r.statistic < margin or r.statistic >= PARSIMONY_SHARE * best.statistic)

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..identify.corrections import corrected, is_sensor_unknown
 from ..models.sensors import UNIT
+from .tails import chi2_sf
 
 BAND_Z = 1.959963984540054  # two-sided 95 %
 WELCH_SEGMENT_S = 1.0  # residual_spectrum's Welch segment [s] (shorter for records under 8 s: 8 segments)
@@ -64,7 +64,7 @@ def ljung_box(x: NDArray, lags: int = 20) -> Whiteness:
         band=float(band),
         outside=float(np.mean(np.abs(acf[1:]) > band)),
         q=q,
-        p_value=float(stats.chi2.sf(q, lags)),
+        p_value=float(chi2_sf(q, lags)),
         lags=lags,
     )
 
