@@ -162,7 +162,12 @@ class _Augmentation:
         problem_r, _ = self.subject.problem_for(reduced)
         idx = [f.names.index(n) for n in reduced]
         free = np.array([n not in f.fixed for n in reduced])
-        without = fit_free(problem_r, f.x[idx], free, budget)
+        start = f.x[idx]
+        now = self.current
+        same = now.names == reduced and set(now.fixed) == {n for n in f.fixed if n in reduced}
+        if self.subject.screen is not None and now is not f and same:
+            start = now.x  # a long record: the fit without the candidate is the current one, converged already
+        without = fit_free(problem_r, start, free, budget)
         k = cand.df if cand.df is not None else len([n for n in own if n not in f.fixed])
         return float(chi2_sf(self.subject.statistic(f)(without.J, f.J), max(k, 1))), without
 

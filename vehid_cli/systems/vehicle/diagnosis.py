@@ -181,8 +181,12 @@ def fit_declared(
         opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, ident.algorithm.iterations)
         x0 = task.nominal if ident.start == "nominal" else None
         res = opt.minimize(search or problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
-        fit = lsq_fit(problem, res.x, refit_budget)  # polish to the likelihood's minimum
-        evaluations = res.evaluations + fit.evaluations
+        start, evaluations = res.x, res.evaluations
+        if search is not None:  # polished on the window first: the whole record's polish then starts next to it
+            on_window = lsq_fit(search, start, refit_budget)
+            start, evaluations = on_window.x, evaluations + on_window.evaluations
+        fit = lsq_fit(problem, start, refit_budget)  # polish to the likelihood's minimum
+        evaluations += fit.evaluations
     else:  # no claim will be made: a local fit from the configured values is enough for the record
         fit = lsq_fit(problem, task.nominal, refit_budget)
         evaluations = fit.evaluations
