@@ -57,6 +57,9 @@ DISTINCT_VALIDATION = 0.1  # validation J this much lower tells the best candida
 PARSIMONY_SHARE = 0.9  # a known parameter explaining this share of an effect's LR is preferred to it
 SHAPE_IDENTIFIABLE = 0.5  # a shape parameter is freed when its 95 % half-width is below this fraction of it
 SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR to about 1e-7 R)
+SCORE_SKIP = (
+    0.25  # a later round's known parameter whose score statistic is below this share of the critical LR is not fitted
+)
 SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
 PROBE = 1e-4  # difference step of the screening's Gauss-Newton step, as a fraction of each unknown's range
 Z95 = 1.959963984540054
@@ -405,6 +408,7 @@ def rank_candidates(
     scale: float = 1.0,
     prior: dict[str, Ranked] | None = None,
     on_done: Callable[[int], None] | None = None,
+    tests: int | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -415,9 +419,10 @@ def rank_candidates(
     `scale` is the variance of one residual entry (for the shape parameters' intervals); with claim=False
     nothing is accepted (the data cannot tell); `prior`: each candidate's test of an earlier round, whose
     estimates of its own unknowns are one more start (warm start); `on_done(n)`: n candidates tested so far (called
-    from this thread). Candidate fits run in parallel threads."""
+    from this thread); `tests`: how many candidates the round tests in all (the Bonferroni count; default these).
+    Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
-    level = alpha / max(len(candidates), 1)
+    level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation
 
     def one(cand: Candidate) -> Ranked:
@@ -459,6 +464,31 @@ def rank_candidates(
             out.append(one(c))
             done(len(out))
     out.sort(key=lambda r: -r.statistic)
+    return out
+
+
+def score_statistics(problem: Problem, x: NDArray, free: NDArray, added: Sequence[int]) -> NDArray:
+    """Rao's score statistic of each added unknown (indices `added` into the problem's unknowns, held at their null
+    value in x) against the fit at x over the `free` others: (j_c' r)² / |j_c|² with j_c the residuals' derivative
+    along the candidate's unknown, less its projection on the fitted unknowns' columns. It is the first-order
+    fall of the sum of squared weighted residuals, i.e. of the LR of chi2_statistic, that freeing the unknown
+    would bring; every candidate from one forward-difference Jacobian (one batch of free + added + 1 evaluations).
+    NaN where the Jacobian is not finite."""
+    cols = np.flatnonzero(np.asarray(free, dtype=bool))
+    use = np.zeros(len(x), dtype=bool)
+    use[cols] = True
+    use[list(added)] = True
+    Jac, r = _jacobian(restricted(problem, x, use), np.asarray(x, dtype=float)[use])
+    where = np.cumsum(use) - 1  # column of each unknown in Jac
+    out = np.full(len(added), np.nan)
+    if not (np.all(np.isfinite(Jac)) and np.all(np.isfinite(r))):
+        return out
+    Jb = Jac[:, where[cols]]
+    for i, c in enumerate(added):
+        jc = Jac[:, where[c]]
+        jc = jc - Jb @ np.linalg.lstsq(Jb, jc, rcond=None)[0] if Jb.size else jc
+        norm = float(jc @ jc)
+        out[i] = float(jc @ r) ** 2 / norm if norm > 0 else 0.0
     return out
 
 

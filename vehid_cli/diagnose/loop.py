@@ -17,6 +17,7 @@ with the noise: above 1 + 5 sqrt(2/R) (R residuals) it is ``incomplete``, whatev
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ from ..core.progress import ProgressHook
 from ..optimizers.base import Problem
 from .attribution import (
     PARAMETER_PREFIX,
+    SCORE_SKIP,
     SCREEN_TOL,
     Candidate,
     Fit,
@@ -39,11 +41,12 @@ from .attribution import (
     lowers_validation,
     parsimonious,
     rank_candidates,
+    score_statistics,
     undistinguished,
 )
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
-from .tails import chi2_sf
+from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports
 from .unexplained import Unexplained
 
@@ -209,17 +212,50 @@ class _Augmentation:
             current_v = subject.validation_J(current.names, current.x)
         stage = f"round {len(self.rounds) + 1} candidates"
         self.progress(stage, 0, len(todo))
+        tests, skipped = len(todo), []
+        chi2 = subject.noise_limit is not None  # J is chi² per sample and the LR chi2_statistic: the score applies
+        if chi2 and self.rounds and self.claim and all(c.kind == "parameter" and len(c.unknowns) == 1 for c in todo):
+            todo, skipped = self.prescreen(todo, subject, current, current_v, tests)
         ranked = rank_candidates(
             todo, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
             subject.validation_J, subject.residual_count,
             self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
             claim=self.claim, scale=subject.scale(current),
             prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
-            on_done=lambda n: self.progress(stage, n, len(todo)),
-        )  # fmt: skip
+            on_done=lambda n: self.progress(stage, len(skipped) + n, tests), tests=tests,
+        ) if todo else []  # fmt: skip
+        ranked = sorted(ranked + skipped, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))
         self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
         return ranked
+
+    def prescreen(
+        self, todo: list[Candidate], subject: Subject, current: Fit, current_v: tuple, tests: int
+    ) -> tuple[list[Candidate], list[Ranked]]:  # fmt: skip
+        """A later round's known parameters (one unknown each): Rao's score statistic of every one from one Jacobian
+        at the current fit (attribution.score_statistics); those below SCORE_SKIP of the critical LR cannot be
+        accepted and are not fitted: their test reports the score statistic as its LR (its first-order value)."""
+        t0 = time.perf_counter()
+        new = tuple(c.unknowns[0] for c in todo)
+        problem, start = subject.problem_for(current.names + new)
+        D = len(current.names)
+        x = np.concatenate([current.x, start[D:]])
+        free = np.array([n not in current.fixed for n in current.names] + [False] * len(new))
+        score = score_statistics(problem, x, free, range(D, len(x)))
+        critical = chi2_isf(self.level(tests), 1)
+        fit, skipped = [], []
+        for c, S in zip(todo, score, strict=True):
+            if not (np.isfinite(S) and S < SCORE_SKIP * critical):
+                fit.append(c)
+                continue
+            k = c.df if c.df is not None else 1
+            R = subject.residual_count
+            skipped.append(Ranked(
+                effect=c.effect, added=(c.unknowns[0],), k=k, J=current.J - S / R, statistic=float(S),
+                p_value=chi2_sf(S, k), bic_margin=S - k * math.log(R), validation_J=current_v[0], accepted=False,
+                fit=current, seconds=time.perf_counter() - t0, kind=c.kind, validation_per_file=current_v[1],
+            ))  # fmt: skip
+        return fit, skipped
 
     def choose(self, ranked: list[Ranked]) -> Ranked | None:
         """The best accepted candidate, a known parameter explaining the residual as well preferred; None when none
