@@ -42,7 +42,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm
@@ -50,6 +49,7 @@ from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import polish
 from ..sim.kernel import available_cores
+from .tails import chi2_isf, chi2_sf
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
 CANDIDATE_BUDGET = 150  # model evaluations of one candidate's fit (after the screening of its starts)
@@ -57,6 +57,9 @@ DISTINCT_VALIDATION = 0.1  # validation J this much lower tells the best candida
 PARSIMONY_SHARE = 0.9  # a known parameter explaining this share of an effect's LR is preferred to it
 SHAPE_IDENTIFIABLE = 0.5  # a shape parameter is freed when its 95 % half-width is below this fraction of it
 SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR to about 1e-7 R)
+SCORE_SKIP = (
+    0.25  # a later round's known parameter whose score statistic is below this share of the critical LR is not fitted
+)
 SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
 PROBE = 1e-4  # difference step of the screening's Gauss-Newton step, as a fraction of each unknown's range
 Z95 = 1.959963984540054
@@ -405,6 +408,7 @@ def rank_candidates(
     scale: float = 1.0,
     prior: dict[str, Ranked] | None = None,
     on_done: Callable[[int], None] | None = None,
+    tests: int | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -415,9 +419,10 @@ def rank_candidates(
     `scale` is the variance of one residual entry (for the shape parameters' intervals); with claim=False
     nothing is accepted (the data cannot tell); `prior`: each candidate's test of an earlier round, whose
     estimates of its own unknowns are one more start (warm start); `on_done(n)`: n candidates tested so far (called
-    from this thread). Candidate fits run in parallel threads."""
+    from this thread); `tests`: how many candidates the round tests in all (the Bonferroni count; default these).
+    Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
-    level = alpha / max(len(candidates), 1)
+    level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation
 
     def one(cand: Candidate) -> Ranked:
@@ -433,7 +438,7 @@ def rank_candidates(
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
         k = cand.df if cand.df is not None else len(added) - len(fit.fixed)
-        p = float(stats.chi2.sf(lr, k))
+        p = float(chi2_sf(lr, k))
         vJ, per = validation_J(names, fit.x) if fit.J < base.J else (base_vJ, base_per)
         better = lowers_validation(vJ, per, base_vJ, base_per, min_gain)
         return Ranked(
@@ -462,6 +467,31 @@ def rank_candidates(
     return out
 
 
+def score_statistics(problem: Problem, x: NDArray, free: NDArray, added: Sequence[int]) -> NDArray:
+    """Rao's score statistic of each added unknown (indices `added` into the problem's unknowns, held at their null
+    value in x) against the fit at x over the `free` others: (j_c' r)² / |j_c|² with j_c the residuals' derivative
+    along the candidate's unknown, less its projection on the fitted unknowns' columns. It is the first-order
+    fall of the sum of squared weighted residuals, i.e. of the LR of chi2_statistic, that freeing the unknown
+    would bring; every candidate from one forward-difference Jacobian (one batch of free + added + 1 evaluations).
+    NaN where the Jacobian is not finite."""
+    cols = np.flatnonzero(np.asarray(free, dtype=bool))
+    use = np.zeros(len(x), dtype=bool)
+    use[cols] = True
+    use[list(added)] = True
+    Jac, r = _jacobian(restricted(problem, x, use), np.asarray(x, dtype=float)[use])
+    where = np.cumsum(use) - 1  # column of each unknown in Jac
+    out = np.full(len(added), np.nan)
+    if not (np.all(np.isfinite(Jac)) and np.all(np.isfinite(r))):
+        return out
+    Jb = Jac[:, where[cols]]
+    for i, c in enumerate(added):
+        jc = Jac[:, where[c]]
+        jc = jc - Jb @ np.linalg.lstsq(Jb, jc, rcond=None)[0] if Jb.size else jc
+        norm = float(jc @ jc)
+        out[i] = float(jc @ r) ** 2 / norm if norm > 0 else 0.0
+    return out
+
+
 def undistinguished(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ranked | None:
     """The runner-up of the same kind the data cannot tell from `best`, if any: another significant candidate
     whose LR falls short of the best's by less than the critical value of a chi²(k_best) test at the
@@ -469,7 +499,7 @@ def undistinguished(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) ->
     one significantly), unless the validation data prefer the best clearly (its validation J
     DISTINCT_VALIDATION lower). A parameter and an effect are not rivals: parsimony decides (``parsimonious``)."""
     level = alpha / max(len(ranked), 1)
-    margin = float(stats.chi2.isf(level, max(best.k, 1)))
+    margin = float(chi2_isf(level, max(best.k, 1)))
     for r in ranked:
         if r is best or r.p_value >= level or r.kind != best.kind:
             continue
@@ -488,7 +518,7 @@ def parsimonious(ranked: list[Ranked], best: Ranked, alpha: float = ALPHA) -> Ra
     if best.kind != "effect":
         return None
     level = alpha / max(len(ranked), 1)
-    margin = float(stats.chi2.isf(level, max(best.k, 1)))
+    margin = float(chi2_isf(level, max(best.k, 1)))
     rivals = [
         r for r in ranked if r.kind == "parameter" and r.accepted
         and (best.statistic - r.statistic < margin or r.statistic >= PARSIMONY_SHARE * best.statistic)

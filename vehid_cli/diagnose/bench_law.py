@@ -24,11 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..core.result import Result
 from .psplines import Basis, PenalisedFit, basis, penalised_fit
 from .residuals import autocorrelation
+from .tails import f_sf
 
 Z95 = 1.959963984540054
 SIGNIFICANCE = 1e-3
@@ -189,7 +189,7 @@ def _significant(fit: LawFit, values: Mapping[str, NDArray], r: NDArray) -> bool
     n_eff = r.size * (1.0 - rho) / (1.0 + rho)
     df = max(fit.sol.edf - 1.0, 1e-9)
     F = max(float(rc @ rc) - rss1, 0.0) / df / max(rss1 / max(r.size - fit.sol.edf, 1.0), 1e-300) * n_eff / r.size
-    return float(stats.f.sf(F, df, max(n_eff - fit.sol.edf, 1.0))) < SIGNIFICANCE
+    return float(f_sf(F, df, max(n_eff - fit.sol.edf, 1.0))) < SIGNIFICANCE
 
 
 def chosen_law(values: Mapping[str, NDArray], r: NDArray, n_knots: int) -> StagedLaw:
@@ -254,7 +254,7 @@ def bench_law(
     rho = float(np.clip(autocorrelation(e, 1)[1], 0.0, 0.99))
     n_eff = r.size * (1.0 - rho) / (1.0 + rho)
     F = max(rss0 - rss1, 0.0) / df / max(rss1 / max(r.size - edf, 1.0), 1e-300) * n_eff / r.size
-    p = float(stats.f.sf(F, df, max(n_eff - edf, 1.0)))
+    p = float(f_sf(F, df, max(n_eff - edf, 1.0)))
     per = {}
     for name, h in held_out.items():
         hv = {k: np.asarray(h[k], dtype=float) for k in variables}

@@ -17,18 +17,20 @@ with the noise: above 1 + 5 sqrt(2/R) (R residuals) it is ``incomplete``, whatev
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..core.progress import ProgressHook
 from ..optimizers.base import Problem
 from .attribution import (
     PARAMETER_PREFIX,
+    SCORE_SKIP,
+    SCREEN_TOL,
     Candidate,
     Fit,
     Ranked,
@@ -39,10 +41,12 @@ from .attribution import (
     lowers_validation,
     parsimonious,
     rank_candidates,
+    score_statistics,
     undistinguished,
 )
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
+from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports
 from .unexplained import Unexplained
 
@@ -69,6 +73,13 @@ class Subject:
     scale: Callable[[Fit], float]
     min_gain: float = 0.0
     noise_limit: float | None = None  # training J at or below which the residual is noise (None: J is not chi²)
+    screen: Subject | None = None  # a long record's screening window (window.py): the candidates are ranked on it
+
+    def J_at(self, fit: Fit) -> Fit:
+        """`fit`'s point with its training J on this subject's data (the screening window's J of a whole-record
+        fit)."""
+        J = float(self.problem_for(fit.names)[0].cost(np.asarray(fit.x, dtype=float)[None, :])[0])
+        return Fit(fit.names, fit.x, J if np.isfinite(J) else float("inf"), 1, fit.fixed)
 
     def intervals(self, fit: Fit) -> NDArray:
         """95 % half-widths at a fit over its free unknowns (NaN for the fixed ones)."""
@@ -140,10 +151,11 @@ class _Augmentation:
         self.current = fit
         self.current_v = self.subject.validation_J(fit.names, fit.x)
 
-    def make_problem(self, names: tuple[str, ...], cand: Candidate):
-        """The problem over `names` plus the candidate's new unknowns, and the new unknowns' start values."""
+    def make_problem(self, names: tuple[str, ...], cand: Candidate, on: Subject | None = None):
+        """The problem over `names` plus the candidate's new unknowns (on the subject `on`, default the loop's),
+        and the new unknowns' start values."""
         new = tuple(n for n in cand.unknowns + cand.shape if n not in names)
-        problem, start = self.subject.problem_for(names + new)
+        problem, start = (on or self.subject).problem_for(names + new)
         return problem, start[len(names) :]
 
     def removal_p(self, f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
@@ -153,9 +165,14 @@ class _Augmentation:
         problem_r, _ = self.subject.problem_for(reduced)
         idx = [f.names.index(n) for n in reduced]
         free = np.array([n not in f.fixed for n in reduced])
-        without = fit_free(problem_r, f.x[idx], free, budget)
+        start = f.x[idx]
+        now = self.current
+        same = now.names == reduced and set(now.fixed) == {n for n in f.fixed if n in reduced}
+        if self.subject.screen is not None and now is not f and same:
+            start = now.x  # a long record: the fit without the candidate is the current one, converged already
+        without = fit_free(problem_r, start, free, budget)
         k = cand.df if cand.df is not None else len([n for n in own if n not in f.fixed])
-        return float(stats.chi2.sf(self.subject.statistic(f)(without.J, f.J), max(k, 1))), without
+        return float(chi2_sf(self.subject.statistic(f)(without.J, f.J), max(k, 1))), without
 
     def round(self) -> bool:
         """One round: rank the candidates against the current fit and try to add the best accepted one. False when
@@ -184,20 +201,61 @@ class _Augmentation:
         return True
 
     def rank(self, todo: list[Candidate]) -> list[Ranked]:
-        """The candidates `todo` ranked against the current fit (the round recorded and said)."""
-        subject, current = self.subject, self.current
+        """The candidates `todo` ranked against the current fit (the round recorded and said); a long record's on its
+        screening window (the current fit's J and validation J there)."""
+        subject, current, current_v = self.subject, self.current, self.current_v
+        if subject.screen is not None:  # the current model re-fitted on the window first: the LR is what each adds
+            subject = subject.screen
+            free = np.array([n not in current.fixed for n in current.names])
+            problem = subject.problem_for(current.names)[0]
+            current = fit_free(problem, current.x, free, self.candidate_budget, tol=SCREEN_TOL)
+            current_v = subject.validation_J(current.names, current.x)
         stage = f"round {len(self.rounds) + 1} candidates"
         self.progress(stage, 0, len(todo))
+        tests, skipped = len(todo), []
+        chi2 = subject.noise_limit is not None  # J is chi² per sample and the LR chi2_statistic: the score applies
+        if chi2 and self.rounds and self.claim and all(c.kind == "parameter" and len(c.unknowns) == 1 for c in todo):
+            todo, skipped = self.prescreen(todo, subject, current, current_v, tests)
         ranked = rank_candidates(
-            todo, current, self.current_v, self.make_problem, subject.validation_J, subject.residual_count,
+            todo, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
+            subject.validation_J, subject.residual_count,
             self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
             claim=self.claim, scale=subject.scale(current),
             prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
-            on_done=lambda n: self.progress(stage, n, len(todo)),
-        )  # fmt: skip
+            on_done=lambda n: self.progress(stage, len(skipped) + n, tests), tests=tests,
+        ) if todo else []  # fmt: skip
+        ranked = sorted(ranked + skipped, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))
         self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
         return ranked
+
+    def prescreen(
+        self, todo: list[Candidate], subject: Subject, current: Fit, current_v: tuple, tests: int
+    ) -> tuple[list[Candidate], list[Ranked]]:  # fmt: skip
+        """A later round's known parameters (one unknown each): Rao's score statistic of every one from one Jacobian
+        at the current fit (attribution.score_statistics); those below SCORE_SKIP of the critical LR cannot be
+        accepted and are not fitted: their test reports the score statistic as its LR (its first-order value)."""
+        t0 = time.perf_counter()
+        new = tuple(c.unknowns[0] for c in todo)
+        problem, start = subject.problem_for(current.names + new)
+        D = len(current.names)
+        x = np.concatenate([current.x, start[D:]])
+        free = np.array([n not in current.fixed for n in current.names] + [False] * len(new))
+        score = score_statistics(problem, x, free, range(D, len(x)))
+        critical = chi2_isf(self.level(tests), 1)
+        fit, skipped = [], []
+        for c, S in zip(todo, score, strict=True):
+            if not (np.isfinite(S) and S < SCORE_SKIP * critical):
+                fit.append(c)
+                continue
+            k = c.df if c.df is not None else 1
+            R = subject.residual_count
+            skipped.append(Ranked(
+                effect=c.effect, added=(c.unknowns[0],), k=k, J=current.J - S / R, statistic=float(S),
+                p_value=chi2_sf(S, k), bic_margin=S - k * math.log(R), validation_J=current_v[0], accepted=False,
+                fit=current, seconds=time.perf_counter() - t0, kind=c.kind, validation_per_file=current_v[1],
+            ))  # fmt: skip
+        return fit, skipped
 
     def choose(self, ranked: list[Ranked]) -> Ranked | None:
         """The best accepted candidate, a known parameter explaining the residual as well preferred; None when none
@@ -233,8 +291,11 @@ class _Augmentation:
         shapes = [n for e in (*self.claimed, best.effect) for n in specs[e].shape]
         free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
         refit = fit_free(problem, x0, free, self.refit_budget)
-        if refit.J > best.fit.J:  # keep the candidate's fit if the re-fit found nothing better
-            refit = Fit(names, x0, best.fit.J, refit.evaluations, best.fit.fixed)
+        best_J = best.fit.J
+        if subject.screen is not None:  # the candidate was fitted on the screening window: its J on the whole record
+            best_J = subject.J_at(Fit(names, x0, best_J, 0)).J
+        if refit.J > best_J:  # keep the candidate's fit if the re-fit found nothing better
+            refit = Fit(names, x0, best_J, refit.evaluations, best.fit.fixed)
         return problem, names, refit
 
     def try_claim(self, best: Ranked, candidates: int) -> None:

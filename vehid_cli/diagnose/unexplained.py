@@ -53,7 +53,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..core.result import Result
 from ..identify.objectives import Objective
@@ -62,6 +61,7 @@ from ..models.fullcar import N_CORNERS, N_DOF
 from .linear_response import LinearCar, car_at, channel_columns, responses
 from .psplines import Basis, PenalisedFit, basis, penalised_fit
 from .shapes import Resemblance, resemblance
+from .tails import f_sf
 
 Z95 = 1.959963984540054
 AXLES = (("front", (0, 1)), ("rear", (2, 3)))
@@ -463,7 +463,7 @@ def _f_test(fit: _ForceFit, rss0: float, edf0: float, R: int) -> _FTest:
     dof = max(R - sol.edf, 1.0)
     sigma2 = max(1.0, rss1 / dof)
     F = max(rss0 - rss1, 0.0) / df_test / sigma2
-    p_value = float(stats.f.sf(F, df_test, dof))
+    p_value = float(f_sf(F, df_test, dof))
     return _FTest(rss1, edf_force, df_test, sigma2, F, p_value)
 
 

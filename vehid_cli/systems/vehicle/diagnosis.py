@@ -38,6 +38,7 @@ from ...diagnose.residuals import ResidualAnalysis, analyse
 from ...diagnose.result import Diagnosis, ModelReport, chi2_limit
 from ...diagnose.shapes import candidate_order
 from ...diagnose.unexplained import Unexplained, estimate_unexplained
+from ...diagnose.window import SCREEN_SAMPLES, is_long, window_task
 from ...identify.source import as_paths
 from ...identify.task import JointTask, Task, build_task, build_tasks
 from ...optimizers import get_optimizer
@@ -170,17 +171,22 @@ def fit_declared(
     precheck_ok: bool,
     refit_budget: int,
     say: Callable[[str], None],
+    search: Problem | None = None,
 ) -> Fit:
-    """The declared model, by the configured algorithm (the campaign's run 0 streams), then polished to the
-    likelihood's minimum; when the data failed the pre-check (no claim will be made) a local fit from the
-    configured values, enough for the record."""
+    """The declared model, by the configured algorithm (the campaign's run 0 streams) on `search` (a long record's
+    screening window; default `problem`), then polished to the likelihood's minimum on `problem`; when the data
+    failed the pre-check (no claim will be made) a local fit from the configured values, enough for the record."""
     ident = config.identify
     if precheck_ok:
         opt = get_optimizer(ident.algorithm.name, ident.algorithm.population, ident.algorithm.iterations)
         x0 = task.nominal if ident.start == "nominal" else None
-        res = opt.minimize(problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
-        fit = lsq_fit(problem, res.x, refit_budget)  # polish to the likelihood's minimum
-        evaluations = res.evaluations + fit.evaluations
+        res = opt.minimize(search or problem, run_streams(ident.seed, 0).optimizer, budget=ident.budget, x0=x0)
+        start, evaluations = res.x, res.evaluations
+        if search is not None:  # polished on the window first: the whole record's polish then starts next to it
+            on_window = lsq_fit(search, start, refit_budget)
+            start, evaluations = on_window.x, evaluations + on_window.evaluations
+        fit = lsq_fit(problem, start, refit_budget)  # polish to the likelihood's minimum
+        evaluations += fit.evaluations
     else:  # no claim will be made: a local fit from the configured values is enough for the record
         fit = lsq_fit(problem, task.nominal, refit_budget)
         evaluations = fit.evaluations
@@ -240,17 +246,19 @@ def diagnose(
     specs = {**candidate_specs(config), **sensor_candidates(found, runs[0].channel_views())}
     limits, starts = candidate_ranges(specs)
     car = CarLoop(task, ref, split, {"limits": limits, "start": starts}, files, analyse_residuals)
+    screen, head = screening(task, ref, split, car, specs, files) if is_long(task) else (None, car)
     # 0. can the data tell at all? (before any fit: length, noise, excitation)
     pre = precheck_vehicle(task, ref)
-    # 1. the declared model, by the configured algorithm, then polished
+    # 1. the declared model, by the configured algorithm (a long record: on its window), then polished
     step("declared fit", 0, 1)
-    fit = fit_declared(config, task, car.problem_of(task, ref, split.keep), pre.ok, refit_budget, say)
+    search = None if screen is None else screen.problem_for(task.names)[0]
+    fit = fit_declared(config, task, car.problem_of(task, ref, split.keep), pre.ok, refit_budget, say, search)
     before = car.report(fit, ())
     step("declared fit", 1, 1)
     quality = assess_vehicle(task, ref, before, pre)
     missing, order, notes = None, (), ()
     if quality.ok:  # the strut force the declared model misses, non-parametrically: which candidates to fit first
-        missing, order, notes = unexplained_force(task, ref, split.keep, fit, specs, files)
+        missing, order, notes = unexplained_force(head.task, head.ref, head.split.keep, fit, specs, files)
     if split.keep is not None:  # the same model and data as identify's one fit, but fewer samples: say so
         ratio = np.sqrt(R_total / R_train)
         notes += (
@@ -258,10 +266,17 @@ def diagnose(
             f"validation J) with the residual's own variance: about {ratio:.2f} x wider than vehid identify's on the "
             "whole run, which are the bound widened by sqrt(chi2) when the residual is not noise",
         )
+    if screen is not None:
+        notes += (
+            f"a long record: the declared model's global search and the candidates' screening ran on the first "
+            f"{SCREEN_SAMPLES} samples of each run (their LR and validation J are the window's), and so did the "
+            "estimate of the unexplained strut force; the polish, every re-fit, interval, removal test and claim on "
+            "the whole record",
+        )
     subject = Subject(
         specs=specs, declared=frozenset(config.vehicle.effect_values()), problem_for=car.problem_for,
         validation_J=car.validation_J, residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
-        scale=lambda f: f.J, noise_limit=chi2_limit(R_train),
+        scale=lambda f: f.J, noise_limit=chi2_limit(R_train), screen=screen,
     )  # fmt: skip
     return close(
         subject, fit, before, car.report, quality, alpha=alpha, max_rounds=max_rounds,
@@ -270,6 +285,28 @@ def diagnose(
         validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if car.joint else (),
         extra_notes=notes, checks=tuple(found.to_json()), unit=config.unit, progress=progress,
     )  # fmt: skip
+
+
+def screening(
+    task: Task | JointTask, ref: References, split: ValidationSplit, car: CarLoop, specs: dict[str, Candidate],
+    files: Sequence[str],
+) -> tuple[Subject, CarLoop]:  # fmt: skip
+    """A long record's screening subject (diagnose/window.py) and the car's loop on its window: the car's problems
+    on the first SCREEN_SAMPLES samples of each run, its held-out blocks there (or the --validate run, whole)."""
+    head = window_task(task)
+    n = SCREEN_SAMPLES
+    wref = tuple({k: v[:n] for k, v in r.items()} for r in ref) if car.joint else {k: v[:n] for k, v in ref.items()}
+    if split.keep is None:  # a --validate run: the same validation data
+        wsplit = ValidationSplit(split.task, split.reference, None, None, split.source)
+    else:
+        wsplit = validation_split(task.config, head, wref, files, None)
+    wcar = CarLoop(head, wref, wsplit, car.ranges, car.files, analyse_residuals=False)
+    R = int(head.residual_samples if wsplit.keep is None else wsplit.keep.sum())
+    subject = Subject(
+        specs=specs, declared=frozenset(), problem_for=wcar.problem_for, validation_J=wcar.validation_J,
+        residual_count=R, statistic=lambda _fit: chi2_statistic(R), scale=lambda f: f.J, noise_limit=chi2_limit(R),
+    )  # fmt: skip
+    return subject, wcar
 
 
 def joint_chi2(analyses: Sequence[ResidualAnalysis]) -> float:

@@ -1,0 +1,46 @@
+"""A long record's screening window (diagnose/window.py): the window's model and residuals are the whole record's
+first samples, bit for bit (the car starts at rest and the integrators step forward), so a fit or test on the window
+is the same fit or test on fewer data; records of a test case's length are never windowed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from vehid_cli.config import load_config
+from vehid_cli.diagnose.window import LONG_RECORD, SCREEN_SAMPLES, is_long, window_task
+from vehid_cli.identify.task import build_task
+from vehid_cli.systems.vehicle.diagnosis import prepare_config
+
+ROOT = Path(__file__).resolve().parents[1]
+HYSTERESIS = ROOT / "configs" / "effects" / "hysteresis.yaml"
+LONG = ["road.bump=null", "road.random.iso_class=C", "identify.objective=wls"]
+
+
+def test_window_residuals_are_the_records_first_samples():
+    seconds = 1.2 * LONG_RECORD / 1000.0  # just long enough to be windowed at 1 kHz
+    cfg = prepare_config(load_config(HYSTERESIS, [*LONG, f"simulation.duration={seconds}"]))
+    task = build_task(cfg)
+    assert is_long(task) and task.experiment.t.size > LONG_RECORD
+    head = window_task(task)
+    n = SCREEN_SAMPLES
+    assert head.experiment.t.size == n and np.array_equal(head.experiment.road, task.experiment.road[:n])
+    ref = task.reference(0)
+    wref = {f: v[:n] for f, v in ref.items()}
+    rng = np.random.default_rng(5)
+    X = task.nominal * rng.uniform(0.9, 1.1, size=(3, task.dim))  # three cars off the configured one
+    _, r_full = task.problem(ref).residuals(X)
+    _, r_head = head.problem(wref).residuals(X)
+    at_full = at_head = 0
+    for family in task.families:  # each family's block is time-major: its first n samples come first
+        k = ref[family].shape[1]
+        assert np.array_equal(r_head[:, at_head : at_head + n * k], r_full[:, at_full : at_full + n * k])
+        at_full, at_head = at_full + ref[family].shape[0] * k, at_head + n * k
+    assert at_head == r_head.shape[1] and at_full == r_full.shape[1]
+
+
+def test_a_test_length_record_is_not_windowed():
+    cfg = prepare_config(load_config(HYSTERESIS, ["identify.objective=wls"]))
+    task = build_task(cfg)
+    assert task.experiment.t.size <= LONG_RECORD and not is_long(task)
