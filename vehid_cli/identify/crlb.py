@@ -106,9 +106,11 @@ def weighted_sensitivities(
         mask = None if observed is None else np.asarray(observed[family], dtype=float)[:, :, None]
         if offsets:
             mean = S.mean(axis=0) if mask is None else (S * mask).sum(axis=0) / mask.sum(axis=0)
-            S = S - mean[None]
-        W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
-        out[family] = W if mask is None else W * mask
+            S -= mean[None]  # in place (S is `sensitivities`' own array): a long record's are tens of MB per copy
+        S /= np.asarray(sigma[family], dtype=float)[None, :, None]
+        if mask is not None:
+            S *= mask
+        out[family] = S
     return out
 
 

@@ -160,8 +160,9 @@ class Objective:
 
     def residual_jacobian(self, sens: Mapping[str, NDArray]) -> NDArray:
         """(R, D) the weighted residuals' derivatives from the model channels' derivatives `sens` (family -> (n, k, D)):
-        -(d sim) / sigma, without what the profiled offsets absorb, at the observed entries, in `residuals`' order."""
-        parts = []
+        -(d sim) / sigma, without what the profiled offsets absorb, at the observed entries, in `residuals`' order,
+        each family's rows written straight into the result (a long record's Jacobian is tens of MB per copy)."""
+        out, first = None, 0
         for family in self.reference:
             d = np.asarray(sens[family], dtype=float)
             d = d / -np.asarray(self.sigma[family], dtype=float)[:, None]  # (n, k, D), a new C-ordered array
@@ -172,8 +173,16 @@ class Objective:
                     m = np.asarray(self.observed[family], dtype=float)[:, :, None]
                     d -= np.sum(d * m, axis=0) / np.sum(m, axis=0)
             d = d.reshape(-1, d.shape[-1])  # rows time-major, like the residuals
-            parts.append(d[self._keep[family]] if family in self._keep else d)
-        return np.concatenate(parts, axis=0)
+            if out is None:
+                out = np.empty((self.size, d.shape[-1]))
+            keep = self._keep.get(family)
+            size = d.shape[0] if keep is None else keep.size
+            if keep is None:
+                out[first : first + size] = d
+            else:
+                np.take(d, keep, axis=0, out=out[first : first + size])
+            first += size
+        return out if out is not None else np.zeros((0, 0))
 
     def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""
