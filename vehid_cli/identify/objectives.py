@@ -170,8 +170,9 @@ class Objective:
                 if self.observed is None:
                     d -= d.mean(axis=0)
                 else:
-                    m = np.asarray(self.observed[family], dtype=float)[:, :, None]
-                    d -= np.sum(d * m, axis=0) / np.sum(m, axis=0)
+                    m = np.asarray(self.observed[family], dtype=float)
+                    for c in range(d.shape[1]):  # channel by channel: no (n, k, D) product at once
+                        d[:, c] -= np.sum(d[:, c] * m[:, c, None], axis=0) / np.sum(m[:, c])
             d = d.reshape(-1, d.shape[-1])  # rows time-major, like the residuals
             if out is None:
                 out = np.empty((self.size, d.shape[-1]))
