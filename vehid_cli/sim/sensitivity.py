@@ -154,7 +154,6 @@ def linear_sensitivities(
     dal, dbe = dt * dt * (d1 - d2), dt * dt * d2  # and their lam-derivatives
     ga = al[:, None, :, None] * coef_u + (Fjj * dal[:, None])[..., None] * bm[:, None]  # (P, D, m, nu)
     gb = be[:, None, :, None] * coef_u + (Fjj * dbe[:, None])[..., None] * bm[:, None]
-    n = u.shape[0]
 
     def lanes(g: NDArray) -> NDArray:  # (..., nu) -> (nu, lanes) contiguous
         return np.ascontiguousarray(np.moveaxis(g, -1, 0).reshape(nu, -1))
@@ -171,6 +170,17 @@ def linear_sensitivities(
     Rz = np.concatenate([Rz.real, -Rz.imag], axis=1)  # (P, 2m, ny (1 + D)): Re(c z) = Re c Re z - Im c Im z
     Rg = np.concatenate([Gk.real, -Gk.imag], axis=-1).transpose(0, 2, 1)  # (P, 2m, ny)
     dDyl = dDy.transpose(0, 3, 2, 1).reshape(P, nu, ny * D)  # (P, nu, ny D): dy (o, d)
+    Y, dY = _blocks(e.reshape(-1), zs, ws, cz, G, u, Dy, dDyl, Rz, Rg, (m, D, ny), block)
+    return Y, dY, ok
+
+
+def _blocks(
+    e: NDArray, zs: NDArray, ws: NDArray, cz: NDArray, G: NDArray, u: NDArray, Dy: NDArray, dDyl: NDArray,
+    Rz: NDArray, Rg: NDArray, sizes: tuple[int, int, int], block: int,
+) -> tuple[NDArray, NDArray]:  # fmt: skip
+    """`linear_sensitivities`' recursion and projections, `block` samples at a time, the states zs, ws carried."""
+    m, D, ny = sizes
+    P, n = Dy.shape[0], u.shape[0]
     Y = np.empty((P, n, ny))
     dY = np.empty((P, n, ny, D))
     block = max(2, int(block))
@@ -181,13 +191,13 @@ def linear_sensitivities(
         drive = np.concatenate([ub[:-1], ub[1:]], axis=1) @ G  # (b or b - 1, 2 lanes)
         zout = np.empty((b, P, 2 * m))
         wout = np.empty((b, P, D, 2 * m))
-        _sensitivity_recursion(e.reshape(-1), zs, ws, cz, drive, zout, wout)
+        _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout)
         for p in range(P):
             Z = zout[:, p] @ Rz[p]  # (b, ny (1 + D)): the outputs, then dy (d, o)
             Y[p, k0:k1] = Z[:, :ny] + u[k0:k1] @ Dy[p].T
             dy = (wout[:, p].reshape(b * D, 2 * m) @ Rg[p]).reshape(b, D, ny) + Z[:, ny:].reshape(b, D, ny)
             dY[p, k0:k1] = dy.transpose(0, 2, 1) + (u[k0:k1] @ dDyl[p]).reshape(b, ny, D)
-    return Y, dY, ok
+    return Y, dY
 
 
 def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, NDArray]:
