@@ -188,3 +188,32 @@ def test_rigs_match_central_differences(config):
     scale = np.sqrt(np.outer(np.diag(F_plain), np.diag(F_plain)))  # each element against its correlation's scale
     assert np.all(np.abs(F_exact - F_plain) <= TOL * scale)
     assert system.problem(system.reference(0)).linearised is not None
+
+
+def test_blocks_carry_the_states():
+    """The record in blocks (the modal states carried from one to the next) gives the one-block numbers to round-off,
+    whatever the block's size (one that divides the record, one that leaves a single last sample, one longer)."""
+    rng = np.random.default_rng(2)
+    ns, nu, ny, n, dt = 6, 3, 4, 1001, 1e-3
+    parts = {
+        "A0": rng.normal(size=(ns, ns)) * 20 - 30 * np.eye(ns), "A1": rng.normal(size=(ns, ns)) * 5,
+        "A2": rng.normal(size=(ns, ns)) * 5, "B0": rng.normal(size=(ns, nu)), "B1": rng.normal(size=(ns, nu)),
+        "C0": rng.normal(size=(ny, ns)), "C1": rng.normal(size=(ny, ns)), "D0": rng.normal(size=(ny, nu)),
+        "D1": rng.normal(size=(ny, nu)), "s0": rng.normal(size=ns), "s1": rng.normal(size=ns),
+    }  # fmt: skip
+    u = rng.normal(size=(n, nu))
+    mats, derivs = _generic(np.array([0.3, 0.7]), parts)
+    args = (
+        *(M[None] for M in mats[:2]),
+        mats[2][None],
+        u,
+        dt,
+        mats[3][None],
+        mats[4][None],
+        *(d[None] for d in derivs),
+    )
+    Y, dY, _ = linear_sensitivities(*args, block=n)
+    for block in (2, 7, 100, 1000, 4096):
+        Yb, dYb, _ = linear_sensitivities(*args, block=block)
+        assert np.max(np.abs(Yb - Y)) <= 1e-12 * np.max(np.abs(Y))
+        assert np.max(np.abs(dYb - dY)) <= 1e-12 * np.max(np.abs(dY))

@@ -9,7 +9,7 @@ simulator (all 2D perturbed cars in one call). Everything is reported relative t
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,21 +70,29 @@ def sensitivities(
     """d channel / d (theta_j / values_j) for each family: (n, k, D): the experiment's exact sensitivities when it has
     them there (`exact_sensitivities`, through the same modal solution as the simulation), else central differences
     of the batched simulator."""
+    return dict(_sensitivities(experiment, names, values, families, rel_step))
+
+
+def _sensitivities(
+    experiment: Experiment, names: Sequence[str], values: NDArray, families: Sequence[str], rel_step: float
+) -> Iterator[tuple[str, NDArray]]:
+    """`sensitivities` family by family: each family's array made only when it is asked for (the bound's
+    information then holds one family's beside the experiment's own)."""
     values = np.asarray(values, dtype=float)
     exact = getattr(experiment, "exact_sensitivities", None)
     got = exact(names, values) if exact is not None else None
     if got is not None:
-        return {family: got[1][family] * np.abs(values) for family in families}
+        for family in families:
+            yield family, got[1][family] * np.abs(values)
+        return
     D = values.size
     h = rel_step * np.abs(values)
     X = _central_points(values, h)
     outputs = experiment.outputs({n: X[:, j] for j, n in enumerate(names)})
-    out = {}
     for family in families:
         z = outputs[family]  # (2D, n, k)
         dz = (z[:D] - z[D:]) / (2 * h[:, None, None])  # (D, n, k) per unit of theta_j
-        out[family] = np.moveaxis(dz * np.abs(values)[:, None, None], 0, -1)  # per relative change
-    return out
+        yield family, np.moveaxis(dz * np.abs(values)[:, None, None], 0, -1)  # per relative change
 
 
 def weighted_sensitivities(
@@ -100,16 +108,24 @@ def weighted_sensitivities(
     sample (`observed`: family -> (n, k) bool; None: all). With `offsets`, each channel has an unknown constant
     offset: its sensitivities lose their mean over the channel's samples, which leaves the information that remains
     once the offsets are estimated too (the Schur complement)."""
+    return dict(_weighted(experiment, names, values, sigma, observed, offsets, rel_step))
+
+
+def _weighted(
+    experiment: Experiment, names: Sequence[str], values: NDArray, sigma: Mapping[str, NDArray],
+    observed: Mapping[str, NDArray] | None, offsets: bool, rel_step: float,
+) -> Iterator[tuple[str, NDArray]]:  # fmt: skip
+    """`weighted_sensitivities` family by family."""
     values = np.asarray(values, dtype=float)
-    out = {}
-    for family, S in sensitivities(experiment, names, values, list(sigma), rel_step).items():
+    for family, S in _sensitivities(experiment, names, values, list(sigma), rel_step):
         mask = None if observed is None else np.asarray(observed[family], dtype=float)[:, :, None]
         if offsets:
             mean = S.mean(axis=0) if mask is None else (S * mask).sum(axis=0) / mask.sum(axis=0)
-            S = S - mean[None]
-        W = S / np.asarray(sigma[family], dtype=float)[None, :, None]
-        out[family] = W if mask is None else W * mask
-    return out
+            S -= mean[None]  # in place (S is `sensitivities`' own array): a long record's are tens of MB per copy
+        S /= np.asarray(sigma[family], dtype=float)[None, :, None]
+        if mask is not None:
+            S *= mask
+        yield family, S
 
 
 def information(
@@ -125,7 +141,7 @@ def information(
     (family -> (k,)), counted at their `observed` samples, offsets estimated alongside (`weighted_sensitivities`)."""
     D = np.asarray(values).size
     F = np.zeros((D, D))
-    for W in weighted_sensitivities(experiment, names, values, sigma, observed, offsets, rel_step).values():
+    for _, W in _weighted(experiment, names, values, sigma, observed, offsets, rel_step):  # one family at a time
         W = W.reshape(-1, D)
         F += W.T @ W
     return F

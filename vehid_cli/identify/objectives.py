@@ -160,20 +160,38 @@ class Objective:
 
     def residual_jacobian(self, sens: Mapping[str, NDArray]) -> NDArray:
         """(R, D) the weighted residuals' derivatives from the model channels' derivatives `sens` (family -> (n, k, D)):
-        -(d sim) / sigma, without what the profiled offsets absorb, at the observed entries, in `residuals`' order."""
-        parts = []
+        -(d sim) / sigma, without what the profiled offsets absorb, at the observed entries, in `residuals`' order,
+        each family's rows written straight into the result (a long record's Jacobian is tens of MB per copy)."""
+        out, first = None, 0
         for family in self.reference:
-            d = np.asarray(sens[family], dtype=float)
-            d = d / -np.asarray(self.sigma[family], dtype=float)[:, None]  # (n, k, D), a new C-ordered array
-            if self.offsets:  # the residual's mean over each channel's samples is profiled out: so is its derivative
-                if self.observed is None:
-                    d -= d.mean(axis=0)
-                else:
-                    m = np.asarray(self.observed[family], dtype=float)[:, :, None]
-                    d -= np.sum(d * m, axis=0) / np.sum(m, axis=0)
-            d = d.reshape(-1, d.shape[-1])  # rows time-major, like the residuals
-            parts.append(d[self._keep[family]] if family in self._keep else d)
-        return np.concatenate(parts, axis=0)
+            s = np.asarray(sens[family], dtype=float)  # (n, k, D), possibly a view of a larger array
+            n, k, D = s.shape
+            neg = -np.asarray(self.sigma[family], dtype=float)
+            if out is None:
+                out = np.empty((self.size, D))
+            mean = np.zeros((k, D)) if self.offsets else None
+            m = None if self.observed is None else np.asarray(self.observed[family], dtype=float)
+            for c in range(k if self.offsets else 0):  # the residual's mean over each channel's samples is
+                dc = s[:, c] / neg[c]  # profiled out: so is its derivative (channel by channel, (n, D) at a time)
+                mean[c] = dc.mean(axis=0) if m is None else np.sum(dc * m[:, c, None], axis=0) / np.sum(m[:, c])
+            keep = self._keep.get(family)
+            size = n * k if keep is None else keep.size
+            block = out[first : first + size]
+            if keep is None:  # rows time-major, like the residuals
+                rows = block.reshape(n, k, D)
+                np.divide(s, neg[:, None], out=rows)
+                if mean is not None:
+                    rows -= mean
+            else:
+                at, channel = np.divmod(keep, k)
+                for c in range(k):
+                    where = np.flatnonzero(channel == c)
+                    part = s[at[where], c] / neg[c]
+                    if mean is not None:
+                        part -= mean[c]
+                    block[where] = part
+            first += size
+        return out if out is not None else np.zeros((0, 0))
 
     def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""

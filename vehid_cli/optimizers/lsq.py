@@ -87,11 +87,11 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
     got = run.evaluate_linearised(x)
     if got is None:
         return None
-    _, r, J = got
+    _, r, Js = got
+    Js *= width  # in place, box-width units (the Jacobian is the problem's fresh array; a long record's is tens of MB)
     ssq = float(r @ r)
     mu = 0.0
     for _ in range(MAX_STEPS):
-        Js = J * width
         H = Js.T @ Js
         g = Js.T @ r
         d = np.diag(H)
@@ -107,7 +107,8 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
         got = run.evaluate_linearised(x_new)
         ssq_new = float(got[1] @ got[1]) if got is not None else np.inf
         if ssq_new < ssq:
-            x, (_, r, J), ssq = x_new, got, ssq_new
+            x, (_, r, Js), ssq = x_new, got, ssq_new
+            Js *= width
             mu = mu / 4 if mu > 1e-6 else 0.0
         else:
             mu = max(4 * mu, 1e-3)

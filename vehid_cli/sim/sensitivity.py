@@ -33,6 +33,7 @@ from .lumped import lumped_state_space, sample_slopes
 from .modal import _kept_modes, _phi12
 
 GAP_MIN = 1e-6  # smallest |lam_i - lam_j| relative to max |lam| the perturbation formulas are trusted at
+BLOCK = 4096  # samples of a record per block of linear_sensitivities (its modal states carried across blocks)
 _SERIES_BELOW = 1e-2  # |lam dt| below which the derivatives of phi1, phi2 come from Taylor series
 
 
@@ -47,13 +48,15 @@ def _dphi12(x: NDArray) -> tuple[NDArray, NDArray]:
 
 
 @numba.njit(cache=True)
-def _sensitivity_recursion(e, z0, w0, cz, drive, zout, wout):  # pragma: no cover - compiled
-    """Each mode's recursion z[k+1] = e z[k] + drive_z[k] (lane l = p m + j: mode j of candidate p; e, z0 (P m,))
-    and, driven by it, D lanes per mode w[k+1] = e w[k] + drive_w[k] + cz z[k] (lane q = (p D + d) m + j; cz, w0
-    (P D m,)). drive (n - 1, 2 (P m + P D m)): [Re, Im] of each lane's input term (the gains times y[k] and
-    y[k + 1], one matrix product outside), z lanes first.
+def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cover - compiled
+    """Each mode's recursion z[k+1] = e z[k] + drive_z[k] (lane l = p m + j: mode j of candidate p; e (P m,))
+    and, driven by it, D lanes per mode w[k+1] = e w[k] + drive_w[k] + cz z[k] (lane q = (p D + d) m + j; cz
+    (P D m,)). zs (2, P m) and ws (2, P D m) hold [Re; Im] of the start states and get the end states (one block
+    of a record carries them to the next). drive (n or n - 1, 2 (P m + P D m)): [Re, Im] of each lane's input
+    term (the gains times y[k] and y[k + 1], one matrix product outside), z lanes first; with n rows the states
+    step past the block's last sample (to the next block's first), with n - 1 they end at it.
 
-    zout (n, P, 2 m) gets [Re z, Im z] of the candidate's m modes, wout (P, n, D, 2 m) [Re w, Im w] of each
+    zout (n, P, 2 m) gets [Re z, Im z] of the candidate's m modes, wout (n, P, D, 2 m) [Re w, Im w] of each
     parameter's."""
     n = zout.shape[0]
     L = e.shape[0]
@@ -62,9 +65,10 @@ def _sensitivity_recursion(e, z0, w0, cz, drive, zout, wout):  # pragma: no cove
     Q = cz.shape[0]
     D = Q // L
     N = L + Q  # lanes; drive's real parts in columns 0..N-1, imaginary parts in N..2N-1
+    steps = drive.shape[0]
     er, ei = e.real.copy(), e.imag.copy()
-    zr, zi = z0.real.copy(), z0.imag.copy()
-    wr, wi = w0.real.copy(), w0.imag.copy()
+    zr, zi = zs[0].copy(), zs[1].copy()
+    wr, wi = ws[0].copy(), ws[1].copy()
     cr, ci = cz.real.copy(), cz.imag.copy()
     for k in range(n):
         for p in range(P):
@@ -74,9 +78,9 @@ def _sensitivity_recursion(e, z0, w0, cz, drive, zout, wout):  # pragma: no cove
             for d in range(D):
                 for j in range(m):
                     q = (p * D + d) * m + j
-                    wout[p, k, d, j] = wr[q]
-                    wout[p, k, d, m + j] = wi[q]
-        if k == n - 1:
+                    wout[k, p, d, j] = wr[q]
+                    wout[k, p, d, m + j] = wi[q]
+        if k >= steps:
             break
         for q in range(Q):
             l = (q // (D * m)) * m + q % m
@@ -93,11 +97,15 @@ def _sensitivity_recursion(e, z0, w0, cz, drive, zout, wout):  # pragma: no cove
             new = a * zr[l] - b * zi[l] + drive[k, l]
             zi[l] = a * zi[l] + b * zr[l] + drive[k, N + l]
             zr[l] = new
+    zs[0] = zr
+    zs[1] = zi
+    ws[0] = wr
+    ws[1] = wi
 
 
 def linear_sensitivities(
     A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: NDArray, Dy: NDArray,
-    dA: NDArray, dBs: NDArray, ds0: NDArray, dCy: NDArray, dDy: NDArray,
+    dA: NDArray, dBs: NDArray, ds0: NDArray, dCy: NDArray, dDy: NDArray, block: int = BLOCK,
 ) -> tuple[NDArray, NDArray, NDArray]:  # fmt: skip
     """Outputs y = Cy s + Dy u (P, n, ny) of sd = A s + Bs u (exact first-order hold, like ``modal.linear_foh``)
     and their derivatives (P, n, ny, D) with respect to D parameters, and which candidates (P,) they hold for.
@@ -105,7 +113,10 @@ def linear_sensitivities(
     A (P, ns, ns), Bs (P, ns, nu), s0 (P, ns), u (n, nu) one input for all, Cy (P, ny, ns), Dy (P, ny, nu), and the
     derivatives dA (P, D, ns, ns), dBs (P, D, ns, nu), ds0 (P, D, ns), dCy (P, D, ny, ns), dDy (P, D, ny, nu). A
     candidate with an ill-conditioned eigenvector matrix or nearly repeated eigenvalues gets False: its numbers are
-    not to be used (central differences instead)."""
+    not to be used (central differences instead).
+
+    The record runs in blocks of `block` samples, the modal states carried from one to the next: nothing of the
+    size of the derivatives is held beside the result (the same numbers as one block, to round-off)."""
     lam, w, V, W, good = _kept_modes(A)  # (P, m), (P, m), (P, ns, m), (P, m, ns), (P,)
     P, m = lam.shape
     nu, D, ny = Bs.shape[-1], dA.shape[1], Cy.shape[1]
@@ -143,7 +154,6 @@ def linear_sensitivities(
     dal, dbe = dt * dt * (d1 - d2), dt * dt * d2  # and their lam-derivatives
     ga = al[:, None, :, None] * coef_u + (Fjj * dal[:, None])[..., None] * bm[:, None]  # (P, D, m, nu)
     gb = be[:, None, :, None] * coef_u + (Fjj * dbe[:, None])[..., None] * bm[:, None]
-    n = u.shape[0]
 
     def lanes(g: NDArray) -> NDArray:  # (..., nu) -> (nu, lanes) contiguous
         return np.ascontiguousarray(np.moveaxis(g, -1, 0).reshape(nu, -1))
@@ -152,26 +162,42 @@ def linear_sensitivities(
         [np.concatenate([lanes(al[..., None] * bm), lanes(ga)], axis=1),
          np.concatenate([lanes(be[..., None] * bm), lanes(gb)], axis=1)]
     )  # fmt: skip
-    steps = np.concatenate([u[:-1], u[1:]], axis=1)  # (n - 1, 2 nu)
-    drive = steps @ np.concatenate([gains.real, gains.imag], axis=1)  # contiguous: BLAS
-    zout = np.empty((n, P, 2 * m))
-    wout = np.empty((P, n, D, 2 * m))
-    _sensitivity_recursion(
-        e.reshape(-1), z0.reshape(-1).astype(complex), coef_f.reshape(-1).astype(complex),
-        (Fjj * (dt * e)[:, None]).reshape(-1), drive, zout, wout,
-    )  # fmt: skip
+    G = np.concatenate([gains.real, gains.imag], axis=1)  # (2 nu, 2 lanes)
+    zs = np.stack([z0.real.reshape(-1), z0.imag.reshape(-1)])  # (2, P m): the states carried across blocks
+    ws = np.stack([coef_f.real.reshape(-1), coef_f.imag.reshape(-1)])  # (2, P D m)
+    cz = (Fjj * (dt * e)[:, None]).reshape(-1)
+    Rz = np.concatenate([Gk, Qt.reshape(P, D * ny, m)], axis=1).transpose(0, 2, 1)  # (P, m, ny (1 + D))
+    Rz = np.concatenate([Rz.real, -Rz.imag], axis=1)  # (P, 2m, ny (1 + D)): Re(c z) = Re c Re z - Im c Im z
+    Rg = np.concatenate([Gk.real, -Gk.imag], axis=-1).transpose(0, 2, 1)  # (P, 2m, ny)
+    dDyl = dDy.transpose(0, 3, 2, 1).reshape(P, nu, ny * D)  # (P, nu, ny D): dy (o, d)
+    Y, dY = _blocks(e.reshape(-1), zs, ws, cz, G, u, Dy, dDyl, Rz, Rg, (m, D, ny), block)
+    return Y, dY, ok
+
+
+def _blocks(
+    e: NDArray, zs: NDArray, ws: NDArray, cz: NDArray, G: NDArray, u: NDArray, Dy: NDArray, dDyl: NDArray,
+    Rz: NDArray, Rg: NDArray, sizes: tuple[int, int, int], block: int,
+) -> tuple[NDArray, NDArray]:  # fmt: skip
+    """`linear_sensitivities`' recursion and projections, `block` samples at a time, the states zs, ws carried."""
+    m, D, ny = sizes
+    P, n = Dy.shape[0], u.shape[0]
     Y = np.empty((P, n, ny))
-    dY = np.empty((P, n, D, ny))
-    for p in range(P):  # Re(c z) = Re c Re z - Im c Im z
-        Rz = np.concatenate([Gk[p], Qt[p].reshape(D * ny, m)]).T  # (m, ny (1 + D)): the outputs, then dy (d, o)
-        Z = zout[:, p] @ np.concatenate([Rz.real, -Rz.imag])
-        Y[p] = Z[:, :ny]
-        Rg = np.concatenate([Gk[p].T.real, -Gk[p].T.imag])  # (2m, ny)
-        np.matmul(wout[p].reshape(n * D, 2 * m), Rg, out=dY[p].reshape(n * D, ny))
-        dY[p] += Z[:, ny:].reshape(n, D, ny)
-        Y[p] += u @ Dy[p].T
-        dY[p] += (u @ dDy[p].transpose(2, 0, 1).reshape(nu, D * ny)).reshape(n, D, ny)
-    return Y, np.ascontiguousarray(np.swapaxes(dY, -1, -2)), ok
+    dY = np.empty((P, n, ny, D))
+    block = max(2, int(block))
+    for k0 in range(0, n, block):
+        k1 = min(n, k0 + block)
+        b = k1 - k0
+        ub = u[k0 : min(n, k1 + 1)]  # the block's inputs and the next block's first (the step to it)
+        drive = np.concatenate([ub[:-1], ub[1:]], axis=1) @ G  # (b or b - 1, 2 lanes)
+        zout = np.empty((b, P, 2 * m))
+        wout = np.empty((b, P, D, 2 * m))
+        _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout)
+        for p in range(P):
+            Z = zout[:, p] @ Rz[p]  # (b, ny (1 + D)): the outputs, then dy (d, o)
+            Y[p, k0:k1] = Z[:, :ny] + u[k0:k1] @ Dy[p].T
+            dy = (wout[:, p].reshape(b * D, 2 * m) @ Rg[p]).reshape(b, D, ny) + Z[:, ny:].reshape(b, D, ny)
+            dY[p, k0:k1] = dy.transpose(0, 2, 1) + (u[k0:k1] @ dDyl[p]).reshape(b, ny, D)
+    return Y, dY
 
 
 def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, NDArray]:
