@@ -38,7 +38,8 @@ for _folder, _below in (
     ("cli", ("core", "io", "config", "identify", "systems", "campaign", "design", "report")),  # the commands
 ):
     ALLOWED[_folder] = frozenset(_below)
-ROOT_MODULES = {"__init__": frozenset(), "__main__": frozenset({"cli"})}  # the package root: at most three
+ROOT_MODULES = {"__init__": frozenset({"core"}), "__main__": frozenset({"cli"})}  # the package root: at most three
+# (the root __init__ sets process-wide settings before anything runs: BLAS threads, core/allocator.py)
 
 
 def folder_of(module: str) -> str:

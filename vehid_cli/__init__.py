@@ -8,4 +8,10 @@ import os as _os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 
+# Every evaluation allocates arrays of a few MB: glibc would mmap each afresh and fault its pages in again on every
+# call (4x the exact sensitivities' cost). Keep freed blocks below 32 MB for reuse (core/allocator.py).
+from .core.allocator import keep_freed_memory as _keep_freed_memory  # noqa: E402
+
+_keep_freed_memory()
+
 __version__ = "0.1.0"
