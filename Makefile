@@ -53,7 +53,9 @@ lint: $(STAMP)
 bench: $(STAMP)
 	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_simulation.py
 	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_damper.py
+	NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/bench_time_to_bound.py
 	$(BIN)/python benchmarks/bench_campaign.py --repeats 3
+	$(BIN)/python benchmarks/bench_long_record.py --repeats 3
 	$(BIN)/python benchmarks/bench_diagnose.py --repeats 3 --long
 	$(BIN)/python benchmarks/bench_design.py --repeats 3
 
