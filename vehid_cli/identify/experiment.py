@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +29,8 @@ from ..models.road import road_function
 from ..models.sensors import Layout
 from ..sim.linear import Response, simulate, simulate_columns
 from ..sim.nonlinear import simulate_effects
-from ..sim.sensitivity import car_output_matrices, linear_sensitivities
+from ..sim.sensitivity import car_output_matrices, central_slopes, linear_sensitivities, stencil
 
-ASSEMBLY_STEP = 1e-6  # relative step of the central differences of the matrices' assembly (exact_sensitivities)
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
 CHUNK_BYTES = 64 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs)
 
@@ -157,12 +156,7 @@ class Experiment:
         (relative error ~1e-10 at a relative step of 1e-6)."""
         if not self.exact_applies(names):
             return None
-        values = np.asarray(values, dtype=float)
-        D = values.size
-        h = ASSEMBLY_STEP * np.maximum(np.abs(values), 1e-12)
-        X = np.repeat(values[None, :], 2 * D + 1, axis=0)  # the car, then +h_j, then -h_j on parameter j
-        X[1 + np.arange(D), np.arange(D)] += h
-        X[1 + D + np.arange(D), np.arange(D)] -= h
+        X, h = stencil(values)  # the car, then +h_j, then -h_j on parameter j
         p = self.parameters({n: X[:, j] for j, n in enumerate(names)})
         mats = assemble(p)
         A, Bs = mats.state_space()
@@ -173,8 +167,7 @@ class Experiment:
         Cy = np.concatenate([rows[f].T @ Call for f in rows], axis=-2)
         Dy = np.concatenate([rows[f].T @ Dall for f in rows], axis=-2)
 
-        def slope(Z: NDArray) -> NDArray:
-            return ((Z[1 : D + 1] - Z[D + 1 :]) / h.reshape((D,) + (1,) * (Z.ndim - 1)))[None] / 2
+        slope = partial(central_slopes, h=h)
 
         with np.errstate(all="ignore"):
             Y, dY, ok = linear_sensitivities(

@@ -32,6 +32,8 @@ from ..models.fullcar import N_DOF
 from .lumped import lumped_state_space, sample_slopes
 from .modal import _kept_modes, _phi12
 
+ASSEMBLY_STEP = 1e-6  # relative step of the central differences of the matrices' assembly (polynomial or rational
+# in the parameters: relative error ~1e-10)
 GAP_MIN = 1e-6  # smallest |lam_i - lam_j| relative to max |lam| the perturbation formulas are trusted at
 BLOCK = 4096  # samples of a record per block of linear_sensitivities (its modal states carried across blocks)
 _SERIES_BELOW = 1e-2  # |lam dt| below which the derivatives of phi1, phi2 come from Taylor series
@@ -214,6 +216,19 @@ def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, N
     Cy[..., 3 * N_DOF + nb :, :] = G @ A[..., N_DOF : N_DOF + 3, :]
     Dy[..., 3 * N_DOF + nb :, :] = G @ Bs[..., N_DOF : N_DOF + 3, :]
     return Cy, Dy
+
+
+def stencil(values: NDArray, rel_step: float = ASSEMBLY_STEP) -> tuple[NDArray, NDArray]:
+    """The central-difference points (2D + 1, D) of D parameters at `values` — the centre, then +h_j, then -h_j on
+    parameter j — and the steps h (D,), `rel_step` of each value: where the (cheap) assembly of the matrices is
+    evaluated for their derivatives (`central_slopes`)."""
+    values = np.asarray(values, dtype=float)
+    D = values.size
+    h = rel_step * np.maximum(np.abs(values), 1e-12)
+    X = np.repeat(values[None, :], 2 * D + 1, axis=0)
+    X[1 + np.arange(D), np.arange(D)] += h
+    X[1 + D + np.arange(D), np.arange(D)] -= h
+    return X, h
 
 
 def central_slopes(Z: NDArray, h: NDArray) -> NDArray:

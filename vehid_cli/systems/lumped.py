@@ -35,12 +35,11 @@ from ..models.noise import NoiseModel
 from ..models.road import RandomProfile, bump_unit, chirp
 from ..optimizers.base import Problem
 from ..sim.lumped import lumped_outputs
-from ..sim.sensitivity import lumped_sensitivities
+from ..sim.sensitivity import lumped_sensitivities, stencil
 from .base import Box, Simulated, System
 
 FAMILIES = ("acc", "disp")  # channel order: accelerations, then displacements (noise draws, residuals)
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode
-EXACT_ASSEMBLY_STEP = 1e-6  # relative step of the central differences of the rig's matrices (exact_sensitivities)
 NULL_RATIO = 1e-9  # eigenvalue of the correlation-scaled information, relative to the largest, that is a free direction
 
 
@@ -210,12 +209,7 @@ class LumpedSystem(System):
         rig = self.rigs[run]
         if self.kernel or any("." in n for n in names) or np.ndim(rig.u) != 2:
             return None
-        values = np.asarray(values, dtype=float)
-        D = values.size
-        h = EXACT_ASSEMBLY_STEP * np.maximum(np.abs(values), 1e-12)
-        X = np.repeat(values[None, :], 2 * D + 1, axis=0)  # the rig, then +h_j, then -h_j on parameter j
-        X[1 + np.arange(D), np.arange(D)] += h
-        X[1 + D + np.arange(D), np.arange(D)] -= h
+        X, h = stencil(values)  # the rig, then +h_j, then -h_j on parameter j
         p = self.parameters(X, names)
         with np.errstate(all="ignore"):
             got = lumped_sensitivities(
