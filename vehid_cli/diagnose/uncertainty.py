@@ -28,11 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..core.result import Result
 from ..models.effects import LIBRARY
 from .shapes import PARAMETER_AFFINITY, all_shapes
+from .tails import chi2_isf
 
 IMITATION_TERMS = 2  # library terms on one element of the strut from which the explanation is compared
 ALPHA = 0.05  # level at which one explanation fits the training data significantly better than the other
@@ -142,7 +142,7 @@ def fit_about_equally(J_selected: float, k: int, unexplained) -> tuple[bool, flo
     no worse than chance makes k parameters' worth of chi² (an alternative that fits better counts, all the more).
     Returns (equal, excess, margin)."""
     gap = float(unexplained.samples * (unexplained.chi2_after - J_selected))
-    margin = float(stats.chi2.isf(ALPHA, max(int(k), 1)))
+    margin = chi2_isf(ALPHA, max(int(k), 1))
     return bool(np.isfinite(gap) and gap <= margin), gap, margin
 
 
