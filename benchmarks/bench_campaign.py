@@ -24,22 +24,25 @@ ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"
 
 
-def tree_rss_bytes(pid: int) -> int:
-    """Resident memory of a process and all its descendants (Linux /proc)."""
+def tree_sum_bytes(pid: int, file: str, field: str) -> int:
+    """The kB figure `field` of /proc/PID/`file`, summed over a process and all its descendants, in bytes (Linux)."""
     total, stack = 0, [pid]
     while stack:
         p = stack.pop()
         try:
-            with open(f"/proc/{p}/status") as fh:
-                for line in fh:
-                    if line.startswith("VmRSS:"):
-                        total += int(line.split()[1]) * 1024
+            with open(f"/proc/{p}/{file}") as fh:
+                total += sum(int(line.split()[1]) * 1024 for line in fh if line.startswith(field))
             for task in os.listdir(f"/proc/{p}/task"):
                 with open(f"/proc/{p}/task/{task}/children") as fh:
                     stack.extend(int(c) for c in fh.read().split())
         except (FileNotFoundError, ProcessLookupError, PermissionError):
             continue
     return total
+
+
+def tree_rss_bytes(pid: int) -> int:
+    """Resident memory of a process and all its descendants (Linux /proc)."""
+    return tree_sum_bytes(pid, "status", "VmRSS:")
 
 
 def timed_run(args: list[str]) -> tuple[float, int]:

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.bench_campaign import tree_rss_bytes  # noqa: E402
+from benchmarks.bench_campaign import tree_rss_bytes, tree_sum_bytes  # noqa: E402
 from examples.make_rig_runs import write_rig_run  # noqa: E402
 from vehid_cli.config import load_config  # noqa: E402
 from vehid_cli.systems import build_system  # noqa: E402
@@ -43,18 +43,7 @@ def tree_pss_bytes(pid: int) -> int:
     """Proportional set size of a process and its descendants (Linux /proc/PID/smaps_rollup): pages shared by a
     forked child and its parent (the logger file's reader runs in one, core/isolated.py) counted once, where the
     summed RSS counts them in both."""
-    total, stack = 0, [pid]
-    while stack:
-        p = stack.pop()
-        try:
-            with open(f"/proc/{p}/smaps_rollup") as fh:
-                total += sum(int(line.split()[1]) * 1024 for line in fh if line.startswith("Pss:"))
-            for task in os.listdir(f"/proc/{p}/task"):
-                with open(f"/proc/{p}/task/{task}/children") as fh:
-                    stack.extend(int(c) for c in fh.read().split())
-        except (FileNotFoundError, ProcessLookupError, PermissionError):
-            continue
-    return total
+    return tree_sum_bytes(pid, "smaps_rollup", "Pss:")
 
 
 def identify(tree: Path, run: Path, duration: float, out: Path) -> tuple[float, int, int]:
