@@ -13,14 +13,14 @@ import yaml
 from tests.conftest import BASE_CONFIG, ROOT
 from vehid_cli.config import load_config
 from vehid_cli.core.streams import run_streams
-from vehid_cli.identify.crlb import _central_points, cramer_rao
+from vehid_cli.identify.crlb import cramer_rao
 from vehid_cli.identify.experiment import build_experiment
 from vehid_cli.identify.task import build_task
 from vehid_cli.optimizers import get_optimizer
 from vehid_cli.optimizers.base import Search
 from vehid_cli.optimizers.lsq import STEP_SD, gauss_newton, polish
 from vehid_cli.sim.modal import linear_foh
-from vehid_cli.sim.sensitivity import linear_sensitivities
+from vehid_cli.sim.sensitivity import central_points, linear_sensitivities
 
 TOL = 1e-6  # relative to the largest derivative of each parameter and channel family
 
@@ -114,7 +114,7 @@ def test_full_car_matches_central_differences(tmp_path, layout):
     values = np.array([cfg.vehicle.values()[n] for n in names]) * np.array([1.1, 0.9, 1.05, 0.95, 1.08])
     out, sens = exp.exact_sensitivities(names, values)
     h = 1e-5 * values
-    X = _central_points(values, h)
+    X = central_points(values, h)
     sim = exp.outputs({n: X[:, j] for j, n in enumerate(names)})
     centre = exp.outputs({n: values[j : j + 1] for j, n in enumerate(names)})
     D = values.size
@@ -173,7 +173,7 @@ def test_rigs_match_central_differences(config):
     out, sens = system.exact_sensitivities(values)
     D = values.size
     h = 1e-5 * np.abs(values)
-    sim = system.outputs(_central_points(values, h))
+    sim = system.outputs(central_points(values, h))
     centre = system.outputs(values[None])
     for family in sim:
         assert np.max(np.abs(out[family] - centre[family][0])) <= 1e-12 * np.max(np.abs(centre[family]))

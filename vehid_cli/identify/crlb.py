@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..sim.sensitivity import central_points
 from .experiment import Experiment
 
 UNIDENTIFIABLE_RE_SD = 50.0  # % — a bound this wide means the sensors cannot pin the parameter down
@@ -51,15 +52,6 @@ class CramerRao:
         )  # fmt: skip
 
 
-def _central_points(values: NDArray, h: NDArray) -> NDArray:
-    """(2D, D) candidates: values with +h_j on parameter j (rows 0..D-1), then with -h_j (rows D..2D-1)."""
-    D = values.size
-    X = np.repeat(values[None, :], 2 * D, axis=0)
-    X[np.arange(D), np.arange(D)] += h
-    X[D + np.arange(D), np.arange(D)] -= h
-    return X
-
-
 def sensitivities(
     experiment: Experiment,
     names: Sequence[str],
@@ -87,7 +79,7 @@ def _sensitivities(
         return
     D = values.size
     h = rel_step * np.abs(values)
-    X = _central_points(values, h)
+    X = central_points(values, h)
     outputs = experiment.outputs({n: X[:, j] for j, n in enumerate(names)})
     for family in families:
         z = outputs[family]  # (2D, n, k)
@@ -210,7 +202,7 @@ def cramer_rao_outputs(
     values = np.asarray(values, dtype=float)
     D = values.size
     h = rel_step * np.maximum(np.abs(values), 1e-12)
-    X = _central_points(values, h)
+    X = central_points(values, h)
     y = np.asarray(simulate(X), dtype=float)
     S = (y[:D] - y[D:]) / (2 * h[:, None]) * np.abs(values)[:, None]  # (D, m) per relative change
     W = S / np.asarray(sigma, dtype=float)

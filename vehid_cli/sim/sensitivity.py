@@ -218,17 +218,24 @@ def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, N
     return Cy, Dy
 
 
+def central_points(values: NDArray, h: NDArray) -> NDArray:
+    """(2D, D) candidates: `values` (D,) with +h_j on parameter j (rows 0..D-1), then with -h_j (rows D..2D-1): the
+    points of central differences."""
+    values = np.asarray(values, dtype=float)
+    D = values.size
+    X = np.repeat(values[None, :], 2 * D, axis=0)
+    X[np.arange(D), np.arange(D)] += h
+    X[D + np.arange(D), np.arange(D)] -= h
+    return X
+
+
 def stencil(values: NDArray, rel_step: float = ASSEMBLY_STEP) -> tuple[NDArray, NDArray]:
     """The central-difference points (2D + 1, D) of D parameters at `values` — the centre, then +h_j, then -h_j on
     parameter j — and the steps h (D,), `rel_step` of each value: where the (cheap) assembly of the matrices is
     evaluated for their derivatives (`central_slopes`)."""
     values = np.asarray(values, dtype=float)
-    D = values.size
     h = rel_step * np.maximum(np.abs(values), 1e-12)
-    X = np.repeat(values[None, :], 2 * D + 1, axis=0)
-    X[1 + np.arange(D), np.arange(D)] += h
-    X[1 + D + np.arange(D), np.arange(D)] -= h
-    return X, h
+    return np.concatenate([values[None, :], central_points(values, h)]), h
 
 
 def central_slopes(Z: NDArray, h: NDArray) -> NDArray:

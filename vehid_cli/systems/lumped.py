@@ -35,7 +35,7 @@ from ..models.noise import NoiseModel
 from ..models.road import RandomProfile, bump_unit, chirp
 from ..optimizers.base import Problem
 from ..sim.lumped import lumped_outputs
-from ..sim.sensitivity import lumped_sensitivities, stencil
+from ..sim.sensitivity import central_points, lumped_sensitivities, stencil
 from .base import Box, Simulated, System
 
 FAMILIES = ("acc", "disp")  # channel order: accelerations, then displacements (noise draws, residuals)
@@ -290,9 +290,7 @@ class LumpedSystem(System):
                     F += S @ S.T
             return F
         h = rel_step * np.maximum(np.abs(at), 1e-12)
-        X = np.repeat(at[None, :], 2 * D, axis=0)
-        X[np.arange(D), np.arange(D)] += h
-        X[D + np.arange(D), np.arange(D)] -= h
+        X = central_points(at, h)
         F = np.zeros((D, D))
         for run, w in enumerate(self.weights):
             for f, z in self.outputs(X, run).items():
