@@ -41,17 +41,22 @@ def _generic(theta: np.ndarray, parts: dict) -> tuple:
     return (A, Bs, s0, Cy, Dy), (dA, dBs, ds0, dCy, dDy)
 
 
-def test_generic_system_matches_central_differences_and_the_simulator():
-    """Complex and real modes, an output matrix, feedthrough and start that move with the parameters: the outputs are
-    linear_foh's to round-off, the derivatives its central differences to TOL (their own truncation is ~1e-10)."""
-    rng = np.random.default_rng(1)
-    ns, nu, ny, n, dt = 6, 3, 4, 2000, 1e-3
-    parts = {
+def _random_parts(rng: np.random.Generator, ns: int, nu: int, ny: int) -> dict[str, np.ndarray]:
+    """Random matrices of `_generic`'s system: a stable A0 (complex and real modes), the terms moving with theta."""
+    return {
         "A0": rng.normal(size=(ns, ns)) * 20 - 30 * np.eye(ns), "A1": rng.normal(size=(ns, ns)) * 5,
         "A2": rng.normal(size=(ns, ns)) * 5, "B0": rng.normal(size=(ns, nu)), "B1": rng.normal(size=(ns, nu)),
         "C0": rng.normal(size=(ny, ns)), "C1": rng.normal(size=(ny, ns)), "D0": rng.normal(size=(ny, nu)),
         "D1": rng.normal(size=(ny, nu)), "s0": rng.normal(size=ns), "s1": rng.normal(size=ns),
     }  # fmt: skip
+
+
+def test_generic_system_matches_central_differences_and_the_simulator():
+    """Complex and real modes, an output matrix, feedthrough and start that move with the parameters: the outputs are
+    linear_foh's to round-off, the derivatives its central differences to TOL (their own truncation is ~1e-10)."""
+    rng = np.random.default_rng(1)
+    ns, nu, ny, n, dt = 6, 3, 4, 2000, 1e-3
+    parts = _random_parts(rng, ns, nu, ny)
     t = np.arange(n) * dt
     u = np.stack([np.sin(2 * np.pi * (3 + i) * t) + 0.3 * (t > 0.5 + 0.2 * i) for i in range(nu)], axis=-1)
     theta = np.array([0.3, 0.7])
@@ -195,12 +200,7 @@ def test_blocks_carry_the_states():
     whatever the block's size (one that divides the record, one that leaves a single last sample, one longer)."""
     rng = np.random.default_rng(2)
     ns, nu, ny, n, dt = 6, 3, 4, 1001, 1e-3
-    parts = {
-        "A0": rng.normal(size=(ns, ns)) * 20 - 30 * np.eye(ns), "A1": rng.normal(size=(ns, ns)) * 5,
-        "A2": rng.normal(size=(ns, ns)) * 5, "B0": rng.normal(size=(ns, nu)), "B1": rng.normal(size=(ns, nu)),
-        "C0": rng.normal(size=(ny, ns)), "C1": rng.normal(size=(ny, ns)), "D0": rng.normal(size=(ny, nu)),
-        "D1": rng.normal(size=(ny, nu)), "s0": rng.normal(size=ns), "s1": rng.normal(size=ns),
-    }  # fmt: skip
+    parts = _random_parts(rng, ns, nu, ny)
     u = rng.normal(size=(n, nu))
     mats, derivs = _generic(np.array([0.3, 0.7]), parts)
     args = (
