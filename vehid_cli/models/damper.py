@@ -273,8 +273,22 @@ def _switches(d, par, w):  # pragma: no cover - compiled
     """w[W_S] = Eq. 5's switch of every candidate as ``_switch`` computes it, only where the ratio v / v_switch
     differs from the one it was last computed at for this candidate or for the one before (the candidates of a
     batch mostly share the motion and v_switch): same numbers, a fraction of the exp calls, the most expensive step
-    of the control models."""
-    for p in range(w.shape[1]):
+    of the control models. When every candidate's ratio is the first one's (the usual batch: one motion, v_switch
+    held fixed by the config), one exp at most and a broadcast, without the serial candidate-to-candidate chain."""
+    P = w.shape[1]
+    x0 = d[1, 0] / par[7, 0]
+    shared, held = True, True
+    for p in range(P):
+        shared &= d[1, p] / par[7, p] == x0
+        held &= w[W_X, p] == x0
+    if shared:
+        if not held:  # a ratio new to some candidate (every one's switch is then _logistic(x0), bit for bit)
+            s = _logistic(x0)
+            for p in range(P):
+                w[W_S, p] = s
+                w[W_X, p] = x0
+        return
+    for p in range(P):
         x = d[1, p] / par[7, p]
         if x == w[W_X, p]:
             continue
@@ -356,7 +370,8 @@ def _blend1(par, comp, reb, i, s, p):  # pragma: no cover - compiled
 def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``generalized_bouc_wen_law`` over the batch (every row has the same table size m; scratch w of N_SCRATCH
     rows). One node (m = 1): no look-up; more: the cell of u in the nodes found once for the fourteen tables, and
-    only when u changed."""
+    only when u changed, in a pass of its own before the Bouc-Wen pass (interleaved, the look-up's branches kept the
+    whole loop scalar: 1.3x slower on the sawtooth with lag, benchmarks/bench_damper.py)."""
     q = P0
     m = int(par[q, 0])
     comp = q + 1 + m
@@ -376,14 +391,20 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover 
             zd[1, p] = zdot
             f[p] = force + par[0, p] * (xb - par[1, p])
         return
-    for p in range(f.shape[0]):
+    for p in range(f.shape[0]):  # a pass of look-ups (branches, a search): the fourteen tables at a new u only
+        u = w[W_U, p]
+        if u != w[W_AT, p]:  # (a held command, a settled lag: the same u, nothing to do)
+            j, t = _cell(par, q + 1, m, u, p)
+            first = comp + j  # table i (compression 0..6, rebound 7..13) at node j: row first + i m
+            if t < 0.0:  # at an end node: its value, as _at takes it
+                for i in range(14):
+                    w[W_TAB + i, p] = par[first + i * m, p]
+            else:
+                for i in range(14):
+                    w[W_TAB + i, p] = (1 - t) * par[first + i * m, p] + t * par[first + i * m + 1, p]
+            w[W_AT, p] = u
+    for p in range(f.shape[0]):  # then Bouc-Wen over the batch: straight-line arithmetic, SIMD over the candidates
         xb, vb, s = d[0, p], d[1, p], w[W_S, p]
-        if w[W_U, p] != w[W_AT, p]:  # the fourteen tables at a new u (a held command, a settled lag: at the same)
-            j, t = _cell(par, q + 1, m, w[W_U, p], p)
-            for i in range(7):
-                w[W_TAB + i, p] = _at(par, comp + i * m, j, t, p)
-                w[W_TAB + 7 + i, p] = _at(par, reb + i * m, j, t, p)
-            w[W_AT, p] = w[W_U, p]
         force, ydot, zdot = _bouc_wen(
             xb, vb, z[0, p], z[1, p], _blend_at(w, 0, s, p), _blend_at(w, 1, s, p), _blend_at(w, 2, s, p),
             _blend_at(w, 3, s, p), _blend_at(w, 4, s, p), _blend_at(w, 5, s, p), _blend_at(w, 6, s, p),
