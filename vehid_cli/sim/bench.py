@@ -68,17 +68,23 @@ def _ramps(t, at, jumps, rising, which, delays, dt, out):  # pragma: no cover - 
             effective[i] = at[i] - dt + delays[p, which[i]]
             if i > 0:
                 effective[i] = max(effective[i], effective[i - 1])  # np.maximum.accumulate
-        start = 0
-        for i in range(m):
-            e, jump = effective[i], jumps[i]
-            while start < n and not t[start] > e:  # before e the ramp adds jump * 0: nothing (a -0.0 level aside)
-                start += 1
-            after = start
-            while after < n and (t[after] - e) / dt < 1.0:  # on the ramp
-                out[p, after, 0] += jump * ((t[after] - e) / dt)
-                after += 1
-            for k in range(after, n):  # past it: jump * 1
-                out[p, k, 0] += jump
+        # One walk over the samples (each written once, not once per change): before sample k the changes [0, on)
+        # have begun (t_k > effective) and [0, done) have ended ((t_k - effective) / dt >= 1; effective never
+        # decreases, so both are prefixes); the level is the initial command plus the ended jumps, added in their
+        # order, then the ramps under way, in theirs: the sums above, term for term (the changes not yet begun
+        # add nothing).
+        level = out[p, 0, 0]  # the initial command (every sample holds it)
+        on = done = 0
+        for k in range(n):
+            while on < m and t[k] > effective[on]:
+                on += 1
+            while done < on and not (t[k] - effective[done]) / dt < 1.0:
+                level += jumps[done]
+                done += 1
+            value = level
+            for i in range(done, on):
+                value += jumps[i] * ((t[k] - effective[i]) / dt)
+            out[p, k, 0] = value
         i = -1
         for k in range(n):  # effective (and t) never decrease: walk them together
             while i + 1 < m and effective[i + 1] + dt <= t[k]:
@@ -163,7 +169,7 @@ def simulate_damper(
         z0[0] = x[0]  # Bouc-Wen internal displacement starts where the piston is: no initial spring force
     with np.errstate(all="ignore"):
         forces = integrate_lanes(model.lanes, rows, road, dt / substeps, z0, model.scratch)
-    return _checked(t, forces[::substeps].T)
+    return _checked(t, forces[:, ::substeps])
 
 
 def _checked(t: NDArray, force: NDArray) -> BenchForces:

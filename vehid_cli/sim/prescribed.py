@@ -81,7 +81,8 @@ def lanes_loop(law, nz: int, nu: int, nw: int = 0):
     latency chain after the other's. Same arithmetic as ``_bench_rk4``, operation for operation: the same forces bit
     for bit. The law is inlined (it is compiled with ``inline="always"``); the loop is cached on disk under a digest
     of this file, the law's file and the sizes (``rk4._cache_key``). Returns run(par, road, dt, z0, out) with road
-    (n, nu, P), z0 (nz, P) and out (n, P) the force."""
+    (n, nu, P), z0 (nz, P) and out (P, n) the force (each candidate's record contiguous: what the bench returns,
+    without a transposing copy; the loop's scattered stores cost nothing measurable)."""
 
     @numba.njit(nogil=True, error_model="numpy")  # nogil: candidate fits run in parallel threads
     def run(par, road, dt, z0, out):  # pragma: no cover - compiled
@@ -110,7 +111,7 @@ def lanes_loop(law, nz: int, nu: int, nw: int = 0):
                         z[i, p] += dt / 6.0 * (k[0, i, p] + 2.0 * k[1, i, p] + 2.0 * k[2, i, p] + k[3, i, p])
             law(d1, z, par, f, k[0], w, nz == 0 or step == 0)  # the output here; stage 1 of the next step
             for p in range(P):
-                out[step, p] = f[p]
+                out[p, step] = f[p]
 
     key = _cache_key(law, "numpy", nz, nu, nw, loop_files=(__file__, _cache_key.__code__.co_filename))
     if key is not None:
@@ -119,12 +120,12 @@ def lanes_loop(law, nz: int, nu: int, nw: int = 0):
 
 
 def integrate_lanes(law, params: ArrayLike, road: ArrayLike, dt: float, z0: ArrayLike, n_w: int = 0) -> NDArray:
-    """Forces (n, P) of the batch law `law` (``lanes_loop``, n_w rows of scratch) for the rows params (P, n_par) on
+    """Forces (P, n) of the batch law `law` (``lanes_loop``, n_w rows of scratch) for the rows params (P, n_par) on
     prescribed bench motion road (n, n_u, P: the candidates last) by RK4 at step dt [s], internal states from z0
     (n_z, P)."""
     params = np.ascontiguousarray(np.atleast_2d(params).T, dtype=float)
     road = np.ascontiguousarray(road, dtype=float)
     z0 = np.ascontiguousarray(z0, dtype=float)
-    out = np.empty((road.shape[0], road.shape[2]))
+    out = np.empty((road.shape[2], road.shape[0]))
     lanes_loop(law, z0.shape[0], road.shape[1], n_w)(params, road, float(dt), z0, out)
     return out
