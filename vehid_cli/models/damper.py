@@ -262,8 +262,9 @@ def bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
 
 # The control models' scratch (w): Eq. 5's switch and the ratio v / v_switch it was computed at (kept from call to
 # call: RK4's stages 2 and 3, and its stage 4 and the output, see the same inputs), the input the damper sees (u),
-# (the force map) the velocity's interval in the table's nodes and the fraction in it, the u last looked up and
-# what was found there (the generalised model: its fourteen tables' values; the force map: the cell of u).
+# (the force map) the velocity's interval in the table's nodes and the fraction in it (the generalised model: the
+# cell of u of its latest look-up, -1 when it had none), the u last looked up and what was found there (the
+# generalised model: its fourteen tables' values; the force map: the cell of u).
 W_S, W_X, W_U, W_JV, W_TV, W_AT, W_TAB = range(7)  # W_TAB..W_TAB + 13: the tables at u (compression, rebound)
 N_SCRATCH = W_TAB + 14
 
@@ -367,11 +368,62 @@ def _blend1(par, comp, reb, i, s, p):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
+def _lerp_rows(par, first, m, t, w, p):  # pragma: no cover - compiled
+    """Candidate p's fourteen Bouc-Wen tables (compression 0..6, rebound 7..13: rows first + i m of par, first the
+    row of the node the cell starts at) at fraction t of the cell into w[W_TAB + i], as ``_at`` computes them."""
+    if t < 0.0:  # at an end node: its value
+        for i in range(14):
+            w[W_TAB + i, p] = par[first + i * m, p]
+    else:
+        for i in range(14):
+            w[W_TAB + i, p] = (1 - t) * par[first + i * m, p] + t * par[first + i * m + 1, p]
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _tables_at(par, w, nodes, m, P):  # pragma: no cover - compiled
+    """The generalised model's fourteen tables at every candidate's u (w[W_U]; its m nodes at rows nodes ..
+    nodes + m - 1, the tables after them) into w[W_TAB ..], as ``_cell`` and ``_at`` find them, only for the
+    candidates whose u changed since their last look-up (a held command, a settled lag: the same u). A pass of its
+    own (its branches and search would keep the Bouc-Wen pass scalar), in two steps: the cells (w[W_JV], w[W_TV];
+    -1 in w[W_JV]: unchanged), then the values. When every candidate's u changed and all fell in the same cell (the
+    usual batch: the nodes held fixed by the config, the lags alike), the values are taken table by table over the
+    whole batch (contiguous rows: SIMD) instead of candidate by candidate: the same numbers."""
+    comp = nodes + m  # the compression tables' first row
+    changed, shared, j0, end0 = 0, True, -1, False
+    for p in range(P):
+        u = w[W_U, p]
+        if u == w[W_AT, p]:
+            w[W_JV, p] = -1.0
+            continue
+        j, t = _cell(par, nodes, m, u, p)
+        if changed == 0:
+            j0, end0 = j, t < 0.0
+        shared &= j == j0 and (t < 0.0) == end0
+        changed += 1
+        w[W_JV, p], w[W_TV, p], w[W_AT, p] = j, t, u
+    if changed == P and shared:
+        first = comp + j0
+        for i in range(14):
+            row = first + i * m
+            if end0:
+                for p in range(P):
+                    w[W_TAB + i, p] = par[row, p]
+            else:
+                for p in range(P):
+                    t = w[W_TV, p]
+                    w[W_TAB + i, p] = (1 - t) * par[row, p] + t * par[row + 1, p]
+    elif changed > 0:
+        for p in range(P):
+            if w[W_JV, p] >= 0.0:
+                _lerp_rows(par, comp + int(w[W_JV, p]), m, w[W_TV, p], w, p)
+
+
+@numba.njit(error_model="numpy", inline="always")
 def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``generalized_bouc_wen_law`` over the batch (every row has the same table size m; scratch w of N_SCRATCH
     rows). One node (m = 1): no look-up; more: the cell of u in the nodes found once for the fourteen tables, and
-    only when u changed, in a pass of its own before the Bouc-Wen pass (interleaved, the look-up's branches kept the
-    whole loop scalar: 1.3x slower on the sawtooth with lag, benchmarks/bench_damper.py)."""
+    only when u changed, in a pass of its own before the Bouc-Wen pass (``_tables_at``; interleaved, the look-up's
+    branches kept the whole loop scalar: 1.3x slower on the sawtooth with lag, benchmarks/bench_damper.py)."""
     q = P0
     m = int(par[q, 0])
     comp = q + 1 + m
@@ -391,18 +443,7 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover 
             zd[1, p] = zdot
             f[p] = force + par[0, p] * (xb - par[1, p])
         return
-    for p in range(f.shape[0]):  # a pass of look-ups (branches, a search): the fourteen tables at a new u only
-        u = w[W_U, p]
-        if u != w[W_AT, p]:  # (a held command, a settled lag: the same u, nothing to do)
-            j, t = _cell(par, q + 1, m, u, p)
-            first = comp + j  # table i (compression 0..6, rebound 7..13) at node j: row first + i m
-            if t < 0.0:  # at an end node: its value, as _at takes it
-                for i in range(14):
-                    w[W_TAB + i, p] = par[first + i * m, p]
-            else:
-                for i in range(14):
-                    w[W_TAB + i, p] = (1 - t) * par[first + i * m, p] + t * par[first + i * m + 1, p]
-            w[W_AT, p] = u
+    _tables_at(par, w, q + 1, m, f.shape[0])
     for p in range(f.shape[0]):  # then Bouc-Wen over the batch: straight-line arithmetic, SIMD over the candidates
         xb, vb, s = d[0, p], d[1, p], w[W_S, p]
         force, ydot, zdot = _bouc_wen(
