@@ -274,22 +274,8 @@ def _switches(d, par, w):  # pragma: no cover - compiled
     """w[W_S] = Eq. 5's switch of every candidate as ``_switch`` computes it, only where the ratio v / v_switch
     differs from the one it was last computed at for this candidate or for the one before (the candidates of a
     batch mostly share the motion and v_switch): same numbers, a fraction of the exp calls, the most expensive step
-    of the control models. When every candidate's ratio is the first one's (the usual batch: one motion, v_switch
-    held fixed by the config), one exp at most and a broadcast, without the serial candidate-to-candidate chain."""
-    P = w.shape[1]
-    x0 = d[1, 0] / par[7, 0]
-    shared, held = True, True
-    for p in range(P):
-        shared &= d[1, p] / par[7, p] == x0
-        held &= w[W_X, p] == x0
-    if shared:
-        if not held:  # a ratio new to some candidate (every one's switch is then _logistic(x0), bit for bit)
-            s = _logistic(x0)
-            for p in range(P):
-                w[W_S, p] = s
-                w[W_X, p] = x0
-        return
-    for p in range(P):
+    of the control models."""
+    for p in range(w.shape[1]):
         x = d[1, p] / par[7, p]
         if x == w[W_X, p]:
             continue
