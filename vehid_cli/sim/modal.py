@@ -51,44 +51,64 @@ def _phi12(x: NDArray) -> tuple[NDArray, NDArray]:
     return phi1, phi2
 
 
+LANE_GROUP = 4  # each car's modes are padded to a multiple of this many lanes (one AVX2 vector of doubles)
+
+
+def _padded_modes(m: int) -> int:
+    """Lanes per car in the recursion and its output: m modes padded to a multiple of LANE_GROUP."""
+    return -(-m // LANE_GROUP) * LANE_GROUP
+
+
 @numba.njit(cache=True)
 def _modal_recursion(e, g, x0, u, out):  # pragma: no cover - compiled
-    """Run the modal recursions of P cars; out (n, P, 2m + 4) gets [Re x (m), Im x (m), y (4)] at each step.
+    """Run the modal recursions of P cars; out (P, n, 2 mp + 4) gets [Re x (mp), Im x (mp), y (4)] at each step,
+    each car's rows contiguous, mp = ``_padded_modes(m)`` (the padding lanes stay 0).
 
-    Lane l = p m + j is mode j of car p: x[k+1] = e x[k] + g . y[k], e (P m,) = exp(lam dt), g (4, P m) the
-    gains of y[k] (``_shifted_gains``), x0 (P m,) the start. u (R, n, 4), R = 1 (one road for all cars) or P.
+    Lane p m + j of e, g, x0 is mode j of car p: x[k+1] = e x[k] + g . y[k], e (P m,) = exp(lam dt), g (4, P m) the
+    gains of y[k] (``_shifted``), x0 (P m,) the start. u (R, n, 4), R = 1 (one road for all cars) or P.
     Time outside, all lanes of all cars inside: with one road the lane loop is a plain vector loop (SIMD), and
-    the independent recursions overlap their latencies.
+    the independent recursions overlap their latencies. Inside, each car has mp lanes (the padding: decay, gains
+    and start 0), so that a car's lanes fill whole vectors and its output rows are whole vectors (2 mp + 4 = 20
+    doubles for the car's 7 modes, 160 bytes): with each car's rows contiguous this ran recursion and projection
+    1.15-1.3x faster than rows of 2 m + 4 interleaved over the block's cars (benchmarks/bench_modal_layout.py).
     """
-    P = out.shape[1]
-    L = e.shape[0]
-    m = L // P
+    P = out.shape[0]
+    m = e.shape[0] // P
+    mp = (out.shape[2] - 4) // 2
+    Lp = P * mp
     n = u.shape[1]
     one_road = u.shape[0] == 1
-    er, ei = e.real.copy(), e.imag.copy()
-    gr, gi = g.real.copy(), g.imag.copy()
-    xr, xi = x0.real.copy(), x0.imag.copy()
+    er, ei, xr, xi = np.zeros(Lp), np.zeros(Lp), np.zeros(Lp), np.zeros(Lp)
+    gr, gi = np.zeros((4, Lp)), np.zeros((4, Lp))
+    for p in range(P):
+        for j in range(m):
+            s, d = p * m + j, p * mp + j
+            er[d], ei[d] = e[s].real, e[s].imag
+            xr[d], xi[d] = x0[s].real, x0[s].imag
+            for c in range(4):
+                gr[c, d], gi[c, d] = g[c, s].real, g[c, s].imag
     for k in range(n):
         for p in range(P):
             r = 0 if one_road else p
-            for j in range(m):
-                out[k, p, j] = xr[p * m + j]
-                out[k, p, m + j] = xi[p * m + j]
+            row = out[p, k]
+            for j in range(mp):
+                row[j] = xr[p * mp + j]
+                row[mp + j] = xi[p * mp + j]
             for c in range(4):
-                out[k, p, 2 * m + c] = u[r, k, c]
+                row[2 * mp + c] = u[r, k, c]
         if k == n - 1:
             break
         if one_road:
             y0, y1, y2, y3 = u[0, k, 0], u[0, k, 1], u[0, k, 2], u[0, k, 3]
-            for l in range(L):
+            for l in range(Lp):
                 dr = gr[0, l] * y0 + gr[1, l] * y1 + gr[2, l] * y2 + gr[3, l] * y3
                 di = gi[0, l] * y0 + gi[1, l] * y1 + gi[2, l] * y2 + gi[3, l] * y3
                 xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
                 xi[l] = er[l] * xi[l] + ei[l] * xr[l] + di
                 xr[l] = xr_new
         else:
-            for l in range(L):
-                r = l // m
+            for l in range(Lp):
+                r = l // mp
                 dr = gr[0, l] * u[r, k, 0] + gr[1, l] * u[r, k, 1] + gr[2, l] * u[r, k, 2] + gr[3, l] * u[r, k, 3]
                 di = gi[0, l] * u[r, k, 0] + gi[1, l] * u[r, k, 1] + gi[2, l] * u[r, k, 2] + gi[3, l] * u[r, k, 3]
                 xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
@@ -342,29 +362,32 @@ def _shifted(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, pr
 def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray, out) -> None:
     """Run the modal recursions (`_foh_gains`' decay, gains a, b, start z0 over P m lanes, roads u) a block of cars
     at a time and project each block at once: out[p] = [Re z, Im z, y] @ proj[p], proj (P, 2 m + 4, ncol) (the
-    recursion runs in x = z - b . y: ``_shifted``).
+    recursion runs in x = z - b . y: ``_shifted``; its rows are padded to mp modes: ``_modal_recursion``).
 
     Why blocks: the lane loop needs several cars to fill its SIMD vectors (one car, 7 lanes, ran 3x slower per
     car), but all of a batch's modal coordinates at once (100 cars: 43 MB) fall out of cache between the
     recursion that writes them and the projection that reads them: batch 100 ran 2x slower per car than batch
     20 did. CARS_PER_BLOCK = 8 (56 lanes, 3.5 MB for 3000 samples) was the fastest of 2 to 100 at 8 and 29
-    columns. Each car's numbers are the same whatever the block."""
+    columns. Each car's numbers are the same whatever the block, and the padding's zero rows of the projection
+    add exact zeros: the same numbers as without it."""
     P = out.shape[0]
     g, x0, proj = _shifted(decay, a, b, z0, u, proj)
-    n, width = u.shape[1], 2 * (decay.size // P) + a.shape[0]
     m = decay.size // P
+    mp = _padded_modes(m)
+    n, width = u.shape[1], 2 * mp + a.shape[0]
+    padded = np.zeros((P, width, proj.shape[-1]))  # rows [Re x (mp), Im x (mp), y]; the padding's rows stay 0
+    padded[:, :m], padded[:, mp : mp + m], padded[:, 2 * mp :] = proj[:, :m], proj[:, m : 2 * m], proj[:, 2 * m :]
     count = -(-P // _block_size(n, width))
     size = -(-P // count)  # blocks of nearly equal size: 20 cars run as 7, 7, 6 rather than 8, 8, 4
-    scratch = np.empty((n, min(P, size), width))
+    scratch = np.empty((min(P, size), n, width))
     for start in range(0, P, size):
         stop = min(P, start + size)
         lanes = slice(start * m, stop * m)
-        block = scratch[:, : stop - start]  # a smaller last block in the same memory: a new 3 MB array each call
+        block = scratch[: stop - start]  # a smaller last block in the same memory: a new 3 MB array each call
         # cost its page faults (20 cars as 7, 7, 6 ran 2x slower per car than 21 as 7, 7, 7)
         ub = u if u.shape[0] == 1 else u[start:stop]
-        _modal_recursion(decay[lanes], np.ascontiguousarray(g[:, lanes]), x0[lanes], ub, block)
-        modal = block.transpose(1, 0, 2)  # each car's rows are strided views, BLAS takes them
-        np.matmul(modal, proj[start:stop], out=out[start:stop])
+        _modal_recursion(decay[lanes], g[:, lanes], x0[lanes], ub, block)
+        np.matmul(block, padded[start:stop], out=out[start:stop])
 
 
 def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
