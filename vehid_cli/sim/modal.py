@@ -304,14 +304,17 @@ def _modal_columns(
     decay, a, b = _foh_gains(lam_k, bm, dt)
 
     # Output j-th mode column: w_j [V_j, lam_j V_j[7:], G V_j[:3], G lam_j V_j[7:10]]; Re(c z) = Re c Re z - Im c Im z.
+    # Only the columns asked for are weighted and split (the same numbers as selecting them afterwards).
     qdd_modes = lam_k[:, None, :] * V_k[:, N_DOF:, :]
-    c = np.concatenate([V_k, qdd_modes, G @ V_k[:, :3, :], G @ qdd_modes[:, :3, :]], axis=1) * w_k[:, None, :]
-    ct = np.swapaxes(c, -1, -2)  # (P, m, 21 + 2 nb)
-    proj = np.concatenate([ct.real, -ct.imag, _input_rows(Bs, G)], axis=1)
-    columns, views = _gemm_columns(groups, proj.shape[-1])
-    projs = proj if columns is None else np.ascontiguousarray(proj[:, :, columns])
-    Y = np.empty((P, n, projs.shape[-1]))
-    _modal_blocks(decay, a, b, z0.reshape(P * m), u, projs, Y)
+    c = np.concatenate([V_k, qdd_modes, G @ V_k[:, :3, :], G @ qdd_modes[:, :3, :]], axis=1)  # (P, 21 + 2 nb, m)
+    rows = _input_rows(Bs, G)
+    columns, views = _gemm_columns(groups, rows.shape[-1])
+    if columns is not None:
+        c, rows = c[:, columns, :], rows[:, :, columns]
+    ct = np.swapaxes(c * w_k[:, None, :], -1, -2)  # (P, m, ncol)
+    proj = np.concatenate([ct.real, -ct.imag, rows], axis=1)
+    Y = np.empty((P, n, proj.shape[-1]))
+    _modal_blocks(decay, a, b, z0.reshape(P * m), u, proj, Y)
     if not good.all():
         for block in _blocks(np.flatnonzero(~good), n, N_STATE + N_CORNERS):
             ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[block])
@@ -362,14 +365,18 @@ def _blocks(cars: NDArray, n: int, width: int) -> list[NDArray]:
 def _shifted(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray):
     """The recursion in x = z - b . y, which needs one input sample per step: x[k+1] = e x[k] + g . y[k],
     g = e b + a (from z[k+1] = e z[k] + a . y[k] + b . y[k+1]). Returns g (4, P m), x0 (P m,) and the projection
-    `proj` (P, 2 m + 4, ncol) onto [Re x, Im x, y]: z = x + b . y adds Re(c b) to the rows of y."""
+    `proj` (P, 2 m + 4, ncol) onto [Re x, Im x, y] in the recursion's padded rows (P, 2 mp + 4, ncol),
+    [Re x (mp), Im x (mp), y], the padding's rows 0: z = x + b . y adds Re(c b) to the rows of y."""
     P, m = proj.shape[0], decay.size // proj.shape[0]
+    mp = _padded_modes(m)
     g = decay * b + a
     y0 = u[:, 0, :] if u.shape[0] == 1 else np.repeat(u[:, 0, :], m, axis=0)  # (1 or P m, 4)
     x0 = z0 - (b.T * y0).sum(axis=-1)
     bc = b.reshape(b.shape[0], P, m).transpose(1, 0, 2)  # (P, 4, m)
-    shifted = proj.copy()
-    shifted[:, 2 * m :, :] += bc.real @ proj[:, :m, :] + bc.imag @ proj[:, m : 2 * m, :]
+    re, im = proj[:, :m, :], proj[:, m : 2 * m, :]
+    shifted = np.zeros((P, 2 * mp + b.shape[0], proj.shape[-1]))
+    shifted[:, :m], shifted[:, mp : mp + m] = re, im
+    np.add(proj[:, 2 * m :, :], bc.real @ re + bc.imag @ im, out=shifted[:, 2 * mp :, :])
     return g, x0, shifted
 
 
@@ -385,12 +392,9 @@ def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArra
     columns. Each car's numbers are the same whatever the block, and the padding's zero rows of the projection
     add exact zeros: the same numbers as without it."""
     P = out.shape[0]
-    g, x0, proj = _shifted(decay, a, b, z0, u, proj)
+    g, x0, padded = _shifted(decay, a, b, z0, u, proj)
     m = decay.size // P
-    mp = _padded_modes(m)
-    n, width = u.shape[1], 2 * mp + a.shape[0]
-    padded = np.zeros((P, width, proj.shape[-1]))  # rows [Re x (mp), Im x (mp), y]; the padding's rows stay 0
-    padded[:, :m], padded[:, mp : mp + m], padded[:, 2 * mp :] = proj[:, :m], proj[:, m : 2 * m], proj[:, 2 * m :]
+    n, width = u.shape[1], padded.shape[1]
     count = -(-P // _block_size(n, width))
     size = -(-P // count)  # blocks of nearly equal size: 20 cars run as 7, 7, 6 rather than 8, 8, 4
     scratch = np.empty((min(P, size), n, width))
