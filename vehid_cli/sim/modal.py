@@ -11,7 +11,10 @@ which is the same update as ``foh_discretisation`` (the Van Loan matrix exponent
 compiled loop runs it in x = z - g2 . y, which needs one input sample per step (x[k+1] = e x[k] + (g1 +
 (e - 1) g2) . y[k]; ``_shifted``), and the projection adds the g2 . y back:
 7 complex scalar recursions per car instead of a 14 x 14 matrix-vector product per step, and one
-14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential. A real system has
+14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential: for the car, A's eigenvalues by
+LAPACK and its eigenvectors and their inverse's rows from the 7 x 7 quadratic eigenproblem
+(lam^2 M + lam C + K) v = 0 (``_second_order_modes``; LAPACK's vectors and the inverse had cost 40 % of the
+eigen-solve). A real system has
 conjugate pairs, so only modes with Im(lam) >= 0 run, conjugates counted twice. Round-off grows with
 the condition number of V; a candidate with an ill-conditioned V (a near-defective, e.g. near
 critically damped, mode) goes through the real state-space recursion instead (``statespace_foh``,
@@ -36,6 +39,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
+from .modes import _pick_modes, _quadratic_vectors
 
 N_STATE = 2 * N_DOF
 COND_MAX = 1e8  # 1-norm condition number of V above which a candidate leaves the modal path (error ~ cond * 1e-16)
@@ -163,7 +167,7 @@ Outputs = tuple[NDArray, NDArray, NDArray, NDArray, NDArray]
 
 def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None):
     """The batch flattened to P cars: batch shape, A (P, 14, 14), Bs (P, 14, 4), body points G (P, nb, 3) (the
-    corners' when `points` is None), q0 (P, 7), u."""
+    corners' when `points` is None), q0 (P, 7), u, and (M, C, K) (P, 7, 7) each."""
     G = mats.G if points is None else np.asarray(points, dtype=float)
     batch = mats.batch_shape
     if road.shape[:-2] not in ((), batch) or G.shape[:-2] not in ((), batch):  # (np.broadcast_shapes: 10 us)
@@ -177,12 +181,13 @@ def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None
 
     A, Bs = mats.state_space()
     A, Bs, G, K, B = flat(A), flat(Bs), flat(G), flat(mats.K), flat(mats.B)
+    MCK = (flat(mats.M), flat(mats.C), K)
     # Writeable and C-contiguous (copied if it is not): one array type for numba to compile.
     u = np.require(road.reshape(1, n, N_CORNERS) if road.ndim == 2 else flat(road), float, ["C", "W"])
     q0 = np.linalg.solve(K, B @ u[:, 0, :, None])[..., 0]  # static equilibrium
     if q0.shape != (P, N_DOF):
         q0 = np.broadcast_to(q0, (P, N_DOF))
-    return batch, A, Bs, G, q0, u
+    return batch, A, Bs, G, q0, u, MCK
 
 
 def _n_out(G: NDArray) -> int:
@@ -255,7 +260,7 @@ def statespace_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDAr
     The same discretisation as the NumPy reference, with the time loop compiled; kept as the modal
     path's fallback and as a benchmark competitor.
     """
-    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
+    batch, A, Bs, G, q0, u, _ = _flatten(mats, road, points)
     return _split(_statespace_outputs(A, Bs, G, q0, u, dt), batch)
 
 
@@ -266,8 +271,8 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray |
     Candidates whose eigenvector matrix has a 1-norm condition number above COND_MAX go through the
     real state-space recursion instead; the answer is the same discretisation either way.
     """
-    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
-    (Y,) = _modal_columns(A, Bs, G, q0, u, dt, [np.arange(_n_out(G))])
+    batch, A, Bs, G, q0, u, MCK = _flatten(mats, road, points)
+    (Y,) = _modal_columns(A, Bs, G, q0, u, dt, [np.arange(_n_out(G))], MCK)
     return _split(Y, batch)
 
 
@@ -279,8 +284,8 @@ def modal_columns(
 
     An identification reads a few channels (the paper's: 8 of 29 columns), and projecting the modal coordinates
     onto the columns is most of the work: each group is computed straight into its own contiguous array."""
-    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
-    Ys = _modal_columns(A, Bs, G, q0, u, dt, [np.asarray(g, dtype=int) for g in groups])
+    batch, A, Bs, G, q0, u, MCK = _flatten(mats, road, points)
+    Ys = _modal_columns(A, Bs, G, q0, u, dt, [np.asarray(g, dtype=int) for g in groups], MCK)
     return [Y.reshape(batch + Y.shape[-2:]) for Y in Ys]
 
 
@@ -293,11 +298,22 @@ def column_index(field: str, index: int, nb: int) -> int:
 
 
 def _modal_columns(
-    A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDArray, dt: float, groups: list[NDArray]
+    A: NDArray,
+    Bs: NDArray,
+    G: NDArray,
+    q0: NDArray,
+    u: NDArray,
+    dt: float,
+    groups: list[NDArray],
+    MCK: tuple[NDArray, NDArray, NDArray] | None = None,
 ) -> list[NDArray]:
-    """(P, n, len(group)) for each group of output columns of P cars: modal recursions, then the projection."""
+    """(P, n, len(group)) for each group of output columns of P cars: modal recursions, then the projection. With
+    the car's (M, C, K) the modes come from ``_second_order_modes`` (A's eigenvalues only), else ``_kept_modes``."""
     P, n = A.shape[0], u.shape[1]
-    lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, 14, m), (P, m, 14), (P,)
+    if MCK is None:
+        lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, 14, m), (P, m, 14), (P,)
+    else:
+        lam_k, w_k, V_k, W_k, good = _second_order_modes(A, *MCK)
     m = lam_k.shape[1]
     bm = W_k @ Bs  # (P, m, 4): modal input matrix
     z0 = (W_k[:, :, :N_DOF] @ q0[:, :, None])[..., 0]  # (P, m)
@@ -429,43 +445,33 @@ def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray
     return lam_k, w_k, V_k, W_k, good
 
 
-@numba.njit(cache=True)
-def _pick_modes(lam, V, W, lam_k, w_k, V_k, W_k, cond):  # pragma: no cover - compiled
-    """Fill lam_k, w_k, V_k, W_k (see ``_kept_modes``) car by car: the modes with Im(lam) >= 0 in LAPACK's order,
-    then padding (weight 0: the dropped modes in LAPACK's order, as a stable argsort of ~keep puts them);
-    cond (P,) gets the 1-norm condition number ||V||_1 ||W||_1."""
+def _second_order_modes(
+    A: NDArray, M: NDArray, C: NDArray, K: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """``_kept_modes`` of A = [[0, I], [-M^-1 K, -M^-1 C]] (P, 2 d, 2 d) from its eigenvalues alone: what LAPACK's
+    eigenvectors and the inverse of their matrix had cost (two fifths of the eigen-solve) comes from the d x d
+    quadratic eigenproblem (lam^2 M + lam C + K) v = 0 instead (``_quadratic_vectors``, compiled).
+
+    Right eigenvector [v, lam v] (unit length, as LAPACK's), left one [(lam M + C)^T u, M^T u] with u^T Q(lam) = 0,
+    scaled so that it is the row of the inverse: y . x = u^T (2 lam M + C) v = 1. Modes of distinct eigenvalues are
+    biorthogonal, so these are the rows of V^-1; a near-defective mode makes the normalisation (and the condition
+    number ||V||_1 ||V^-1||_1, from the kept modes: a conjugate has the same magnitudes) blow up, and the candidate
+    goes through the state-space recursion like any ill-conditioned one. The same modes as LAPACK's to round-off."""
+    lam_k, w_k, V_k, W_k, cond = _quadratic_modes(A, M, C, K)
+    good = np.isfinite(cond) & (cond < COND_MAX)
+    return lam_k, w_k, V_k, W_k, good
+
+
+def _quadratic_modes(A: NDArray, M: NDArray, C: NDArray, K: NDArray) -> tuple[NDArray, ...]:
+    """``_second_order_modes``' modes with the condition numbers (P,) in place of the verdict."""
+    lam = np.linalg.eigvals(A).astype(complex, copy=False)
+    m = int((lam.imag >= 0).sum(axis=-1).max())
     P, ns = lam.shape
-    m = lam_k.shape[1]
-    order = np.empty(ns, dtype=np.int64)
-    for p in range(P):
-        count = 0
-        for i in range(ns):
-            if lam[p, i].imag >= 0:
-                order[count] = i
-                count += 1
-        kept = count
-        for i in range(ns):
-            if lam[p, i].imag < 0:
-                order[count] = i
-                count += 1
-        for j in range(m):
-            i = order[j]
-            lam_k[p, j] = lam[p, i]
-            w_k[p, j] = 0.0 if j >= kept else (2.0 if lam[p, i].imag > 0 else 1.0)
-            for r in range(ns):
-                V_k[p, r, j] = V[p, r, i]
-                W_k[p, j, r] = W[p, i, r]
-        norm_v, norm_w = 0.0, 0.0
-        for col in range(ns):
-            sv, sw = 0.0, 0.0
-            for r in range(ns):
-                sv += abs(V[p, r, col])
-                sw += abs(W[p, r, col])
-            if not sv <= norm_v:  # (NaN propagates, as in NumPy's max)
-                norm_v = sv
-            if not sw <= norm_w:
-                norm_w = sw
-        cond[p] = norm_v * norm_w
+    lam_k, w_k = np.empty((P, m), dtype=complex), np.empty((P, m))
+    V_k, W_k = np.empty((P, ns, m), dtype=complex), np.empty((P, m, ns), dtype=complex)
+    cond = np.empty(P)
+    _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond)
+    return lam_k, w_k, V_k, W_k, cond
 
 
 def _foh_gains(lam_k: NDArray, bm: NDArray, dt: float) -> tuple[NDArray, NDArray, NDArray]:
