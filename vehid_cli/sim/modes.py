@@ -109,6 +109,7 @@ def _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond):  # pragma: no 
     piv = np.empty(d, dtype=np.int64)
     v = np.empty(d, dtype=np.complex128)
     uu = np.empty(d, dtype=np.complex128)
+    Mu, Cu, Ku = np.empty(d, dtype=np.complex128), np.empty(d, dtype=np.complex128), np.empty(d, dtype=np.complex128)
     colsum = np.empty(ns)
     for p in range(P):
         count = 0
@@ -139,9 +140,11 @@ def _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond):  # pragma: no 
             lam_k[p, j] = s
             w_k[p, j] = weight
             big = 0.0
+            s2 = s * s
             for r in range(d):
-                for c in range(d):
-                    Q[r, c] = (s * s) * M[p, r, c] + s * C[p, r, c] + K[p, r, c]
+                for c in range(d):  # real times complex in real arithmetic (numba would multiply two complexes)
+                    m_, c_ = M[p, r, c], C[p, r, c]
+                    Q[r, c] = complex(s2.real * m_ + s.real * c_ + K[p, r, c], s2.imag * m_ + s.imag * c_)
                     big = max(big, _cabs1(Q[r, c]))
             for c in range(d):  # LU, partial pivoting
                 best, at = _cabs1(Q[c, c]), c
@@ -190,27 +193,26 @@ def _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond):  # pragma: no 
             # u^T Q(s) = 0 gives (s M + C)^T u = -K^T u / s: the form without cancellation where s M + C cancels
             # (a fast overdamped mode: s M ~ -C), the one with the smaller round-off bound of the two
             by_k = s != 0 and scales[2] / abs(s) < abs(s) * scales[0] + scales[1]
-            denom = 0.0j  # u^T (2 s M + C) v = u^T (s M - K / s) v
-            for r in range(d):
-                for c in range(d):
-                    if by_k:
-                        denom += uu[r] * (s * M[p, r, c] - K[p, r, c] / s) * v[c]
-                    else:
-                        denom += uu[r] * ((2.0 * s) * M[p, r, c] + C[p, r, c]) * v[c]
+            for c in range(d):  # M^T u, C^T u, K^T u
+                mu, cu, ku = 0.0j, 0.0j, 0.0j
+                for r in range(d):
+                    ur, ui = uu[r].real, uu[r].imag
+                    mu += complex(M[p, r, c] * ur, M[p, r, c] * ui)
+                    cu += complex(C[p, r, c] * ur, C[p, r, c] * ui)
+                    ku += complex(K[p, r, c] * ur, K[p, r, c] * ui)
+                Mu[c], Cu[c], Ku[c] = mu, cu, ku
+            umv, ucv, ukv = 0.0j, 0.0j, 0.0j
+            for c in range(d):
+                umv += Mu[c] * v[c]
+                ucv += Cu[c] * v[c]
+                ukv += Ku[c] * v[c]
+            denom = s * umv - ukv / s if by_k else 2.0 * s * umv + ucv  # u^T (2 s M + C) v = u^T (s M - K / s) v
             if denom == 0:  # a defective mode: W blows up, the candidate falls back
                 denom = 1e-300 + 0.0j
             for c in range(d):
-                top, bottom = 0.0j, 0.0j
-                for r in range(d):
-                    if by_k:
-                        top -= K[p, r, c] * uu[r]
-                    else:
-                        top += (s * M[p, r, c] + C[p, r, c]) * uu[r]
-                    bottom += M[p, r, c] * uu[r]
-                if by_k:
-                    top /= s
+                top = -Ku[c] / s if by_k else s * Mu[c] + Cu[c]
                 W_k[p, j, c] = top / denom
-                W_k[p, j, d + c] = bottom / denom
+                W_k[p, j, d + c] = Mu[c] / denom
                 V_k[p, c, j] = v[c]
                 V_k[p, d + c, j] = s * v[c]
             if weight > 0:
