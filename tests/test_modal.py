@@ -188,3 +188,66 @@ def test_long_records_run_fewer_cars_at_once():
     for n in (60_000, 600_000, 10**8):
         size = modal._block_size(n, 18)
         assert size >= 1 and (size == 1 or size * n * 18 * 8 <= modal.SCRATCH_BYTES)
+
+
+def _lapack_condition(A: np.ndarray) -> np.ndarray:
+    """||V||_1 ||V^-1||_1 (P,) of LAPACK's unit eigenvectors: the condition number the modal path tests."""
+    V = np.linalg.eig(A)[1]
+    return np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(np.linalg.inv(V)).sum(axis=-2).max(axis=-1)
+
+
+def _second_order_systems() -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(M, C, K) batches: 20 cars of the search box with an overdamped one (real eigenvalues), and 6 random
+    non-symmetric 3-DOF systems (the left null vectors by their own solve)."""
+    cars = random_cars(20, seed=3)
+    cars["cf"][4] = 3e5  # overdamped front: real eigenvalues among complex ones
+    car = assemble(cars)
+    rng = np.random.default_rng(11)
+    d = 3
+    M = np.eye(d) + 0.1 * rng.normal(size=(6, d, d))
+    C = 0.5 * np.eye(d) + 0.2 * rng.normal(size=(6, d, d))
+    K = 4.0 * np.eye(d) + rng.normal(size=(6, d, d))
+    return [(car.M, car.C, car.K), (M, C, K)]
+
+
+@pytest.mark.parametrize("system", [0, 1], ids=["cars", "non-symmetric"])
+def test_second_order_modes_are_eigenvectors_and_the_rows_of_their_inverse(system):
+    """_second_order_modes (A's eigenvalues by LAPACK, vectors from the d x d quadratic eigenproblem) against the
+    definition: A x = lam x and y A = lam y to round-off, y_i . x_j = delta_ij over every mode (the kept ones and
+    their conjugates), the same eigenvalues as LAPACK's eig and the same condition number as LAPACK's vectors."""
+    M, C, K = _second_order_systems()[system]
+    d = M.shape[-1]
+    A = np.zeros(M.shape[:-2] + (2 * d, 2 * d))
+    A[:, :d, d:] = np.eye(d)
+    A[:, d:, :d] = -np.linalg.solve(M, K)
+    A[:, d:, d:] = -np.linalg.solve(M, C)
+    lam, w, V, W, good = modal._second_order_modes(A, M, C, K)
+    lam_ref, _, _, _, good_ref = modal._kept_modes(A)
+    assert good.all() and np.array_equal(good, good_ref)
+    np.testing.assert_allclose(lam, lam_ref, rtol=1e-12)
+    norm = np.abs(A).max(axis=(-1, -2))[:, None]  # residuals per mode, relative to |A| |vector| (LAPACK's: 2e-14)
+    assert (np.abs(A @ V - V * lam[:, None, :]).max(axis=1) / (norm * np.abs(V).max(axis=1))).max() < 1e-13
+    assert (np.abs(W @ A - lam[:, :, None] * W).max(axis=2) / (norm * np.abs(W).max(axis=2))).max() < 1e-13
+    for p in range(A.shape[0]):  # every mode: the kept ones and the conjugates of the complex ones
+        pair = w[p] == 2
+        Vf = np.concatenate([V[p][:, w[p] > 0], V[p][:, pair].conj()], axis=1)
+        Wf = np.concatenate([W[p][w[p] > 0], W[p][pair].conj()], axis=0)
+        assert Vf.shape == (2 * d, 2 * d)
+        np.testing.assert_allclose(Wf @ Vf, np.eye(2 * d), atol=1e-11)
+        np.testing.assert_allclose(np.linalg.norm(Vf, axis=0), 1.0, rtol=1e-14)
+    cond = modal._quadratic_modes(A, M, C, K)[-1]
+    np.testing.assert_allclose(cond, _lapack_condition(A), rtol=1e-6)
+
+
+def test_a_defective_mode_falls_back():
+    """A critically damped oscillator (lam = -1 twice, one eigenvector): no inverse to its modes, so the candidate
+    goes through the state-space recursion (good False), and one beside it does not."""
+    M = np.ones((2, 1, 1))
+    K = np.ones((2, 1, 1))
+    C = np.array([[[2.0]], [[0.5]]])
+    A = np.zeros((2, 2, 2))
+    A[:, 0, 1] = 1.0
+    A[:, 1, 0] = -K[:, 0, 0]
+    A[:, 1, 1] = -C[:, 0, 0]
+    good = modal._second_order_modes(A, M, C, K)[-1]
+    assert good.tolist() == [False, True]

@@ -11,7 +11,10 @@ which is the same update as ``foh_discretisation`` (the Van Loan matrix exponent
 compiled loop runs it in x = z - g2 . y, which needs one input sample per step (x[k+1] = e x[k] + (g1 +
 (e - 1) g2) . y[k]; ``_shifted``), and the projection adds the g2 . y back:
 7 complex scalar recursions per car instead of a 14 x 14 matrix-vector product per step, and one
-14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential. A real system has
+14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential: for the car, A's eigenvalues by
+LAPACK and its eigenvectors and their inverse's rows from the 7 x 7 quadratic eigenproblem
+(lam^2 M + lam C + K) v = 0 (``_second_order_modes``; LAPACK's vectors and the inverse had cost 40 % of the
+eigen-solve). A real system has
 conjugate pairs, so only modes with Im(lam) >= 0 run, conjugates counted twice. Round-off grows with
 the condition number of V; a candidate with an ill-conditioned V (a near-defective, e.g. near
 critically damped, mode) goes through the real state-space recursion instead (``statespace_foh``,
@@ -27,6 +30,7 @@ body point), a layout's channels for ``modal_columns`` (identification reads 8 o
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numba
@@ -35,6 +39,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
+from .modes import _pick_modes, _quadratic_vectors
 
 N_STATE = 2 * N_DOF
 COND_MAX = 1e8  # 1-norm condition number of V above which a candidate leaves the modal path (error ~ cond * 1e-16)
@@ -42,53 +47,82 @@ _SERIES_BELOW = 1e-2  # |lam dt| below which phi1, phi2 come from Taylor series 
 
 
 def _phi12(x: NDArray) -> tuple[NDArray, NDArray]:
-    """phi1(x) = (e^x - 1)/x and phi2(x) = (e^x - 1 - x)/x^2 for complex x, accurate near x = 0."""
+    """phi1(x) = (e^x - 1)/x and phi2(x) = (e^x - 1 - x)/x^2 for complex x, accurate near x = 0.
+
+    The direct formulas everywhere, then the Taylor series where |x| < _SERIES_BELOW (few entries, often none):
+    each entry is computed as by a select between the two over the whole array, at a fraction of its cost (the
+    series' complex powers over every entry had cost a quarter of the gains' set-up of a 20-car batch)."""
+    x = np.asarray(x)
     small = np.abs(x) < _SERIES_BELOW
-    xs = np.where(small, 1.0, x)  # keeps the direct formulas away from 0/0 where the series is used
+    xs = np.where(small, 1.0, x) if small.any() else x  # keeps the direct formulas away from 0/0
     em1 = np.expm1(xs)
-    phi1 = np.where(small, 1 + x / 2 + x**2 / 6 + x**3 / 24 + x**4 / 120 + x**5 / 720, em1 / xs)
-    phi2 = np.where(small, 0.5 + x / 6 + x**2 / 24 + x**3 / 120 + x**4 / 720 + x**5 / 5040, (em1 - xs) / xs**2)
+    phi1 = em1 / xs
+    phi2 = (em1 - xs) / xs**2
+    if small.any():
+        z = x[small]
+        phi1[small] = 1 + z / 2 + z**2 / 6 + z**3 / 24 + z**4 / 120 + z**5 / 720
+        phi2[small] = 0.5 + z / 6 + z**2 / 24 + z**3 / 120 + z**4 / 720 + z**5 / 5040
     return phi1, phi2
+
+
+LANE_GROUP = 4  # each car's modes are padded to a multiple of this many lanes (one AVX2 vector of doubles)
+
+
+def _padded_modes(m: int) -> int:
+    """Lanes per car in the recursion and its output: m modes padded to a multiple of LANE_GROUP."""
+    return -(-m // LANE_GROUP) * LANE_GROUP
 
 
 @numba.njit(cache=True)
 def _modal_recursion(e, g, x0, u, out):  # pragma: no cover - compiled
-    """Run the modal recursions of P cars; out (n, P, 2m + 4) gets [Re x (m), Im x (m), y (4)] at each step.
+    """Run the modal recursions of P cars; out (P, n, 2 mp + 4) gets [Re x (mp), Im x (mp), y (4)] at each step,
+    each car's rows contiguous, mp = ``_padded_modes(m)`` (the padding lanes stay 0).
 
-    Lane l = p m + j is mode j of car p: x[k+1] = e x[k] + g . y[k], e (P m,) = exp(lam dt), g (4, P m) the
-    gains of y[k] (``_shifted_gains``), x0 (P m,) the start. u (R, n, 4), R = 1 (one road for all cars) or P.
+    Lane p m + j of e, g, x0 is mode j of car p: x[k+1] = e x[k] + g . y[k], e (P m,) = exp(lam dt), g (4, P m) the
+    gains of y[k] (``_shifted``), x0 (P m,) the start. u (R, n, 4), R = 1 (one road for all cars) or P.
     Time outside, all lanes of all cars inside: with one road the lane loop is a plain vector loop (SIMD), and
-    the independent recursions overlap their latencies.
+    the independent recursions overlap their latencies. Inside, each car has mp lanes (the padding: decay, gains
+    and start 0), so that a car's lanes fill whole vectors and its output rows are whole vectors (2 mp + 4 = 20
+    doubles for the car's 7 modes, 160 bytes): with each car's rows contiguous this ran recursion and projection
+    1.15-1.3x faster than rows of 2 m + 4 interleaved over the block's cars (benchmarks/bench_modal_layout.py).
     """
-    P = out.shape[1]
-    L = e.shape[0]
-    m = L // P
+    P = out.shape[0]
+    m = e.shape[0] // P
+    mp = (out.shape[2] - 4) // 2
+    Lp = P * mp
     n = u.shape[1]
     one_road = u.shape[0] == 1
-    er, ei = e.real.copy(), e.imag.copy()
-    gr, gi = g.real.copy(), g.imag.copy()
-    xr, xi = x0.real.copy(), x0.imag.copy()
+    er, ei, xr, xi = np.zeros(Lp), np.zeros(Lp), np.zeros(Lp), np.zeros(Lp)
+    gr, gi = np.zeros((4, Lp)), np.zeros((4, Lp))
+    for p in range(P):
+        for j in range(m):
+            s, d = p * m + j, p * mp + j
+            er[d], ei[d] = e[s].real, e[s].imag
+            xr[d], xi[d] = x0[s].real, x0[s].imag
+            for c in range(4):
+                gr[c, d], gi[c, d] = g[c, s].real, g[c, s].imag
     for k in range(n):
         for p in range(P):
             r = 0 if one_road else p
-            for j in range(m):
-                out[k, p, j] = xr[p * m + j]
-                out[k, p, m + j] = xi[p * m + j]
+            row = out[p, k]
+            for j in range(mp):
+                row[j] = xr[p * mp + j]
+                row[mp + j] = xi[p * mp + j]
             for c in range(4):
-                out[k, p, 2 * m + c] = u[r, k, c]
+                row[2 * mp + c] = u[r, k, c]
         if k == n - 1:
             break
         if one_road:
             y0, y1, y2, y3 = u[0, k, 0], u[0, k, 1], u[0, k, 2], u[0, k, 3]
-            for l in range(L):
+            for l in range(Lp):
                 dr = gr[0, l] * y0 + gr[1, l] * y1 + gr[2, l] * y2 + gr[3, l] * y3
                 di = gi[0, l] * y0 + gi[1, l] * y1 + gi[2, l] * y2 + gi[3, l] * y3
                 xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
                 xi[l] = er[l] * xi[l] + ei[l] * xr[l] + di
                 xr[l] = xr_new
         else:
-            for l in range(L):
-                r = l // m
+            for l in range(Lp):
+                r = l // mp
                 dr = gr[0, l] * u[r, k, 0] + gr[1, l] * u[r, k, 1] + gr[2, l] * u[r, k, 2] + gr[3, l] * u[r, k, 3]
                 di = gi[0, l] * u[r, k, 0] + gi[1, l] * u[r, k, 1] + gi[2, l] * u[r, k, 2] + gi[3, l] * u[r, k, 3]
                 xr_new = er[l] * xr[l] - ei[l] * xi[l] + dr
@@ -133,10 +167,12 @@ Outputs = tuple[NDArray, NDArray, NDArray, NDArray, NDArray]
 
 def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None):
     """The batch flattened to P cars: batch shape, A (P, 14, 14), Bs (P, 14, 4), body points G (P, nb, 3) (the
-    corners' when `points` is None), q0 (P, 7), u."""
+    corners' when `points` is None), q0 (P, 7), u, and (M, C, K) (P, 7, 7) each."""
     G = mats.G if points is None else np.asarray(points, dtype=float)
-    batch = np.broadcast_shapes(mats.batch_shape, road.shape[:-2], G.shape[:-2])
-    P = int(np.prod(batch, dtype=int))
+    batch = mats.batch_shape
+    if road.shape[:-2] not in ((), batch) or G.shape[:-2] not in ((), batch):  # (np.broadcast_shapes: 10 us)
+        batch = np.broadcast_shapes(batch, road.shape[:-2], G.shape[:-2])
+    P = math.prod(batch)
     n = road.shape[-2]
 
     def flat(X: NDArray) -> NDArray:
@@ -145,10 +181,13 @@ def _flatten(mats: FullCarMatrices, road: NDArray, points: NDArray | None = None
 
     A, Bs = mats.state_space()
     A, Bs, G, K, B = flat(A), flat(Bs), flat(G), flat(mats.K), flat(mats.B)
+    MCK = (flat(mats.M), flat(mats.C), K)
     # Writeable and C-contiguous (copied if it is not): one array type for numba to compile.
     u = np.require(road.reshape(1, n, N_CORNERS) if road.ndim == 2 else flat(road), float, ["C", "W"])
-    q0 = np.broadcast_to(np.linalg.solve(K, B @ u[:, 0, :, None])[..., 0], (P, N_DOF))  # static equilibrium
-    return batch, A, Bs, G, q0, u
+    q0 = np.linalg.solve(K, B @ u[:, 0, :, None])[..., 0]  # static equilibrium
+    if q0.shape != (P, N_DOF):
+        q0 = np.broadcast_to(q0, (P, N_DOF))
+    return batch, A, Bs, G, q0, u, MCK
 
 
 def _n_out(G: NDArray) -> int:
@@ -221,7 +260,7 @@ def statespace_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDAr
     The same discretisation as the NumPy reference, with the time loop compiled; kept as the modal
     path's fallback and as a benchmark competitor.
     """
-    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
+    batch, A, Bs, G, q0, u, _ = _flatten(mats, road, points)
     return _split(_statespace_outputs(A, Bs, G, q0, u, dt), batch)
 
 
@@ -232,8 +271,8 @@ def modal_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray |
     Candidates whose eigenvector matrix has a 1-norm condition number above COND_MAX go through the
     real state-space recursion instead; the answer is the same discretisation either way.
     """
-    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
-    (Y,) = _modal_columns(A, Bs, G, q0, u, dt, [np.arange(_n_out(G))])
+    batch, A, Bs, G, q0, u, MCK = _flatten(mats, road, points)
+    (Y,) = _modal_columns(A, Bs, G, q0, u, dt, [np.arange(_n_out(G))], MCK)
     return _split(Y, batch)
 
 
@@ -245,8 +284,8 @@ def modal_columns(
 
     An identification reads a few channels (the paper's: 8 of 29 columns), and projecting the modal coordinates
     onto the columns is most of the work: each group is computed straight into its own contiguous array."""
-    batch, A, Bs, G, q0, u = _flatten(mats, road, points)
-    Ys = _modal_columns(A, Bs, G, q0, u, dt, [np.asarray(g, dtype=int) for g in groups])
+    batch, A, Bs, G, q0, u, MCK = _flatten(mats, road, points)
+    Ys = _modal_columns(A, Bs, G, q0, u, dt, [np.asarray(g, dtype=int) for g in groups], MCK)
     return [Y.reshape(batch + Y.shape[-2:]) for Y in Ys]
 
 
@@ -259,25 +298,39 @@ def column_index(field: str, index: int, nb: int) -> int:
 
 
 def _modal_columns(
-    A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDArray, dt: float, groups: list[NDArray]
+    A: NDArray,
+    Bs: NDArray,
+    G: NDArray,
+    q0: NDArray,
+    u: NDArray,
+    dt: float,
+    groups: list[NDArray],
+    MCK: tuple[NDArray, NDArray, NDArray] | None = None,
 ) -> list[NDArray]:
-    """(P, n, len(group)) for each group of output columns of P cars: modal recursions, then the projection."""
+    """(P, n, len(group)) for each group of output columns of P cars: modal recursions, then the projection. With
+    the car's (M, C, K) the modes come from ``_second_order_modes`` (A's eigenvalues only), else ``_kept_modes``."""
     P, n = A.shape[0], u.shape[1]
-    lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, 14, m), (P, m, 14), (P,)
+    if MCK is None:
+        lam_k, w_k, V_k, W_k, good = _kept_modes(A)  # (P, m), (P, m), (P, 14, m), (P, m, 14), (P,)
+    else:
+        lam_k, w_k, V_k, W_k, good = _second_order_modes(A, *MCK)
     m = lam_k.shape[1]
     bm = W_k @ Bs  # (P, m, 4): modal input matrix
     z0 = (W_k[:, :, :N_DOF] @ q0[:, :, None])[..., 0]  # (P, m)
     decay, a, b = _foh_gains(lam_k, bm, dt)
 
     # Output j-th mode column: w_j [V_j, lam_j V_j[7:], G V_j[:3], G lam_j V_j[7:10]]; Re(c z) = Re c Re z - Im c Im z.
+    # Only the columns asked for are weighted and split (the same numbers as selecting them afterwards).
     qdd_modes = lam_k[:, None, :] * V_k[:, N_DOF:, :]
-    c = np.concatenate([V_k, qdd_modes, G @ V_k[:, :3, :], G @ qdd_modes[:, :3, :]], axis=1) * w_k[:, None, :]
-    ct = np.swapaxes(c, -1, -2)  # (P, m, 21 + 2 nb)
-    proj = np.concatenate([ct.real, -ct.imag, _input_rows(Bs, G)], axis=1)
-    columns, views = _gemm_columns(groups, proj.shape[-1])
-    projs = proj if columns is None else np.ascontiguousarray(proj[:, :, columns])
-    Y = np.empty((P, n, projs.shape[-1]))
-    _modal_blocks(decay, a, b, z0.reshape(P * m), u, projs, Y)
+    c = np.concatenate([V_k, qdd_modes, G @ V_k[:, :3, :], G @ qdd_modes[:, :3, :]], axis=1)  # (P, 21 + 2 nb, m)
+    rows = _input_rows(Bs, G)
+    columns, views = _gemm_columns(groups, rows.shape[-1])
+    if columns is not None:
+        c, rows = c[:, columns, :], rows[:, :, columns]
+    ct = np.swapaxes(c * w_k[:, None, :], -1, -2)  # (P, m, ncol)
+    proj = np.concatenate([ct.real, -ct.imag, rows], axis=1)
+    Y = np.empty((P, n, proj.shape[-1]))
+    _modal_blocks(decay, a, b, z0.reshape(P * m), u, proj, Y)
     if not good.all():
         for block in _blocks(np.flatnonzero(~good), n, N_STATE + N_CORNERS):
             ub = u if u.shape[0] == 1 else np.ascontiguousarray(u[block])
@@ -328,68 +381,97 @@ def _blocks(cars: NDArray, n: int, width: int) -> list[NDArray]:
 def _shifted(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray):
     """The recursion in x = z - b . y, which needs one input sample per step: x[k+1] = e x[k] + g . y[k],
     g = e b + a (from z[k+1] = e z[k] + a . y[k] + b . y[k+1]). Returns g (4, P m), x0 (P m,) and the projection
-    `proj` (P, 2 m + 4, ncol) onto [Re x, Im x, y]: z = x + b . y adds Re(c b) to the rows of y."""
+    `proj` (P, 2 m + 4, ncol) onto [Re x, Im x, y] in the recursion's padded rows (P, 2 mp + 4, ncol),
+    [Re x (mp), Im x (mp), y], the padding's rows 0: z = x + b . y adds Re(c b) to the rows of y."""
     P, m = proj.shape[0], decay.size // proj.shape[0]
+    mp = _padded_modes(m)
     g = decay * b + a
     y0 = u[:, 0, :] if u.shape[0] == 1 else np.repeat(u[:, 0, :], m, axis=0)  # (1 or P m, 4)
     x0 = z0 - (b.T * y0).sum(axis=-1)
     bc = b.reshape(b.shape[0], P, m).transpose(1, 0, 2)  # (P, 4, m)
-    shifted = proj.copy()
-    shifted[:, 2 * m :, :] += bc.real @ proj[:, :m, :] + bc.imag @ proj[:, m : 2 * m, :]
+    re, im = proj[:, :m, :], proj[:, m : 2 * m, :]
+    shifted = np.zeros((P, 2 * mp + b.shape[0], proj.shape[-1]))
+    shifted[:, :m], shifted[:, mp : mp + m] = re, im
+    np.add(proj[:, 2 * m :, :], bc.real @ re + bc.imag @ im, out=shifted[:, 2 * mp :, :])
     return g, x0, shifted
 
 
 def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArray, proj: NDArray, out) -> None:
     """Run the modal recursions (`_foh_gains`' decay, gains a, b, start z0 over P m lanes, roads u) a block of cars
     at a time and project each block at once: out[p] = [Re z, Im z, y] @ proj[p], proj (P, 2 m + 4, ncol) (the
-    recursion runs in x = z - b . y: ``_shifted``).
+    recursion runs in x = z - b . y: ``_shifted``; its rows are padded to mp modes: ``_modal_recursion``).
 
     Why blocks: the lane loop needs several cars to fill its SIMD vectors (one car, 7 lanes, ran 3x slower per
     car), but all of a batch's modal coordinates at once (100 cars: 43 MB) fall out of cache between the
     recursion that writes them and the projection that reads them: batch 100 ran 2x slower per car than batch
     20 did. CARS_PER_BLOCK = 8 (56 lanes, 3.5 MB for 3000 samples) was the fastest of 2 to 100 at 8 and 29
-    columns. Each car's numbers are the same whatever the block."""
+    columns. Each car's numbers are the same whatever the block, and the padding's zero rows of the projection
+    add exact zeros: the same numbers as without it."""
     P = out.shape[0]
-    g, x0, proj = _shifted(decay, a, b, z0, u, proj)
-    n, width = u.shape[1], 2 * (decay.size // P) + a.shape[0]
+    g, x0, padded = _shifted(decay, a, b, z0, u, proj)
     m = decay.size // P
+    n, width = u.shape[1], padded.shape[1]
     count = -(-P // _block_size(n, width))
     size = -(-P // count)  # blocks of nearly equal size: 20 cars run as 7, 7, 6 rather than 8, 8, 4
-    scratch = np.empty((n, min(P, size), width))
+    scratch = np.empty((min(P, size), n, width))
     for start in range(0, P, size):
         stop = min(P, start + size)
         lanes = slice(start * m, stop * m)
-        block = scratch[:, : stop - start]  # a smaller last block in the same memory: a new 3 MB array each call
+        block = scratch[: stop - start]  # a smaller last block in the same memory: a new 3 MB array each call
         # cost its page faults (20 cars as 7, 7, 6 ran 2x slower per car than 21 as 7, 7, 7)
         ub = u if u.shape[0] == 1 else u[start:stop]
-        _modal_recursion(decay[lanes], np.ascontiguousarray(g[:, lanes]), x0[lanes], ub, block)
-        modal = block.transpose(1, 0, 2)  # each car's rows are strided views, BLAS takes them
-        np.matmul(modal, proj[start:stop], out=out[start:stop])
+        _modal_recursion(decay[lanes], g[:, lanes], x0[lanes], ub, block)
+        np.matmul(block, padded[start:stop], out=out[start:stop])
 
 
 def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
     """The modes of each state matrix A (P, ns, ns) the recursion runs on: eigenvalues with Im > 0 (weight 2: the
     conjugate adds the same real part) and real ones (weight 1), first and padded to one count m with weight 0;
     their eigenvalues (P, m), weights (P, m), eigenvectors (P, ns, m), rows of the inverse (P, m, ns), and whether
-    the eigenvector matrix is well conditioned (P,). LAPACK returns conjugate pairs exactly conjugate."""
+    the eigenvector matrix is well conditioned (P,). LAPACK returns conjugate pairs exactly conjugate.
+
+    The picking and the condition numbers run compiled (``_pick_modes``): as a dozen NumPy calls they had cost a
+    fifth of a 20-car batch's set-up (the same numbers: copies, and the condition only compared to COND_MAX)."""
     lam, V = np.linalg.eig(A)
     lam, V = lam.astype(complex, copy=False), V.astype(complex, copy=False)
     W = np.linalg.inv(V)
-    cond = np.abs(V).sum(axis=-2).max(axis=-1) * np.abs(W).sum(axis=-2).max(axis=-1)
+    m = int((lam.imag >= 0).sum(axis=-1).max())
+    P, ns = lam.shape
+    lam_k, w_k = np.empty((P, m), dtype=complex), np.empty((P, m))
+    V_k, W_k = np.empty((P, ns, m), dtype=complex), np.empty((P, m, ns), dtype=complex)
+    cond = np.empty(P)
+    _pick_modes(lam, V, W, lam_k, w_k, V_k, W_k, cond)
     good = np.isfinite(cond) & (cond < COND_MAX)
-    keep = lam.imag >= 0
-    weight = np.where(lam.imag > 0, 2.0, 1.0) * keep
-    m = int(keep.sum(axis=-1).max())
-    idx = np.argsort(~keep, axis=-1, kind="stable")[:, :m]  # kept modes first; padding has weight 0
-    if (idx == idx[0]).all():  # the same places in every car (LAPACK orders each conjugate pair alike): one index
-        i = idx[0]
-        picked = (lam[:, i], weight[:, i], V[:, :, i], W[:, i, :])
-        return (*(np.ascontiguousarray(x) for x in picked), good)  # C-contiguous, as take_along_axis gives
-    lam_k = np.take_along_axis(lam, idx, axis=-1)
-    w_k = np.take_along_axis(weight, idx, axis=-1)
-    V_k = np.take_along_axis(V, idx[:, None, :], axis=-1)
-    W_k = np.take_along_axis(W, idx[:, :, None], axis=-2)
     return lam_k, w_k, V_k, W_k, good
+
+
+def _second_order_modes(
+    A: NDArray, M: NDArray, C: NDArray, K: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """``_kept_modes`` of A = [[0, I], [-M^-1 K, -M^-1 C]] (P, 2 d, 2 d) from its eigenvalues alone: what LAPACK's
+    eigenvectors and the inverse of their matrix had cost (two fifths of the eigen-solve) comes from the d x d
+    quadratic eigenproblem (lam^2 M + lam C + K) v = 0 instead (``_quadratic_vectors``, compiled).
+
+    Right eigenvector [v, lam v] (unit length, as LAPACK's), left one [(lam M + C)^T u, M^T u] with u^T Q(lam) = 0,
+    scaled so that it is the row of the inverse: y . x = u^T (2 lam M + C) v = 1. Modes of distinct eigenvalues are
+    biorthogonal, so these are the rows of V^-1; a near-defective mode makes the normalisation (and the condition
+    number ||V||_1 ||V^-1||_1, from the kept modes: a conjugate has the same magnitudes) blow up, and the candidate
+    goes through the state-space recursion like any ill-conditioned one. The same modes as LAPACK's to round-off."""
+    lam_k, w_k, V_k, W_k, cond = _quadratic_modes(A, M, C, K)
+    good = np.isfinite(cond) & (cond < COND_MAX)
+    return lam_k, w_k, V_k, W_k, good
+
+
+def _quadratic_modes(A: NDArray, M: NDArray, C: NDArray, K: NDArray) -> tuple[NDArray, ...]:
+    """``_second_order_modes``' modes with the condition numbers (P,) in place of the verdict."""
+    lam = np.linalg.eigvals(A).astype(complex, copy=False)
+    m = int((lam.imag >= 0).sum(axis=-1).max())
+    P, ns = lam.shape
+    lam_k, w_k = np.empty((P, m), dtype=complex), np.empty((P, m))
+    V_k, W_k = np.empty((P, ns, m), dtype=complex), np.empty((P, m, ns), dtype=complex)
+    cond = np.empty(P)
+    _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond)
+    return lam_k, w_k, V_k, W_k, cond
 
 
 def _foh_gains(lam_k: NDArray, bm: NDArray, dt: float) -> tuple[NDArray, NDArray, NDArray]:
@@ -398,11 +480,10 @@ def _foh_gains(lam_k: NDArray, bm: NDArray, dt: float) -> tuple[NDArray, NDArray
     P, m, inputs = bm.shape
     x = lam_k * dt
     phi1, phi2 = _phi12(x)
-    g1 = (dt * phi1)[..., None] * bm
-    g2 = (dt * phi2)[..., None] * bm
-    a = np.ascontiguousarray(np.moveaxis(g1 - g2, -1, 0).reshape(inputs, P * m))
-    b = np.ascontiguousarray(np.moveaxis(g2, -1, 0).reshape(inputs, P * m))
-    return np.exp(x).reshape(P * m), a, b
+    bt = bm.transpose(2, 0, 1)  # (inputs, P, m): the products come out in the gains' order, no copies after
+    g2 = (dt * phi2) * bt
+    a = (dt * phi1) * bt - g2
+    return np.exp(x).reshape(P * m), a.reshape(inputs, P * m), g2.reshape(inputs, P * m)
 
 
 MAX_MODAL_INPUTS = 4  # the modal recursion's inputs per step (fewer are padded with zeros: a zero adds nothing)
