@@ -218,8 +218,12 @@ class System(ABC):
         # them the finite penalty and counts them (`penalised`), so NumPy's floating-point warnings are noise.
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
             result = optimizer.minimize(problem, streams.optimizer, budget=ident.budget, x0=x0)
-            # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits.
-            _, residuals = problem.residuals(result.x[None, :])
+            # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits
+            # (the residuals the search kept at its estimate, else one more simulation).
+            if result.residuals is not None:
+                residuals = result.residuals[None, :]
+            else:
+                _, residuals = problem.residuals(result.x[None, :])
             chi2 = float(np.mean(residuals**2))
         return RunRecord(
             index=index, estimate=result.x, cost=result.cost, evaluations=result.evaluations,
