@@ -95,14 +95,12 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
     got = run.evaluate_linearised(x)
     if got is None:
         return None
-    _, r, Js = got
-    Js *= width  # in place, box-width units (the Jacobian is the problem's fresh array; a long record's is tens of MB)
+    _, r, J = got
+    H, g = _normal_equations(J, r, width)
     ssq = float(r @ r)
     mu = 0.0
     q_prev = 0.0  # the last accepted undamped step [standard deviations] (0: none)
     for _ in range(MAX_STEPS):
-        H = Js.T @ Js
-        g = Js.T @ r
         d = np.diag(H)
         try:
             s = np.linalg.solve(H + mu * np.diag(d), -g)
@@ -124,8 +122,8 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
         got = run.evaluate_linearised(x_new)
         ssq_new = float(got[1] @ got[1]) if got is not None else np.inf
         if ssq_new < ssq:
-            x, (_, r, Js), ssq = x_new, got, ssq_new
-            Js *= width
+            x, (_, r, J), ssq = x_new, got, ssq_new
+            H, g = _normal_equations(J, r, width)
             q_prev = q if mu == 0.0 else 0.0
             mu = mu / 4 if mu > 1e-6 else 0.0
         else:
@@ -133,6 +131,12 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
             if mu > MU_GIVE_UP:  # no step of any length lowers the cost: x is the minimum to round-off
                 break
     return x
+
+
+def _normal_equations(J: NDArray, r: NDArray, width: NDArray) -> tuple[NDArray, NDArray]:
+    """H = J'J and g = J'r (J (R, D) per unit of each unknown) in box-width units, (D, D) and (D,): the products on
+    the problem's J, scaled after (no pass over a copy of J; once per accepted point, not per damping tried)."""
+    return (J.T @ J) * np.outer(width, width), (J.T @ r) * width
 
 
 @register

@@ -72,27 +72,31 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
     zr, zi = zs[0].copy(), zs[1].copy()
     wr, wi = ws[0].copy(), ws[1].copy()
     cr, ci = cz.real.copy(), cz.imag.copy()
-    for k in range(n):
+    for k in range(n):  # lanes by candidate, parameter and mode in nested loops (no index arithmetic per lane)
         for p in range(P):
             for j in range(m):
                 zout[k, p, j] = zr[p * m + j]
                 zout[k, p, m + j] = zi[p * m + j]
             for d in range(D):
+                first = (p * D + d) * m
                 for j in range(m):
-                    q = (p * D + d) * m + j
-                    wout[k, p, d, j] = wr[q]
-                    wout[k, p, d, m + j] = wi[q]
+                    wout[k, p, d, j] = wr[first + j]
+                    wout[k, p, d, m + j] = wi[first + j]
         if k >= steps:
             break
-        for q in range(Q):
-            l = (q // (D * m)) * m + q % m
-            a = er[l]
-            b = ei[l]
-            fr = cr[q] * zr[l] - ci[q] * zi[l] + drive[k, L + q]
-            fi = cr[q] * zi[l] + ci[q] * zr[l] + drive[k, N + L + q]
-            new = a * wr[q] - b * wi[q] + fr
-            wi[q] = a * wi[q] + b * wr[q] + fi
-            wr[q] = new
+        for p in range(P):
+            for d in range(D):
+                first = (p * D + d) * m
+                for j in range(m):
+                    q = first + j
+                    l = p * m + j
+                    a = er[l]
+                    b = ei[l]
+                    fr = cr[q] * zr[l] - ci[q] * zi[l] + drive[k, L + q]
+                    fi = cr[q] * zi[l] + ci[q] * zr[l] + drive[k, N + L + q]
+                    new = a * wr[q] - b * wi[q] + fr
+                    wi[q] = a * wi[q] + b * wr[q] + fi
+                    wr[q] = new
         for l in range(L):
             a = er[l]
             b = ei[l]
@@ -194,11 +198,12 @@ def _blocks(
         zout = np.empty((b, P, 2 * m))
         wout = np.empty((b, P, D, 2 * m))
         _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout)
-        for p in range(P):
+        for p in range(P):  # the sums written straight into their places (no temporaries of the derivatives' size)
             Z = zout[:, p] @ Rz[p]  # (b, ny (1 + D)): the outputs, then dy (d, o)
-            Y[p, k0:k1] = Z[:, :ny] + u[k0:k1] @ Dy[p].T
-            dy = (wout[:, p].reshape(b * D, 2 * m) @ Rg[p]).reshape(b, D, ny) + Z[:, ny:].reshape(b, D, ny)
-            dY[p, k0:k1] = dy.transpose(0, 2, 1) + (u[k0:k1] @ dDyl[p]).reshape(b, ny, D)
+            np.add(Z[:, :ny], u[k0:k1] @ Dy[p].T, out=Y[p, k0:k1])
+            dy = (wout[:, p].reshape(b * D, 2 * m) @ Rg[p]).reshape(b, D, ny)
+            dy += Z[:, ny:].reshape(b, D, ny)
+            np.add(dy.transpose(0, 2, 1), (u[k0:k1] @ dDyl[p]).reshape(b, ny, D), out=dY[p, k0:k1])
     return Y, dY
 
 
