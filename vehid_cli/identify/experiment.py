@@ -186,10 +186,21 @@ class Experiment:
     def exact_applies(self, names: tuple[str, ...] | list[str]) -> bool:
         """Whether `exact_sensitivities` can differentiate with respect to `names`: the linear car on the exact path
         (no effects, integrator exact, no substeps), vehicle parameters only."""
-        sim = self.config.simulation
-        if self.effects() or sim.integrator != "exact" or (sim.substeps or 1) != 1 or self.road.ndim != 2:
+        if not self._exact_path:
             return False
-        return not any("." in n for n in names) and set(names) <= set(self.config.vehicle.values())
+        return not any("." in n for n in names) and set(names) <= self._vehicle_names
+
+    @cached_property
+    def _exact_path(self) -> bool:
+        """The configured car on the exact linear path (no effects, integrator exact, no substeps, one road): asked
+        by every linearisation, decided once."""
+        sim = self.config.simulation
+        return not (self.effects() or sim.integrator != "exact" or (sim.substeps or 1) != 1 or self.road.ndim != 2)
+
+    @cached_property
+    def _vehicle_names(self) -> set[str]:
+        """The configured car's parameter names."""
+        return set(self.config.vehicle.values())
 
     def _channel_rows(self, columns: int) -> dict[str, NDArray]:
         """Family -> (columns, k): how the layout's channels read the response's columns [q, qd, qdd, disp, acc]

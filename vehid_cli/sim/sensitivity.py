@@ -39,9 +39,10 @@ BLOCK = 4096  # samples of a record per block of linear_sensitivities (its modal
 _SERIES_BELOW = 1e-2  # |lam dt| below which the derivatives of phi1, phi2 come from Taylor series
 
 
-def _dphi12(x: NDArray) -> tuple[NDArray, NDArray]:
-    """phi1'(x) = (e^x - phi1)/x and phi2'(x) = (phi1 - 2 phi2)/x, accurate near x = 0 (series)."""
-    phi1, phi2 = _phi12(x)
+def _dphi12(x: NDArray, phi12: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray, NDArray]:
+    """phi1'(x) = (e^x - phi1)/x and phi2'(x) = (phi1 - 2 phi2)/x, accurate near x = 0 (series); `phi12`: phi1(x),
+    phi2(x) when the caller has them."""
+    phi1, phi2 = _phi12(x) if phi12 is None else phi12
     small = np.abs(x) < _SERIES_BELOW
     xs = np.where(small, 1.0, x)
     d1 = np.where(small, 1 / 2 + x / 3 + x**2 / 8 + x**3 / 30 + x**4 / 144 + x**5 / 840, (np.exp(xs) - phi1) / xs)
@@ -59,7 +60,7 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
     step past the block's last sample (to the next block's first), with n - 1 they end at it.
 
     zout (n, P, 2 m) gets [Re z, Im z] of the candidate's m modes, wout (n, P, D, 2 m) [Re w, Im w] of each
-    parameter's."""
+    parameter's (both C-contiguous)."""
     n = zout.shape[0]
     L = e.shape[0]
     P = zout.shape[1]
@@ -72,18 +73,23 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
     zr, zi = zs[0].copy(), zs[1].copy()
     wr, wi = ws[0].copy(), ws[1].copy()
     cr, ci = cz.real.copy(), cz.imag.copy()
+    z2 = zout.reshape(n, P * 2 * m)  # (C-contiguous) each step's outputs as one row: plain offsets into it
+    w2 = wout.reshape(n, Q * 2)
     for k in range(n):  # lanes by candidate, parameter and mode in nested loops (no index arithmetic per lane)
+        zk = z2[k]
+        wk = w2[k]
         for p in range(P):
             for j in range(m):
-                zout[k, p, j] = zr[p * m + j]
-                zout[k, p, m + j] = zi[p * m + j]
+                zk[2 * p * m + j] = zr[p * m + j]
+                zk[2 * p * m + m + j] = zi[p * m + j]
             for d in range(D):
                 first = (p * D + d) * m
                 for j in range(m):
-                    wout[k, p, d, j] = wr[first + j]
-                    wout[k, p, d, m + j] = wi[first + j]
+                    wk[2 * first + j] = wr[first + j]
+                    wk[2 * first + m + j] = wi[first + j]
         if k >= steps:
             break
+        dk = drive[k]
         for p in range(P):
             for d in range(D):
                 first = (p * D + d) * m
@@ -92,16 +98,16 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
                     l = p * m + j
                     a = er[l]
                     b = ei[l]
-                    fr = cr[q] * zr[l] - ci[q] * zi[l] + drive[k, L + q]
-                    fi = cr[q] * zi[l] + ci[q] * zr[l] + drive[k, N + L + q]
+                    fr = cr[q] * zr[l] - ci[q] * zi[l] + dk[L + q]
+                    fi = cr[q] * zi[l] + ci[q] * zr[l] + dk[N + L + q]
                     new = a * wr[q] - b * wi[q] + fr
                     wi[q] = a * wi[q] + b * wr[q] + fi
                     wr[q] = new
         for l in range(L):
             a = er[l]
             b = ei[l]
-            new = a * zr[l] - b * zi[l] + drive[k, l]
-            zi[l] = a * zi[l] + b * zr[l] + drive[k, N + l]
+            new = a * zr[l] - b * zi[l] + dk[l]
+            zi[l] = a * zi[l] + b * zr[l] + dk[N + l]
             zr[l] = new
     zs[0] = zr
     zs[1] = zi
@@ -154,7 +160,7 @@ def linear_sensitivities(
     # by z_j (the lam-derivative's de z term); then dy = Re(Gk w) + Re(Qt z) + dDy u.
     x = lam * dt
     phi1, phi2 = _phi12(x)
-    d1, d2 = _dphi12(x)
+    d1, d2 = _dphi12(x, (phi1, phi2))
     e = np.exp(x)
     al, be = dt * (phi1 - phi2), dt * phi2  # (P, m) FOH gains per unit input on y[k], y[k + 1]
     dal, dbe = dt * dt * (d1 - d2), dt * dt * d2  # and their lam-derivatives
