@@ -120,7 +120,8 @@ def linear_sensitivities(
     dA: NDArray, dBs: NDArray, ds0: NDArray, dCy: NDArray, dDy: NDArray, block: int = BLOCK,
 ) -> tuple[NDArray, NDArray, NDArray]:  # fmt: skip
     """Outputs y = Cy s + Dy u (P, n, ny) of sd = A s + Bs u (exact first-order hold, like ``modal.linear_foh``)
-    and their derivatives (P, n, ny, D) with respect to D parameters, and which candidates (P,) they hold for.
+    and their derivatives (P, n, ny, D; a view of (P, n, D, ny)) with respect to D parameters, and which
+    candidates (P,) they hold for.
 
     A (P, ns, ns), Bs (P, ns, nu), s0 (P, ns), u (n, nu) one input for all, Cy (P, ny, ns), Dy (P, ny, nu), and the
     derivatives dA (P, D, ns, ns), dBs (P, D, ns, nu), ds0 (P, D, ns), dCy (P, D, ny, ns), dDy (P, D, ny, nu). A
@@ -181,7 +182,7 @@ def linear_sensitivities(
     Rz = np.concatenate([Gk, Qt.reshape(P, D * ny, m)], axis=1).transpose(0, 2, 1)  # (P, m, ny (1 + D))
     Rz = np.concatenate([Rz.real, -Rz.imag], axis=1)  # (P, 2m, ny (1 + D)): Re(c z) = Re c Re z - Im c Im z
     Rg = np.concatenate([Gk.real, -Gk.imag], axis=-1).transpose(0, 2, 1)  # (P, 2m, ny)
-    dDyl = dDy.transpose(0, 3, 2, 1).reshape(P, nu, ny * D)  # (P, nu, ny D): dy (o, d)
+    dDyl = dDy.transpose(0, 3, 1, 2).reshape(P, nu, D * ny)  # (P, nu, D ny): dy (d, o)
     Y, dY = _blocks(e.reshape(-1), zs, ws, cz, G, u, Dy, dDyl, Rz, Rg, (m, D, ny), block)
     return Y, dY, ok
 
@@ -190,11 +191,14 @@ def _blocks(
     e: NDArray, zs: NDArray, ws: NDArray, cz: NDArray, G: NDArray, u: NDArray, Dy: NDArray, dDyl: NDArray,
     Rz: NDArray, Rg: NDArray, sizes: tuple[int, int, int], block: int,
 ) -> tuple[NDArray, NDArray]:  # fmt: skip
-    """`linear_sensitivities`' recursion and projections, `block` samples at a time, the states zs, ws carried."""
+    """`linear_sensitivities`' recursion and projections, `block` samples at a time, the states zs, ws carried.
+
+    The derivatives are held as (P, n, D, ny), where each product lands contiguous, and returned as the view
+    (P, n, ny, D): no pass that transposes them (a caller that copies a family's channels out transposes there)."""
     m, D, ny = sizes
     P, n = Dy.shape[0], u.shape[0]
     Y = np.empty((P, n, ny))
-    dY = np.empty((P, n, ny, D))
+    dYt = np.empty((P, n, D, ny))
     block = max(2, int(block))
     for k0 in range(0, n, block):
         k1 = min(n, k0 + block)
@@ -207,10 +211,11 @@ def _blocks(
         for p in range(P):  # the sums written straight into their places (no temporaries of the derivatives' size)
             Z = zout[:, p] @ Rz[p]  # (b, ny (1 + D)): the outputs, then dy (d, o)
             np.add(Z[:, :ny], u[k0:k1] @ Dy[p].T, out=Y[p, k0:k1])
-            dy = (wout[:, p].reshape(b * D, 2 * m) @ Rg[p]).reshape(b, D, ny)
-            dy += Z[:, ny:].reshape(b, D, ny)
-            np.add(dy.transpose(0, 2, 1), (u[k0:k1] @ dDyl[p]).reshape(b, ny, D), out=dY[p, k0:k1])
-    return Y, dY
+            dy = dYt[p, k0:k1].reshape(b * D, ny)  # a view: dYt[p, k0:k1] is contiguous
+            np.matmul(wout[:, p].reshape(b * D, 2 * m), Rg[p], out=dy)
+            dy += Z[:, ny:].reshape(b * D, ny)
+            dy += (u[k0:k1] @ dDyl[p]).reshape(b * D, ny)
+    return Y, dYt.transpose(0, 1, 3, 2)
 
 
 def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, NDArray]:
