@@ -73,9 +73,19 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
     zr, zi = zs[0].copy(), zs[1].copy()
     wr, wi = ws[0].copy(), ws[1].copy()
     cr, ci = cz.real.copy(), cz.imag.copy()
+    ar, ai = np.empty(Q), np.empty(Q)  # e of each parameter lane's mode, and that mode's z at the step: the
+    zqr, zqi = np.empty(Q), np.empty(Q)  # parameter lanes then run as one flat loop (no gathers in it)
+    lane = np.empty(Q, dtype=np.int64)
+    for p in range(P):
+        for d in range(D):
+            for j in range(m):
+                lane[(p * D + d) * m + j] = p * m + j
+    for q in range(Q):
+        ar[q] = er[lane[q]]
+        ai[q] = ei[lane[q]]
     z2 = zout.reshape(n, P * 2 * m)  # (C-contiguous) each step's outputs as one row: plain offsets into it
     w2 = wout.reshape(n, Q * 2)
-    for k in range(n):  # lanes by candidate, parameter and mode in nested loops (no index arithmetic per lane)
+    for k in range(n):
         zk = z2[k]
         wk = w2[k]
         for p in range(P):
@@ -90,19 +100,15 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
         if k >= steps:
             break
         dk = drive[k]
-        for p in range(P):
-            for d in range(D):
-                first = (p * D + d) * m
-                for j in range(m):
-                    q = first + j
-                    l = p * m + j
-                    a = er[l]
-                    b = ei[l]
-                    fr = cr[q] * zr[l] - ci[q] * zi[l] + dk[L + q]
-                    fi = cr[q] * zi[l] + ci[q] * zr[l] + dk[N + L + q]
-                    new = a * wr[q] - b * wi[q] + fr
-                    wi[q] = a * wi[q] + b * wr[q] + fi
-                    wr[q] = new
+        for q in range(Q):
+            zqr[q] = zr[lane[q]]
+            zqi[q] = zi[lane[q]]
+        for q in range(Q):
+            fr = cr[q] * zqr[q] - ci[q] * zqi[q] + dk[L + q]
+            fi = cr[q] * zqi[q] + ci[q] * zqr[q] + dk[N + L + q]
+            new = ar[q] * wr[q] - ai[q] * wi[q] + fr
+            wi[q] = ar[q] * wi[q] + ai[q] * wr[q] + fi
+            wr[q] = new
         for l in range(L):
             a = er[l]
             b = ei[l]
