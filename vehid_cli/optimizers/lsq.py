@@ -133,11 +133,16 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
     return x
 
 
+GEMM_COPY_BYTES = 4 * 2**20  # a Jacobian up to this size gets its J'J by gemm against a copy (see _normal_equations)
+
+
 def _normal_equations(J: NDArray, r: NDArray, width: NDArray) -> tuple[NDArray, NDArray]:
     """H = J'J and g = J'r (J (R, D) per unit of each unknown) in box-width units, (D, D) and (D,): the products on
     the problem's J, scaled after; once per accepted point, not per damping tried. J'J against a copy of J: NumPy
-    sends J.T @ J to BLAS's syrk, three times slower than gemm on a tall J of a few columns (copy included)."""
-    return (J.T @ J.copy()) * np.outer(width, width), (J.T @ r) * width
+    sends J.T @ J to BLAS's syrk, three times slower than gemm on a tall J of a few columns (copy included); a long
+    record's J (beyond GEMM_COPY_BYTES) is not copied."""
+    other = J.copy() if J.nbytes <= GEMM_COPY_BYTES else J
+    return (J.T @ other) * np.outer(width, width), (J.T @ r) * width
 
 
 @register
