@@ -239,6 +239,24 @@ def test_identify_refuses_a_file_of_another_config_unless_forced(tmp_path):
     assert read_campaign_h5(out).config.noise.level == 0.2
 
 
+def test_truth_cost_and_chi2_folded_into_the_run_are_what_simulating_gives():
+    """A run's truth cost comes from the clean channels its noise was drawn on, and its chi2 from the residuals the
+    search kept at its estimate: the same numbers as simulating the truth and the estimate again (bit for bit where
+    the kept residuals are the problem's own evaluation at the estimate; lsq's last linearisation differs from the
+    simulation by round-off), without the two simulations."""
+    from vehid_cli.systems import build_system
+
+    for cfg in (small_config(), small_config("identify.algorithm.name=lsq", "identify.objective=wls")):
+        system = build_system(cfg)
+        truth = system.box.truth
+        for index in range(2):
+            record = system.identify_run(index)
+            problem = system.problem(system.reference(index))
+            assert record.truth_cost == float(problem.cost(truth[None, :])[0])
+            _, residuals = problem.residuals(record.estimate[None, :])
+            assert record.chi2 == pytest.approx(float(np.mean(residuals**2)), rel=1e-12, abs=0)
+
+
 def test_converged_means_no_worse_than_the_truth_on_the_same_data():
     polished = run_campaign(small_config("identify.algorithm.name=lsq", "identify.objective=wls"), jobs=1)
     assert polished.summary.converged == 4

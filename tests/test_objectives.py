@@ -83,3 +83,22 @@ def test_observed_samples_only_enter_the_residuals():
     assert r.shape == (1, 10) and obj.size == 10
     np.testing.assert_array_equal(np.sort(r[0]), np.sort(ref[observed]))
     assert obj.costs({"acc": sim})[0] == pytest.approx(np.mean(ref[observed] ** 2))
+
+
+@pytest.mark.parametrize("offsets", [False, True])
+def test_residual_jacobian_is_the_residuals_response_to_the_outputs(offsets):
+    """The residuals are affine in the model's outputs: moving the outputs along a parameter's sensitivities moves
+    them by the residual Jacobian's column (to round-off), family by family, with and without profiled offsets."""
+    rng = np.random.default_rng(7)
+    n, D = 50, 3
+    ref = {"acc": rng.standard_normal((n, 4)), "disp": rng.standard_normal((n, 3))}
+    sigma = {"acc": rng.uniform(0.5, 2.0, 4), "disp": rng.uniform(0.5, 2.0, 3)}
+    obj = Objective("wls", ref, sigma, offsets=offsets)
+    out = {f: rng.standard_normal(v.shape) for f, v in ref.items()}
+    big = rng.standard_normal((n, 9, D))  # the families' sensitivities as views of one array, like the car's
+    sens = {"acc": big[:, :4], "disp": big[:, 4:7]}
+    J = obj.residual_jacobian(sens)
+    r0 = obj.residuals({f: v[None] for f, v in out.items()})[0]
+    for j in range(D):
+        moved = {f: (out[f] + sens[f][..., j])[None] for f in out}
+        np.testing.assert_allclose(obj.residuals(moved)[0] - r0, J[:, j], rtol=0, atol=1e-12)

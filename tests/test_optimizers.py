@@ -376,3 +376,83 @@ def test_lsq_respects_the_box_when_the_minimum_lies_outside():
         Problem(np.full(2, -1.0), np.full(2, 1.0), lambda X: fn(X)[0], fn), np.random.default_rng(0), budget=100
     )
     np.testing.assert_allclose(r.x, [1.0, -1.0], atol=1e-8)
+
+
+def decay_problem(seed: int) -> tuple[Problem, np.ndarray, float]:
+    """A small nonlinear least squares with its exact linearisation: y = a exp(-b t) + c t, 200 samples, noise 0.01.
+    The problem (residuals in units of the noise), the model's true values and the noise level."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 4.0, 200)
+    truth, sigma = np.array([2.0, 1.3, 0.4]), 0.01
+    y = truth[0] * np.exp(-truth[1] * t) + truth[2] * t + sigma * rng.standard_normal(t.size)
+
+    def residuals(X):
+        X = np.atleast_2d(X)
+        r = (y - (X[:, :1] * np.exp(-X[:, 1:2] * t) + X[:, 2:3] * t)) / sigma
+        return np.mean(r**2, axis=1), r
+
+    def linearised(x):
+        cost, r = residuals(x[None])
+        e = np.exp(-x[1] * t)
+        J = -np.stack([e, -x[0] * t * e, t], axis=1) / sigma
+        return float(cost[0]), r[0], J
+
+    lo, hi = truth * 0.5, truth * 1.5
+    return Problem(lo, hi, lambda X: residuals(X)[0], residuals, linearised=linearised), truth, sigma
+
+
+def counted_fit(problem: Problem, x0: np.ndarray, seed: int) -> tuple[np.ndarray, int, int, object]:
+    """gauss_newton from x0 on `problem`: the estimate, its linearisations and residual evaluations, the search."""
+    from vehid_cli.optimizers import lsq
+    from vehid_cli.optimizers.base import Search
+
+    calls = {"linearised": 0, "residuals": 0}
+
+    def residuals(X):
+        calls["residuals"] += 1
+        return problem.residuals(X)
+
+    def linearised(x):
+        calls["linearised"] += 1
+        return problem.linearised(x)
+
+    counted = Problem(problem.lower, problem.upper, problem.cost, residuals, linearised=linearised)
+    run = Search(counted, np.random.default_rng(seed), 100)
+    x = lsq.gauss_newton(run, x0)
+    return x, calls["linearised"], calls["residuals"], run
+
+
+def test_gauss_newton_takes_its_last_step_on_the_residuals_within_last_sd(monkeypatch):
+    """Levenberg–Marquardt on the exact linearisation stops within LAST_SD standard deviations (of the estimate:
+    the inverse of J'J in noise units) of the minimum that scipy's trust region reaches at 1e-14 (the rule that
+    confirms the last step with a linearisation, LAST_SD = 0, within STEP_SD); where its last step is taken on the
+    residuals alone it saves that linearisation, and the residuals the search keeps at its estimate are the
+    problem's there. Eight seeds: the shortcut is taken on some of them."""
+    from scipy.optimize import least_squares
+
+    from vehid_cli.optimizers import lsq
+    from vehid_cli.optimizers.base import Search
+
+    last_sd = lsq.LAST_SD
+    taken = 0
+    for seed in range(8):
+        problem, _, _ = decay_problem(seed)
+        x0 = Search(problem, np.random.default_rng(seed), 100).start(None)
+        ref = least_squares(
+            lambda x, p=problem: p.residuals(x[None])[1][0], x0, jac=lambda x, p=problem: p.linearised(x)[2],
+            bounds=(problem.lower, problem.upper), xtol=1e-14, ftol=1e-14, gtol=1e-14,
+        ).x  # fmt: skip
+        J = problem.linearised(ref)[2]
+        sd = np.sqrt(np.diag(np.linalg.inv(J.T @ J)))  # the estimate's standard deviation (residuals in noise units)
+        monkeypatch.setattr(lsq, "LAST_SD", last_sd)
+        x, lin, res, run = counted_fit(problem, x0, seed)
+        monkeypatch.setattr(lsq, "LAST_SD", 0.0)
+        x_confirm, lin_confirm, res_confirm, _ = counted_fit(problem, x0, seed)
+        assert np.all(np.abs(x - ref) <= last_sd * sd)
+        assert np.all(np.abs(x_confirm - ref) <= lsq.STEP_SD * sd)
+        assert res_confirm == 0 and res in (0, 1) and lin == lin_confirm - res
+        assert np.array_equal(run.best_x, x)
+        if res:
+            assert np.array_equal(run.best_residuals, problem.residuals(x[None])[1][0])
+        taken += res
+    assert taken >= 2

@@ -164,8 +164,8 @@ class Experiment:
         s0[:, :N_DOF] = np.linalg.solve(mats.K, mats.B @ self.road[0][:, None])[..., 0]  # static, first sample
         Call, Dall = car_output_matrices(A, Bs, self.layout.points(p))
         rows = self._channel_rows(Call.shape[-2])
-        Cy = np.concatenate([rows[f].T @ Call for f in rows], axis=-2)
-        Dy = np.concatenate([rows[f].T @ Dall for f in rows], axis=-2)
+        Cy = np.concatenate([r.T @ Call for r in rows.values()], axis=-2)
+        Dy = np.concatenate([r.T @ Dall for r in rows.values()], axis=-2)
 
         slope = partial(central_slopes, h=h)
 
@@ -186,14 +186,38 @@ class Experiment:
     def exact_applies(self, names: tuple[str, ...] | list[str]) -> bool:
         """Whether `exact_sensitivities` can differentiate with respect to `names`: the linear car on the exact path
         (no effects, integrator exact, no substeps), vehicle parameters only."""
-        sim = self.config.simulation
-        if self.effects() or sim.integrator != "exact" or (sim.substeps or 1) != 1 or self.road.ndim != 2:
+        if not self._exact_path:
             return False
-        return not any("." in n for n in names) and set(names) <= set(self.config.vehicle.values())
+        return not any("." in n for n in names) and set(names) <= self._vehicle_names
+
+    @cached_property
+    def _exact_path(self) -> bool:
+        """The configured car on the exact linear path (no effects, integrator exact, no substeps, one road): asked
+        by every linearisation, decided once."""
+        sim = self.config.simulation
+        return not (self.effects() or sim.integrator != "exact" or (sim.substeps or 1) != 1 or self.road.ndim != 2)
+
+    @cached_property
+    def _vehicle_names(self) -> set[str]:
+        """The configured car's parameter names."""
+        return set(self.config.vehicle.values())
 
     def _channel_rows(self, columns: int) -> dict[str, NDArray]:
         """Family -> (columns, k): how the layout's channels read the response's columns [q, qd, qdd, disp, acc]
-        (`Layout.read` is linear in them, sample by sample)."""
+        (`Layout.read` is linear in them, sample by sample). Built once per column count (every linearisation
+        asks)."""
+        cache = self._channel_rows_cache
+        if columns not in cache:
+            cache[columns] = self._read_rows(columns)
+        return cache[columns]
+
+    @cached_property
+    def _channel_rows_cache(self) -> dict[int, dict[str, NDArray]]:
+        """`_channel_rows`' matrices by column count (filled on first use)."""
+        return {}
+
+    def _read_rows(self, columns: int) -> dict[str, NDArray]:
+        """`_channel_rows` computed: the layout read from an identity response."""
         eye = np.eye(columns)
         nb = (columns - 3 * N_DOF) // 2
         d = N_DOF

@@ -179,7 +179,8 @@ class Objective:
             block = out[first : first + size]
             if keep is None:  # rows time-major, like the residuals
                 rows = block.reshape(n, k, D)
-                np.divide(s, neg[:, None], out=rows)
+                rows[...] = s  # copied, then divided as rows of k D: NumPy's loop over rows of D was twice as slow
+                np.divide(rows.reshape(n, k * D), np.repeat(neg, D), out=rows.reshape(n, k * D))
                 if mean is not None:
                     rows -= mean
             else:

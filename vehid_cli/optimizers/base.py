@@ -60,6 +60,7 @@ class OptimizeResult:
     history_evals: NDArray  # cumulative evaluations after each batch
     history_cost: NDArray  # best cost after each batch
     message: str = ""
+    residuals: NDArray | None = None  # the weighted residuals (R,) at x when the search kept them (else None)
 
 
 class BudgetExhausted(Exception):
@@ -79,6 +80,7 @@ class Search:
     best_cost: float = np.inf
     history_evals: list[int] = field(default_factory=list)
     history_cost: list[float] = field(default_factory=list)
+    best_residuals: NDArray | None = None  # the residuals at best_x when an evaluation kept them (`keep`), else None
 
     @property
     def remaining(self) -> int:
@@ -101,7 +103,7 @@ class Search:
             self.evaluations += take
             i = int(np.argmin(raw))
             if raw[i] < self.best_cost:
-                self.best_cost, self.best_x = float(raw[i]), X[i].copy()
+                self.best_cost, self.best_x, self.best_residuals = float(raw[i]), X[i].copy(), None
             self.history_evals.append(self.evaluations)
             self.history_cost.append(self.best_cost)
         if take < len(X):
@@ -111,8 +113,8 @@ class Search:
     def evaluate_linearised(self, x: NDArray) -> tuple[NDArray, NDArray, NDArray] | None:
         """Cost, residuals (R,) and their exact Jacobian (R, D) at x (clipped into the box) from the problem's
         `linearised` (one simulation of the response and its sensitivities), counted as one evaluation and tracked
-        like ``evaluate``; None when the problem has none or its numbers there are not finite. Raises
-        BudgetExhausted when no evaluation is left."""
+        like ``evaluate`` (a new best keeps its residuals: the caller must not modify them); None when the problem
+        has none or its numbers there are not finite. Raises BudgetExhausted when no evaluation is left."""
         if self.problem.linearised is None:
             return None
         if self.remaining < 1:
@@ -127,13 +129,14 @@ class Search:
         if not ok:
             self.penalised += 1
         elif cost < self.best_cost:
-            self.best_cost, self.best_x = float(cost), x.copy()
+            self.best_cost, self.best_x, self.best_residuals = float(cost), x.copy(), r
         self.history_evals.append(self.evaluations)
         self.history_cost.append(self.best_cost)
         return (np.asarray(cost), r, J) if ok else None
 
-    def evaluate_residuals(self, X: NDArray) -> NDArray:
-        """Residual vectors (P, R) of a population, counted and tracked like ``evaluate``.
+    def evaluate_residuals(self, X: NDArray, keep: bool = False) -> NDArray:
+        """Residual vectors (P, R) of a population, counted and tracked like ``evaluate``; with `keep` a new best
+        keeps its residuals (`best_residuals`, the result's: the caller promises not to modify them).
 
         Raises BudgetExhausted (evaluating nothing) when the whole batch does not fit the budget, and
         ValueError when the problem has no residuals.
@@ -156,6 +159,7 @@ class Search:
         i = int(np.argmin(costs))
         if costs[i] < self.best_cost:
             self.best_cost, self.best_x = float(costs[i]), X[i].copy()
+            self.best_residuals = residuals[i] if keep and not bad[i] else None
         self.history_evals.append(self.evaluations)
         self.history_cost.append(self.best_cost)
         return residuals
@@ -228,6 +232,7 @@ class Optimizer(ABC):
             history_evals=np.asarray(run.history_evals, dtype=np.int64),
             history_cost=np.asarray(run.history_cost, dtype=float),
             message=message,
+            residuals=run.best_residuals if run.best_x is not None else None,
         )
 
     @abstractmethod

@@ -39,9 +39,10 @@ BLOCK = 4096  # samples of a record per block of linear_sensitivities (its modal
 _SERIES_BELOW = 1e-2  # |lam dt| below which the derivatives of phi1, phi2 come from Taylor series
 
 
-def _dphi12(x: NDArray) -> tuple[NDArray, NDArray]:
-    """phi1'(x) = (e^x - phi1)/x and phi2'(x) = (phi1 - 2 phi2)/x, accurate near x = 0 (series)."""
-    phi1, phi2 = _phi12(x)
+def _dphi12(x: NDArray, phi12: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray, NDArray]:
+    """phi1'(x) = (e^x - phi1)/x and phi2'(x) = (phi1 - 2 phi2)/x, accurate near x = 0 (series); `phi12`: phi1(x),
+    phi2(x) when the caller has them."""
+    phi1, phi2 = _phi12(x) if phi12 is None else phi12
     small = np.abs(x) < _SERIES_BELOW
     xs = np.where(small, 1.0, x)
     d1 = np.where(small, 1 / 2 + x / 3 + x**2 / 8 + x**3 / 30 + x**4 / 144 + x**5 / 840, (np.exp(xs) - phi1) / xs)
@@ -59,7 +60,7 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
     step past the block's last sample (to the next block's first), with n - 1 they end at it.
 
     zout (n, P, 2 m) gets [Re z, Im z] of the candidate's m modes, wout (n, P, D, 2 m) [Re w, Im w] of each
-    parameter's."""
+    parameter's (both C-contiguous)."""
     n = zout.shape[0]
     L = e.shape[0]
     P = zout.shape[1]
@@ -72,32 +73,47 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
     zr, zi = zs[0].copy(), zs[1].copy()
     wr, wi = ws[0].copy(), ws[1].copy()
     cr, ci = cz.real.copy(), cz.imag.copy()
+    ar, ai = np.empty(Q), np.empty(Q)  # e of each parameter lane's mode, and that mode's z at the step: the
+    zqr, zqi = np.empty(Q), np.empty(Q)  # parameter lanes then run as one flat loop (no gathers in it)
+    lane = np.empty(Q, dtype=np.int64)
+    for p in range(P):
+        for d in range(D):
+            for j in range(m):
+                lane[(p * D + d) * m + j] = p * m + j
+    for q in range(Q):
+        ar[q] = er[lane[q]]
+        ai[q] = ei[lane[q]]
+    z2 = zout.reshape(n, P * 2 * m)  # (C-contiguous) each step's outputs as one row: plain offsets into it
+    w2 = wout.reshape(n, Q * 2)
     for k in range(n):
+        zk = z2[k]
+        wk = w2[k]
         for p in range(P):
             for j in range(m):
-                zout[k, p, j] = zr[p * m + j]
-                zout[k, p, m + j] = zi[p * m + j]
+                zk[2 * p * m + j] = zr[p * m + j]
+                zk[2 * p * m + m + j] = zi[p * m + j]
             for d in range(D):
+                first = (p * D + d) * m
                 for j in range(m):
-                    q = (p * D + d) * m + j
-                    wout[k, p, d, j] = wr[q]
-                    wout[k, p, d, m + j] = wi[q]
+                    wk[2 * first + j] = wr[first + j]
+                    wk[2 * first + m + j] = wi[first + j]
         if k >= steps:
             break
+        dk = drive[k]
         for q in range(Q):
-            l = (q // (D * m)) * m + q % m
-            a = er[l]
-            b = ei[l]
-            fr = cr[q] * zr[l] - ci[q] * zi[l] + drive[k, L + q]
-            fi = cr[q] * zi[l] + ci[q] * zr[l] + drive[k, N + L + q]
-            new = a * wr[q] - b * wi[q] + fr
-            wi[q] = a * wi[q] + b * wr[q] + fi
+            zqr[q] = zr[lane[q]]
+            zqi[q] = zi[lane[q]]
+        for q in range(Q):
+            fr = cr[q] * zqr[q] - ci[q] * zqi[q] + dk[L + q]
+            fi = cr[q] * zqi[q] + ci[q] * zqr[q] + dk[N + L + q]
+            new = ar[q] * wr[q] - ai[q] * wi[q] + fr
+            wi[q] = ar[q] * wi[q] + ai[q] * wr[q] + fi
             wr[q] = new
         for l in range(L):
             a = er[l]
             b = ei[l]
-            new = a * zr[l] - b * zi[l] + drive[k, l]
-            zi[l] = a * zi[l] + b * zr[l] + drive[k, N + l]
+            new = a * zr[l] - b * zi[l] + dk[l]
+            zi[l] = a * zi[l] + b * zr[l] + dk[N + l]
             zr[l] = new
     zs[0] = zr
     zs[1] = zi
@@ -110,7 +126,8 @@ def linear_sensitivities(
     dA: NDArray, dBs: NDArray, ds0: NDArray, dCy: NDArray, dDy: NDArray, block: int = BLOCK,
 ) -> tuple[NDArray, NDArray, NDArray]:  # fmt: skip
     """Outputs y = Cy s + Dy u (P, n, ny) of sd = A s + Bs u (exact first-order hold, like ``modal.linear_foh``)
-    and their derivatives (P, n, ny, D) with respect to D parameters, and which candidates (P,) they hold for.
+    and their derivatives (P, n, ny, D; a view of (P, n, D, ny)) with respect to D parameters, and which
+    candidates (P,) they hold for.
 
     A (P, ns, ns), Bs (P, ns, nu), s0 (P, ns), u (n, nu) one input for all, Cy (P, ny, ns), Dy (P, ny, nu), and the
     derivatives dA (P, D, ns, ns), dBs (P, D, ns, nu), ds0 (P, D, ns), dCy (P, D, ny, ns), dDy (P, D, ny, nu). A
@@ -150,7 +167,7 @@ def linear_sensitivities(
     # by z_j (the lam-derivative's de z term); then dy = Re(Gk w) + Re(Qt z) + dDy u.
     x = lam * dt
     phi1, phi2 = _phi12(x)
-    d1, d2 = _dphi12(x)
+    d1, d2 = _dphi12(x, (phi1, phi2))
     e = np.exp(x)
     al, be = dt * (phi1 - phi2), dt * phi2  # (P, m) FOH gains per unit input on y[k], y[k + 1]
     dal, dbe = dt * dt * (d1 - d2), dt * dt * d2  # and their lam-derivatives
@@ -171,7 +188,7 @@ def linear_sensitivities(
     Rz = np.concatenate([Gk, Qt.reshape(P, D * ny, m)], axis=1).transpose(0, 2, 1)  # (P, m, ny (1 + D))
     Rz = np.concatenate([Rz.real, -Rz.imag], axis=1)  # (P, 2m, ny (1 + D)): Re(c z) = Re c Re z - Im c Im z
     Rg = np.concatenate([Gk.real, -Gk.imag], axis=-1).transpose(0, 2, 1)  # (P, 2m, ny)
-    dDyl = dDy.transpose(0, 3, 2, 1).reshape(P, nu, ny * D)  # (P, nu, ny D): dy (o, d)
+    dDyl = dDy.transpose(0, 3, 1, 2).reshape(P, nu, D * ny)  # (P, nu, D ny): dy (d, o)
     Y, dY = _blocks(e.reshape(-1), zs, ws, cz, G, u, Dy, dDyl, Rz, Rg, (m, D, ny), block)
     return Y, dY, ok
 
@@ -180,11 +197,14 @@ def _blocks(
     e: NDArray, zs: NDArray, ws: NDArray, cz: NDArray, G: NDArray, u: NDArray, Dy: NDArray, dDyl: NDArray,
     Rz: NDArray, Rg: NDArray, sizes: tuple[int, int, int], block: int,
 ) -> tuple[NDArray, NDArray]:  # fmt: skip
-    """`linear_sensitivities`' recursion and projections, `block` samples at a time, the states zs, ws carried."""
+    """`linear_sensitivities`' recursion and projections, `block` samples at a time, the states zs, ws carried.
+
+    The derivatives are held as (P, n, D, ny), where each product lands contiguous, and returned as the view
+    (P, n, ny, D): no pass that transposes them (a caller that copies a family's channels out transposes there)."""
     m, D, ny = sizes
     P, n = Dy.shape[0], u.shape[0]
     Y = np.empty((P, n, ny))
-    dY = np.empty((P, n, ny, D))
+    dYt = np.empty((P, n, D, ny))
     block = max(2, int(block))
     for k0 in range(0, n, block):
         k1 = min(n, k0 + block)
@@ -194,12 +214,14 @@ def _blocks(
         zout = np.empty((b, P, 2 * m))
         wout = np.empty((b, P, D, 2 * m))
         _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout)
-        for p in range(P):
+        for p in range(P):  # the sums written straight into their places (no temporaries of the derivatives' size)
             Z = zout[:, p] @ Rz[p]  # (b, ny (1 + D)): the outputs, then dy (d, o)
-            Y[p, k0:k1] = Z[:, :ny] + u[k0:k1] @ Dy[p].T
-            dy = (wout[:, p].reshape(b * D, 2 * m) @ Rg[p]).reshape(b, D, ny) + Z[:, ny:].reshape(b, D, ny)
-            dY[p, k0:k1] = dy.transpose(0, 2, 1) + (u[k0:k1] @ dDyl[p]).reshape(b, ny, D)
-    return Y, dY
+            np.add(Z[:, :ny], u[k0:k1] @ Dy[p].T, out=Y[p, k0:k1])
+            dy = dYt[p, k0:k1].reshape(b * D, ny)  # a view: dYt[p, k0:k1] is contiguous
+            np.matmul(wout[:, p].reshape(b * D, 2 * m), Rg[p], out=dy)
+            dy += Z[:, ny:].reshape(b * D, ny)
+            dy += (u[k0:k1] @ dDyl[p]).reshape(b * D, ny)
+    return Y, dYt.transpose(0, 1, 3, 2)
 
 
 def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, NDArray]:

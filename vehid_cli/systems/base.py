@@ -209,8 +209,7 @@ class System(ABC):
         reference = self.reference(index)
         problem = self.problem(reference)
         # Diagnostic, not charged to the budget: the truth's cost on this run's data tells a converged run.
-        truth = self.box.truth
-        truth_cost = float(problem.cost(truth[None, :])[0]) if truth is not None else float("nan")
+        truth_cost = self.truth_cost(reference, problem)
         algorithm = ident.algorithm
         optimizer = get_optimizer(algorithm.name, algorithm.population, algorithm.iterations)
         x0 = self.start(streams.optimizer)
@@ -218,8 +217,12 @@ class System(ABC):
         # them the finite penalty and counts them (`penalised`), so NumPy's floating-point warnings are noise.
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
             result = optimizer.minimize(problem, streams.optimizer, budget=ident.budget, x0=x0)
-            # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits.
-            _, residuals = problem.residuals(result.x[None, :])
+            # Diagnostic, not charged: residual power over noise power at the estimate tells whether the model fits
+            # (the residuals the search kept at its estimate, else one more simulation).
+            if result.residuals is not None:
+                residuals = result.residuals[None, :]
+            else:
+                _, residuals = problem.residuals(result.x[None, :])
             chi2 = float(np.mean(residuals**2))
         return RunRecord(
             index=index, estimate=result.x, cost=result.cost, evaluations=result.evaluations,
@@ -227,6 +230,12 @@ class System(ABC):
             history_cost=result.history_cost, truth_cost=truth_cost, chi2=chi2,
             channel_chi2=self._channel_chi2(reference, residuals[0]),
         )  # fmt: skip
+
+    def truth_cost(self, reference: Any, problem: Problem) -> float:
+        """The truth's cost on a run's data (`problem`'s cost at the truth; NaN without a truth): one simulation of
+        the truth. A system that holds the clean data its runs were drawn from gives it without one."""
+        truth = self.box.truth
+        return float(problem.cost(truth[None, :])[0]) if truth is not None else float("nan")
 
     def _channel_chi2(self, reference: Any, residuals: NDArray) -> NDArray:
         """Each channel's mean squared weighted residual (C,), in `channel_names` order (NaN: no entries)."""

@@ -168,6 +168,14 @@ class VehicleSystem(System):
     def problem(self, reference: dict[str, NDArray]) -> Problem:
         return self.task.problem(reference)
 
+    def truth_cost(self, reference: dict[str, NDArray], problem: Problem) -> float:
+        """The truth's cost on a simulated run's data from the clean channels the run's noise was added to (the
+        configured car, which is the truth: the same numbers as simulating it again, without the simulation)."""
+        t = self.task
+        if isinstance(t, Task) and t.clean is not None and t.truth is not None and not t.corrections:
+            return float(t.objective(reference).costs({f: t.clean[f][None] for f in t.families})[0])
+        return super().truth_cost(reference, problem)
+
     def bound(self, at: NDArray | None = None) -> CramerRao:
         return self.task.bound(at)
 
