@@ -72,6 +72,25 @@ def test_explanations_that_disagree_beyond_their_intervals_widen_them_to_cover_b
     assert compare_explanations(["coulomb_friction"], names, x, ci, alt) is None  # one term: nothing to compare
 
 
+def test_the_struts_own_rates_are_reported_but_not_judged():
+    """The non-parametric strut force shares the linear part of the strut's law out with g and h, so kr means
+    something else beside it: a kr apart alone (the four-post rig's progressive spring, a library law) is no
+    imitation; a body parameter apart is; with only strut rates declared they are all there is to judge."""
+    names = ("m", "Ix", "kr", "cf")
+    x, ci = np.array([1300.0, 500.0, 80000.0, 2800.0]), np.array([1.5, 5.0, 300.0, 9.0])
+    strut_only = fake_unexplained(names, [1300.1, 500.2, 70000.0, 2475.0], [1.5, 5.0, 250.0, 9.0])
+    mu = compare_explanations(["progressive_spring", "parameter:kr"], names, x, ci, strut_only)
+    assert mu is not None and mu.separation[2] > 10 and not mu.imitates
+    assert mu.to_json()["judged_on"] == ["m", "Ix"]
+    body = fake_unexplained(names, [1310.0, 500.2, 80000.0, 2800.0], [1.5, 5.0, 250.0, 9.0])
+    mu = compare_explanations(["progressive_spring", "parameter:kr"], names, x, ci, body)
+    assert mu.imitates and mu.worst == "m"
+    rates = ("kr", "cf")
+    only = compare_explanations(["progressive_spring", "parameter:kr"], rates, x[2:], ci[2:],
+                                fake_unexplained(rates, [70000.0, 2475.0], [250.0, 9.0]))  # fmt: skip
+    assert only.imitates and only.worst == "kr"
+
+
 def test_the_widened_interval_holds_a_truth_that_both_explanations_miss():
     """Two explanations biased the same way, each interval missing the truth (the weak square-root damper's m: 1303.6
     ± 1.6 and 1307.5 ± 3.0 for 1300): the union misses it too, the widened interval holds it."""
