@@ -77,23 +77,21 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
     when the problem has no linearisation at x0 (the caller falls back to `polish`).
 
     Each step solves (H + mu diag H) s = -g with H = J'J, g = J'r in box-width units and evaluates the residuals and
-    Jacobian at the (clipped) new point together: accepted when the sum of squares falls (mu shrinks), else mu grows
+    Jacobian at the (clipped) new point together (a long record's H and g summed over its samples by the problem's
+    `normal`, no (R, D) Jacobian made): accepted when the sum of squares falls (mu shrinks), else mu grows
     and the step is retried. It stops when the proposed step's squared length in the metric H, over the residual
     variance, is below STEP_SD²: the step is then STEP_SD standard deviations of the estimate (H / s² is its Fisher
     information), far below what the data can tell."""
     lo, hi = run.problem.lower, run.problem.upper
     width = hi - lo
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
-    got = run.evaluate_linearised(x)
+    got = _normal_point(run, x, width)
     if got is None:
         return None
-    _, r, Js = got
-    Js *= width  # in place, box-width units (the Jacobian is the problem's fresh array; a long record's is tens of MB)
+    r, H, g = got
     ssq = float(r @ r)
     mu = 0.0
     for _ in range(MAX_STEPS):
-        H = Js.T @ Js
-        g = Js.T @ r
         d = np.diag(H)
         try:
             s = np.linalg.solve(H + mu * np.diag(d), -g)
@@ -104,17 +102,33 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
         variance = max(ssq / max(r.size - x.size, 1), 1e-300)
         if float(step @ H @ step) / variance < STEP_SD**2:
             break
-        got = run.evaluate_linearised(x_new)
-        ssq_new = float(got[1] @ got[1]) if got is not None else np.inf
+        got = _normal_point(run, x_new, width)
+        ssq_new = float(got[0] @ got[0]) if got is not None else np.inf
         if ssq_new < ssq:
-            x, (_, r, Js), ssq = x_new, got, ssq_new
-            Js *= width
+            x, (r, H, g), ssq = x_new, got, ssq_new
             mu = mu / 4 if mu > 1e-6 else 0.0
         else:
             mu = max(4 * mu, 1e-3)
             if mu > MU_GIVE_UP:  # no step of any length lowers the cost: x is the minimum to round-off
                 break
     return x
+
+
+def _normal_point(run: Search, x: NDArray, width: NDArray) -> tuple[NDArray, NDArray, NDArray] | None:
+    """The residuals r (R,), H = J'J and g = J'r in box-width units at x, from one evaluation: the problem's normal
+    equations when it has them (a long record: summed over the samples, no (R, D) Jacobian), else its Jacobian."""
+    if run.problem.normal is not None:
+        got = run.evaluate_normal(x)
+        if got is None:
+            return None
+        _, r, H, g = got
+        return r, H * width[:, None] * width[None, :], g * width
+    got = run.evaluate_linearised(x)
+    if got is None:
+        return None
+    _, r, Js = got
+    Js *= width  # in place, box-width units (the Jacobian is the problem's fresh array; a long record's is tens of MB)
+    return r, Js.T @ Js, Js.T @ r
 
 
 @register
@@ -128,7 +142,8 @@ class LeastSquares(Optimizer):
 
     def _step(self, run: Search, state: Any) -> bool | None:
         try:
-            x = gauss_newton(run, state["x"]) if run.problem.linearised is not None else None
+            exact = run.problem.linearised is not None or run.problem.normal is not None
+            x = gauss_newton(run, state["x"]) if exact else None
             state["x"] = polish(run, state["x"]) if x is None else x
         except BudgetExhausted:
             pass
