@@ -21,17 +21,10 @@ from ..core.errors import InputError
 from ..core.streams import run_streams
 from ..models.effects import LIBRARY
 from ..models.faults import Channel, Context, Finding, fault_of
-from ..optimizers.base import Problem
 from ..optimizers import lsq
+from ..optimizers.base import Problem
 from .corrections import SensorCorrection, corrected, is_sensor_unknown, split_sensor
-from .crlb import (
-    CramerRao,
-    bound_from_information,
-    cramer_rao,
-    information,
-    summed_information,
-    weighted_sensitivities,
-)  # fmt: skip
+from .crlb import CramerRao, bound_from_information, cramer_rao, information, summed_information, weighted_sensitivities
 from .experiment import Experiment, build_experiment, measurement_noise
 from .measured import experiment_of, read_run
 from .objectives import Objective, objective_families
