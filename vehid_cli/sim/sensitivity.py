@@ -39,6 +39,8 @@ ASSEMBLY_STEP = 1e-6  # relative step of the central differences of the matrices
 GAP_MIN = 1e-6  # smallest |lam_i - lam_j| relative to max |lam| the perturbation formulas are trusted at
 Sink = Callable[[int, int, NDArray, NDArray], None]  # (candidate, first sample, outputs (b, ny), dy (b, ny, D))
 BLOCK = 4096  # samples of a record per block of linear_sensitivities (its modal states carried across blocks)
+SINK_BLOCK = 1024  # ... at most, when the blocks go to a sink: its temporaries 16 MB at 60 s x 16 channels x 9
+# unknowns, 42 MB at 4096 (tracemalloc), for the same wall to the noise of the measurement (issue 26)
 _SERIES_BELOW = 1e-2  # |lam dt| below which the derivatives of phi1, phi2 come from Taylor series
 
 
@@ -124,8 +126,9 @@ def linear_sensitivities(
     The record runs in blocks of `block` samples, the modal states carried from one to the next: nothing of the
     size of the derivatives is held beside the result (the same numbers as one block, to round-off). With `sink`,
     the derivatives are not kept: each block's are handed to `sink(p, k0, y, dy)` (candidate p, first sample k0, its
-    outputs y (b, ny) and derivatives dy (b, ny, D)) as they are made, and None is returned in their place (a long
-    record's normal equations accumulated without its (n, ny, D) array, `optimizers.normal`)."""
+    outputs y (b, ny) and derivatives dy (b, ny, D); blocks of at most SINK_BLOCK) as they are made, and None is
+    returned in their place (a long record's normal equations summed without its (n, ny, D) array,
+    `optimizers.normal`)."""
     lam, w, V, W, good = _kept_modes(A)  # (P, m), (P, m), (P, ns, m), (P, m, ns), (P,)
     P, m = lam.shape
     nu, D, ny = Bs.shape[-1], dA.shape[1], Cy.shape[1]
@@ -179,6 +182,7 @@ def linear_sensitivities(
     Rz = np.concatenate([Rz.real, -Rz.imag], axis=1)  # (P, 2m, ny (1 + D)): Re(c z) = Re c Re z - Im c Im z
     Rg = np.concatenate([Gk.real, -Gk.imag], axis=-1).transpose(0, 2, 1)  # (P, 2m, ny)
     dDyl = dDy.transpose(0, 3, 2, 1).reshape(P, nu, ny * D)  # (P, nu, ny D): dy (o, d)
+    block = block if sink is None else min(block, SINK_BLOCK)
     Y, dY = _blocks(e.reshape(-1), zs, ws, cz, G, u, Dy, dDyl, Rz, Rg, (m, D, ny), block, sink)
     return Y, dY, ok
 
