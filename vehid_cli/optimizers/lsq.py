@@ -22,7 +22,9 @@ from .base import BudgetExhausted, Optimizer, Search, register
 from .compressed import trf_compressed
 
 JACOBIAN_STEP = 1e-7  # forward-difference step, as a fraction of each parameter's box width
-LONG_JACOBIAN_BYTES = 16 * 2**20  # a Jacobian larger than this is fitted compressed (optimizers/compressed.py)
+LONG_JACOBIAN_BYTES = 4 * 2**20  # a Jacobian larger than this is fitted compressed (optimizers/compressed.py), or
+# from its normal equations summed over the record (`Problem.normal`): above it scipy's copies of the (R, D) Jacobian
+# (6 of them, 70 MB for 60 s x 8 channels x 3 unknowns) outweigh the memory of the rest of a fit (issue 26)
 
 
 def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1e-12) -> NDArray:
