@@ -33,7 +33,8 @@ from ..sim.sensitivity import car_output_matrices, central_slopes, linear_sensit
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
 BlockSink = Callable[[int, dict, dict], None]  # (first sample, family -> (b, k) channels, -> (b, k, D) derivatives)
-CHUNK_BYTES = 64 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs)
+CHUNK_BYTES = 40 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs):
+# 2 cars of a 60 s record at 1 kHz (18 MB each), one per core (3 at 64 MB: the 60 s diagnosis peaked 37 MB higher)
 
 
 @dataclass(frozen=True)
