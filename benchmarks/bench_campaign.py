@@ -25,19 +25,31 @@ BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"
 
 
 def tree_sum_bytes(pid: int, file: str, field: str) -> int:
-    """The kB figure `field` of /proc/PID/`file`, summed over a process and all its descendants, in bytes (Linux)."""
-    total, stack = 0, [pid]
+    """The kB figure `field` of /proc/PID/`file`, summed over a process and all its descendants, in bytes (Linux).
+
+    A child that shares its parent's address space is not counted again: between vfork() and exec() (how
+    subprocess starts every child: the logger file's reader, git for the provenance) the child's /proc figures are
+    its parent's memory, which a sample caught in that window counted twice (a 60 s identify read 526 MiB once, 276
+    otherwise). Such a child has its parent's /proc/PID/statm to the page; a process of its own does not."""
+    total, stack = 0, [(pid, None)]
     while stack:
-        p = stack.pop()
+        p, parent = stack.pop()
         try:
-            with open(f"/proc/{p}/{file}") as fh:
-                total += sum(int(line.split()[1]) * 1024 for line in fh if line.startswith(field))
+            statm = _statm(p)
+            if parent is None or statm != parent:
+                with open(f"/proc/{p}/{file}") as fh:
+                    total += sum(int(line.split()[1]) * 1024 for line in fh if line.startswith(field))
             for task in os.listdir(f"/proc/{p}/task"):
                 with open(f"/proc/{p}/task/{task}/children") as fh:
-                    stack.extend(int(c) for c in fh.read().split())
+                    stack.extend((int(c), statm) for c in fh.read().split())
         except (FileNotFoundError, ProcessLookupError, PermissionError):
             continue
     return total
+
+
+def _statm(pid: int) -> str:
+    with open(f"/proc/{pid}/statm") as fh:
+        return fh.read()
 
 
 def tree_rss_bytes(pid: int) -> int:

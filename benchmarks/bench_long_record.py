@@ -2,8 +2,9 @@
 x 16 channels plus the 4 actuators, MDF4 with 200 Hz potentiometers, g and mm, offsets) identified with `lsq`
 through the CLI, as a user runs it. Targets (issue 26): <= 5 s wall on 2 cores, peak memory of the process tree
 <= 300 MiB, and the estimate within the bound (its z-scores printed). A benchmark, not a test. The tree's memory is
-given as summed RSS (the issue's measure) and as PSS: the logger file is read in a forked child (core/isolated.py),
-whose RSS counts the pages it shares with its parent a second time.
+given as summed RSS (the issue's measure) and as PSS (pages shared between processes counted once): the logger file
+is read in a child process (core/isolated.py: a fresh interpreter; a forked one, before, counted its parent's pages
+a second time).
 
 Each figure is printed beside anchors measured in the same run, interleaved repeat by repeat (a loaded machine
 slows them alike), after one untimed run of each: the same command on a short record (`--anchor`, 3 s), and with

@@ -1,6 +1,6 @@
-"""A parsing library run in a forked child (vehid_cli/core/isolated.py, issue 22): its result comes back, and a
-crash, a hang, a memory blow-up or an exception of the library becomes `Damaged` in the parent, which lives on
-and prints nothing of the child's."""
+"""A parsing library run in a child process (a fresh interpreter: vehid_cli/core/isolated.py, issues 22 and 26): its
+result comes back, and a crash, a hang, a memory blow-up or an exception of the library becomes `Damaged` in the
+parent, which lives on and prints nothing of the child's."""
 
 from __future__ import annotations
 

@@ -334,10 +334,15 @@ def test_an_mdf4_channel_group_declaring_2_34_samples_is_refused_before_it_is_re
     raises(path, str(path), "channel group 0 declares 17179869184 samples", "GiB", "bytes can hold", channels=CHANNELS)
 
 
+def _segfault(src):
+    """A MAT reader that crashes (module level: the reader's child is a fresh interpreter, core/isolated.py)."""
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
 def test_a_mat_reader_that_crashes_is_exit_2_not_a_dead_process(files, monkeypatch):
     from vehid_cli.io.formats import mat
 
-    monkeypatch.setattr(mat, "_load_v5", lambda src: os.kill(os.getpid(), signal.SIGSEGV))
+    monkeypatch.setattr(mat, "_load_v5", _segfault)
     raises((files, "mat"), str(files["mat"]), "cannot read as a MATLAB file", "the reader crashed (SIGSEGV")
 
 

@@ -1,9 +1,9 @@
-"""Run a file-parsing library in a forked child process, so that no file can take vehid down (issue 22).
+"""Run a file-parsing library in a child process of its own, so that no file can take vehid down (issue 22).
 
 Some readers of binary logger files are C code that trusts the bytes it is given: `scipy.io.loadmat` segfaults on
 a damaged MAT v5 header, asammdf aborts the process (`malloc(): invalid size`) on an MDF4 file with ten flipped
 bytes, and a size field inflated to 2**34 samples asks for 128 GiB. `in_child(fn, ...)` runs `fn` (the library's
-part of a reader: open, parse, copy the arrays out) in a forked child and returns its result to the parent:
+part of a reader: open, parse, copy the arrays out; a module-level function) in a child and returns its result:
 
 - the child's address space is limited (`MEMORY_BUDGET`, or a multiple of the file's size when larger): a
   declared size the file cannot hold becomes a MemoryError there, not a machine swapping or an OOM kill;
@@ -13,11 +13,14 @@ part of a reader: open, parse, copy the arrays out) in a forked child and return
   turns into an InputError naming the file ("the file is damaged: the reader crashed (SIGSEGV)");
 - an InputError raised by `fn` itself reaches the parent as it was raised.
 
-Why fork, measured on this machine (issue 22): with the CLI imported (250 MB), fork + pickle of a small run costs
-25 ms against 2 ms reading in process; a spawned interpreter would cost about 1 s of imports and break the 2 s
-budget of `vehid check`. Checking every block of every format before the library reads it (the alternative) would
-mean re-implementing the formats' parsers, and would still leave the library's own bugs. Where `os.fork` does not
-exist (Windows), `fn` runs in this process, its exceptions still turned into `Damaged`.
+The child is a fresh interpreter (`sys.executable`, this process's `sys.path`), not a fork: it imports only the
+reader's module and its library (numpy, asammdf, ...). A fork would carry the whole of this process: with the CLI
+imported, 150-250 MB of interpreter, scipy, numba and pydantic that the child's RSS counts a second time (issue 26:
+the long record's reading peaked at parent + child = 2 x 150 MB + asammdf). The fresh interpreter costs about
+0.2 s of start-up and imports (python, numpy, vehid_cli.io: 0.17 s and 30 MB measured), beside the 0.5 s that a
+forked child also spent importing asammdf, which the parent never imports. Checking every block of every format
+before the library reads it (the alternative to a child) would mean re-implementing the formats' parsers, and would
+still leave the library's own bugs. Off POSIX, `fn` runs in this process, its exceptions still turned into `Damaged`.
 """
 
 from __future__ import annotations
@@ -27,8 +30,9 @@ import os
 import pickle
 import select
 import signal
+import subprocess
+import sys
 import time
-import warnings
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -58,10 +62,11 @@ def describe(exc: BaseException, budget: int | None = None) -> str:
 
 
 def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None = None) -> T:
-    """`fn(*args)` run in a forked child; its result (picklable) back here. `size` is the file's size in bytes
-    (the child's memory budget grows with it), `timeout` [s] the time it may take (default: 30 s plus 1 s per
-    10 MB). Raises Damaged when the child crashes, hangs, or `fn` raises anything but an InputError."""
-    if not hasattr(os, "fork"):
+    """`fn(*args)` run in a child interpreter; its result (picklable) back here. `fn` and `args` are pickled (`fn`
+    by reference: a module-level function), `size` is the file's size in bytes (the child's memory budget grows with
+    it), `timeout` [s] the time it may take, start-up included (default: 30 s plus 1 s per 10 MB). Raises Damaged
+    when the child crashes, hangs, or `fn` raises anything but an InputError."""
+    if os.name != "posix":
         try:
             return fn(*args)
         except InputError:
@@ -69,30 +74,31 @@ def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None =
         except Exception as exc:  # noqa: BLE001 - the boundary of a parsing library: any failure is the file's
             raise Damaged(describe(exc)) from None
     timeout = 30.0 + size / 10e6 if timeout is None else timeout
-    read_end, write_end = os.pipe()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)  # Python 3.12: fork of a process with threads
-        pid = os.fork()
-    if pid == 0:  # the child: never returns
-        os.close(read_end)
-        _child(fn, args, write_end, max(MEMORY_BUDGET, FILE_FACTOR * size))
-    os.close(write_end)
+    budget = max(MEMORY_BUDGET, FILE_FACTOR * size)
+    request = pickle.dumps(list(sys.path)) + pickle.dumps((fn, args, budget), protocol=pickle.HIGHEST_PROTOCOL)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _BOOT], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL
+    )
     try:
-        data = _receive(read_end, timeout)
+        try:
+            proc.stdin.write(request)
+            proc.stdin.close()
+        except BrokenPipeError:  # the child died before reading its request: its status says how
+            pass
+        data = _receive(proc.stdout.fileno(), timeout)
     except BaseException:  # interrupted (Ctrl-C, an alarm): the child goes too
-        _kill(pid)
+        _kill(proc)
         raise
     finally:
-        os.close(read_end)
+        proc.stdout.close()
     if data is None:
-        _kill(pid)
+        _kill(proc)
         raise Damaged(f"the reader did not finish within {timeout:.0f} s")
-    status = _reap(pid)
+    status = proc.wait()
     if not data:
-        if os.WIFSIGNALED(status):
-            sig = os.WTERMSIG(status)
-            raise Damaged(f"the reader crashed ({_signal_name(sig)})")
-        raise Damaged(f"the reader stopped without a result (exit status {os.waitstatus_to_exitcode(status)})")
+        if status < 0:
+            raise Damaged(f"the reader crashed ({_signal_name(-status)})")
+        raise Damaged(f"the reader stopped without a result (exit status {status})")
     kind, payload = pickle.loads(data)
     if kind == "ok":
         return payload
@@ -102,14 +108,23 @@ def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None =
     raise Damaged(payload)
 
 
-def _child(fn, args, write_end: int, budget: int) -> None:
+# The child's first lines: the parent's import path, then this module's `_serve` (its request follows on stdin).
+_BOOT = f"import pickle, sys; sys.path[:] = pickle.load(sys.stdin.buffer); from {__name__} import _serve; _serve()"
+
+
+def _serve() -> None:
+    """In the child: read (fn, args, budget) from stdin, run fn(*args) within the memory budget with stdout and
+    stderr at /dev/null, and write the pickled outcome to the stdout it was started with."""
     try:
-        faulthandler.disable()  # a crash is the parent's to report (pytest and PYTHONFAULTHANDLER enable it)
+        faulthandler.disable()  # a crash is the parent's to report (PYTHONFAULTHANDLER may enable it)
+        out = os.dup(1)
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, 1)
         os.dup2(devnull, 2)
-        _limit_memory(budget)
+        budget = MEMORY_BUDGET
         try:
+            fn, args, budget = pickle.load(sys.stdin.buffer)
+            _limit_memory(budget)
             result = ("ok", fn(*args))
         except InputError as exc:
             result = ("input", (exc.detail, exc.source, exc.key))
@@ -119,7 +134,7 @@ def _child(fn, args, write_end: int, budget: int) -> None:
             data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception as exc:  # noqa: BLE001 - what the library returned cannot be carried back
             data = pickle.dumps(("damaged", f"its content cannot be carried back ({describe(exc)})"))
-        with os.fdopen(write_end, "wb") as fh:
+        with os.fdopen(out, "wb") as fh:
             fh.write(data)
     finally:
         os._exit(0)
@@ -156,22 +171,9 @@ def _receive(fd: int, timeout: float) -> bytes | None:
         chunks.append(chunk)
 
 
-def _kill(pid: int) -> None:
-    try:
-        os.kill(pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
-    _reap(pid)
-
-
-def _reap(pid: int) -> int:
-    while True:
-        try:
-            return os.waitpid(pid, 0)[1]
-        except InterruptedError:
-            continue
-        except ChildProcessError:
-            return 0
+def _kill(proc: subprocess.Popen) -> None:
+    proc.kill()
+    proc.wait()
 
 
 def _signal_name(sig: int) -> str:

@@ -212,7 +212,9 @@ def _jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
     X = np.vstack([x[None, :], x[None, :] + np.diag(step)])
     _, R = problem.residuals(X)
     with np.errstate(over="ignore", invalid="ignore"):  # a step into an unstable model: inf columns, not a warning
-        return ((R[1:] - R[0][None, :]) / step[:, None]).T, R[0]
+        R[1:] -= R[0][None, :]  # in place: a long record's (D + 1, R) residuals are tens of MB per copy
+        R[1:] /= step[:, None]
+    return R[1:].T, R[0]
 
 
 def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArray:

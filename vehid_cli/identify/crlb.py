@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..optimizers.normal import Gram
 from ..sim.sensitivity import central_points
 from .experiment import Experiment
 
@@ -137,6 +138,31 @@ def information(
         W = W.reshape(-1, D)
         F += W.T @ W
     return F
+
+
+def summed_information(
+    experiment: Experiment,
+    names: Sequence[str],
+    values: NDArray,
+    sigma: Mapping[str, NDArray],
+    observed: Mapping[str, NDArray] | None = None,
+    offsets: bool = False,
+) -> NDArray | None:
+    """`information` from the experiment's exact sensitivities summed a block of samples at a time
+    (`exact_sensitivities` with a sink; centred sums with `offsets`, `optimizers.normal.Gram`): a long record's
+    information without its (n, k, D) sensitivities. None where the exact sensitivities do not apply."""
+    values = np.asarray(values, dtype=float)
+    scale = np.abs(values)
+    grams = {f: Gram(np.size(s), values.size, offsets) for f, s in sigma.items()}
+
+    def add(k0: int, out: Mapping[str, NDArray], sens: Mapping[str, NDArray]) -> None:
+        for family, gram in grams.items():
+            V = sens[family] * (scale / np.asarray(sigma[family], dtype=float)[:, None])  # (b, k, D), relative
+            gram.add(V, None if observed is None else observed[family][k0 : k0 + V.shape[0]])
+
+    if experiment.exact_sensitivities(names, values, sink=add) is None:
+        return None
+    return sum(g.total() for g in grams.values())
 
 
 def cramer_rao(

@@ -10,7 +10,7 @@ of runs or the number of worker processes.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property, partial
 from pathlib import Path
@@ -32,7 +32,9 @@ from ..sim.nonlinear import simulate_effects
 from ..sim.sensitivity import car_output_matrices, central_slopes, linear_sensitivities, stencil
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
-CHUNK_BYTES = 64 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs)
+BlockSink = Callable[[int, dict, dict], None]  # (first sample, family -> (b, k) channels, -> (b, k, D) derivatives)
+CHUNK_BYTES = 40 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs):
+# 2 cars of a 60 s record at 1 kHz (18 MB each), one per core (3 at 64 MB: the 60 s diagnosis peaked 37 MB higher)
 
 
 @dataclass(frozen=True)
@@ -144,7 +146,7 @@ class Experiment:
         return max(1, CHUNK_BYTES // per_car)
 
     def exact_sensitivities(
-        self, names: tuple[str, ...] | list[str], values: ArrayLike
+        self, names: tuple[str, ...] | list[str], values: ArrayLike, sink: BlockSink | None = None
     ) -> tuple[dict[str, NDArray], dict[str, NDArray]] | None:
         """The layout's channels of one car (family -> (n, k)) and their derivatives with respect to the vehicle
         parameters `names` at `values` (family -> (n, k, D), per unit of each parameter), through the same modal
@@ -153,7 +155,11 @@ class Experiment:
 
         The dynamics are differentiated exactly; the matrices' derivatives (A, Bs, the body points' rows, the static
         start) come from central differences of their assembly, which is polynomial or rational in the parameters
-        (relative error ~1e-10 at a relative step of 1e-6)."""
+        (relative error ~1e-10 at a relative step of 1e-6).
+
+        With `sink`, the derivatives are not kept (a long record's are tens of MB): each block of samples is handed
+        to `sink(k0, out, sens)` as it is made (first sample k0; family -> (b, k) channels, (b, k, D) derivatives),
+        and the derivatives returned are empty; on None the blocks handed over are not to be used."""
         if not self.exact_applies(names):
             return None
         X, h = stencil(values)  # the car, then +h_j, then -h_j on parameter j
@@ -168,18 +174,21 @@ class Experiment:
         Dy = np.concatenate([r.T @ Dall for r in rows.values()], axis=-2)
 
         slope = partial(central_slopes, h=h)
+        split = None if sink is None else partial(_split_block, rows=rows, sink=sink)
 
         with np.errstate(all="ignore"):
             Y, dY, ok = linear_sensitivities(
                 A[:1], Bs[:1], s0[:1], self.road, self.dt, Cy[:1], Dy[:1], slope(A), slope(Bs), slope(s0),
-                slope(Cy), slope(Dy),
+                slope(Cy), slope(Dy), sink=split,
             )  # fmt: skip
         if not ok[0]:
             return None
         out, sens, first = {}, {}, 0
         for family, r in rows.items():
             k = r.shape[1]
-            out[family], sens[family] = Y[0, :, first : first + k], dY[0, :, first : first + k]
+            out[family] = Y[0, :, first : first + k]
+            if dY is not None:
+                sens[family] = dY[0, :, first : first + k]
             first += k
         return out, sens
 
@@ -241,6 +250,17 @@ class Experiment:
     def noise_floors(self, family: str) -> NDArray:
         """Absolute noise standard deviation per channel of a family (k,), NaN where Eq. 15 applies."""
         return self.noise.floors[family]
+
+
+def _split_block(p: int, k0: int, y: NDArray, dy: NDArray, rows: dict[str, NDArray], sink: BlockSink) -> None:
+    """A block of `linear_sensitivities`' outputs y (b, ny) and derivatives dy (b, ny, D) handed to `sink` family by
+    family (`rows`: family -> (columns, k), in the order of the outputs' columns)."""
+    out, sens, first = {}, {}, 0
+    for family, r in rows.items():
+        k = r.shape[1]
+        out[family], sens[family] = y[:, first : first + k], dy[:, first : first + k]
+        first += k
+    sink(k0, out, sens)
 
 
 def split_values(values: Mapping[str, ArrayLike] | None) -> tuple[dict[str, ArrayLike], dict[str, ArrayLike]]:

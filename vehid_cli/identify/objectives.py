@@ -18,6 +18,8 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
+from ..optimizers.normal import Gram
+
 OBJECTIVE_FAMILIES = {"f1": ("disp",), "f2": ("acc",)}
 SENSOR_FAMILIES = {"acc": ("acc",), "disp": ("disp",), "both": ("acc", "disp")}
 
@@ -194,8 +196,41 @@ class Objective:
             first += size
         return out if out is not None else np.zeros((0, 0))
 
+    def normal_sums(self, dim: int) -> NormalSums:
+        """An accumulator of `residual_jacobian`'s J'J and J'r over `dim` unknowns, a block of samples at a time (the
+        sink of `Experiment.exact_sensitivities`): a long record's normal equations without its (R, D) Jacobian."""
+        return NormalSums(self, dim)
+
     def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""
         residuals = self.residuals(outputs)
         costs = np.mean(residuals**2, axis=-1) if self.name == "wls" else self._eq8(outputs)
         return costs, residuals
+
+
+class NormalSums:
+    """J'J (D, D) and J'r (D,) of an objective's weighted residuals r = (ref - sim) / sigma and their Jacobian
+    J = -(d sim) / sigma (`Objective.residual_jacobian`), summed over the observed samples block by block; with
+    profiled offsets both lose each channel's mean (centred sums, `optimizers.normal.Gram`), as r and J do."""
+
+    def __init__(self, objective: Objective, dim: int):
+        self.objective = objective
+        self.grams = {f: Gram(ref.shape[-1], dim + 1, objective.offsets) for f, ref in objective.reference.items()}
+
+    def __call__(self, k0: int, out: Mapping[str, NDArray], sens: Mapping[str, NDArray]) -> None:
+        """One block of samples from k0: the model's channels `out` (family -> (b, k)) and derivatives `sens`
+        (family -> (b, k, D))."""
+        obj = self.objective
+        for family, gram in self.grams.items():
+            s = sens[family]
+            b = s.shape[0]
+            sigma = np.asarray(obj.sigma[family], dtype=float)
+            V = np.empty(s.shape[:2] + (s.shape[2] + 1,))  # [J row, r] per sample and channel
+            np.divide(s, -sigma[:, None], out=V[..., :-1])
+            np.divide(obj.reference[family][k0 : k0 + b] - out[family], sigma, out=V[..., -1])
+            gram.add(V, None if obj.observed is None else obj.observed[family][k0 : k0 + b])
+
+    def result(self) -> tuple[NDArray, NDArray]:
+        """H = J'J (D, D) and g = J'r (D,) over every block given."""
+        S = sum(g.total() for g in self.grams.values())
+        return S[:-1, :-1], S[:-1, -1]

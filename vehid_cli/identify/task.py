@@ -21,9 +21,10 @@ from ..core.errors import InputError
 from ..core.streams import run_streams
 from ..models.effects import LIBRARY
 from ..models.faults import Channel, Context, Finding, fault_of
+from ..optimizers import lsq
 from ..optimizers.base import Problem
 from .corrections import SensorCorrection, corrected, is_sensor_unknown, split_sensor
-from .crlb import CramerRao, bound_from_information, cramer_rao, information, weighted_sensitivities
+from .crlb import CramerRao, bound_from_information, cramer_rao, information, summed_information, weighted_sensitivities
 from .experiment import Experiment, build_experiment, measurement_noise
 from .measured import experiment_of, read_run
 from .objectives import Objective, objective_families
@@ -203,10 +204,21 @@ class Task:
                 costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()})
                 return float(costs[0]), residuals[0], objective.residual_jacobian(got[1])
 
+        def normal(x: NDArray) -> tuple[float, NDArray, NDArray, NDArray] | None:
+            with np.errstate(all="ignore"):
+                sums = objective.normal_sums(len(names))
+                got = self.experiment.exact_sensitivities(names, x, sink=sums)
+                if got is None:
+                    return None
+                costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()})
+                return float(costs[0]), residuals[0], *sums.result()
+
         exact = not self.corrections and self.experiment.exact_applies(names)
+        long = objective.size * len(names) * 8 > lsq.LONG_JACOBIAN_BYTES  # its Jacobian: summed, never made
         return Problem(
-            self.lower, self.upper, cost, cost_and_residuals, names=names, linearised=linearised if exact else None
-        )
+            self.lower, self.upper, cost, cost_and_residuals, names=names,
+            linearised=linearised if exact and not long else None, normal=normal if exact and long else None,
+        )  # fmt: skip
 
     def outputs(self, values: Mapping[str, NDArray]) -> dict[str, NDArray]:
         """The model's channels (family -> (P, n, k)) for a batch of the unknowns' values, as the measurement chain
@@ -244,6 +256,10 @@ class Task:
         long = 2 * at.size * self.residual_samples * 8 > LONG_INFORMATION_BYTES
         if long and not self.experiment.exact_applies(self.names):  # exact sensitivities hold no perturbed cars
             return information_by_parameter(self.experiment, self.names, at, self.sigma, self.observed, self.offsets)
+        if long:  # ... and are summed block by block, never held
+            F = summed_information(self.experiment, self.names, at, self.sigma, self.observed, self.offsets)
+            if F is not None:
+                return F
         return information(self.experiment, self.names, at, self.sigma, self.observed, self.offsets)
 
     def bound(self, at: NDArray | None = None) -> CramerRao:

@@ -220,12 +220,14 @@ def _grid_slice(raw: Raw, dt: float, grid: NDArray) -> slice | None:
 def onto(raw: Raw, dt: float, grid: NDArray, rate: float, name: str = "", src: str = "") -> NDArray:
     """A channel on the grid: its own samples when they lie on the grid (`_grid_slice`); else an anti-alias
     low-pass first when its rate is above the grid's, then a cubic spline."""
-    from scipy.interpolate import CubicSpline
-
     t, y = raw.t, raw.y
     own = 1.0 / dt
     if own <= rate * (1 + RATE_MATCH) and (keep := _grid_slice(raw, dt, grid)) is not None:
         return y[keep].copy()
+    # scipy.interpolate loads scipy.optimize, sparse, spatial and special (24 MB, 0.2 s): only when a channel is
+    # resampled, not for one whose samples lie on the grid
+    from scipy.interpolate import CubicSpline
+
     if own > rate * (1 + RATE_MATCH):
         from scipy.signal import butter, sosfiltfilt  # 0.9 s to import (it loads scipy.stats): only when filtering
 

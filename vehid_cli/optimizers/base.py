@@ -22,6 +22,8 @@ BatchCost = Callable[[NDArray], NDArray]  # (P, D) -> (P,)
 CostAndResiduals = Callable[[NDArray], tuple[NDArray, NDArray]]  # (P, D) -> costs (P,), residuals (P, R)
 # x (D,) -> cost, residuals (R,) and their exact derivatives d r / dx (R, D) from one simulation; None where unavailable
 Linearised = Callable[[NDArray], "tuple[float, NDArray, NDArray] | None"]
+# x (D,) -> cost, residuals (R,), J'J (D, D) and J'r (D,) of that Jacobian, summed over a long record without it
+NormalEquations = Callable[[NDArray], "tuple[float, NDArray, NDArray, NDArray] | None"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,7 @@ class Problem:
     penalty: float = 1e10
     names: tuple[str, ...] = ()
     linearised: Linearised | None = None  # cost, residuals and their exact Jacobian at one point (None: not known)
+    normal: NormalEquations | None = None  # the same as normal equations (a long record: no (R, D) Jacobian made)
 
     @property
     def dim(self) -> int:
@@ -123,16 +126,32 @@ class Search:
         got = self.problem.linearised(x)
         if got is None:
             return None
-        cost, r, J = got
+        return (np.asarray(got[0]), *got[1:]) if self._track_one(x, got) else None
+
+    def evaluate_normal(self, x: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray] | None:
+        """Cost, residuals (R,), J'J (D, D) and J'r (D,) at x (clipped into the box) from the problem's `normal`
+        equations (a long record's ``evaluate_linearised`` without its Jacobian), counted and tracked alike."""
+        if self.problem.normal is None:
+            return None
+        if self.remaining < 1:
+            raise BudgetExhausted
+        x = np.clip(np.asarray(x, dtype=float), self.problem.lower, self.problem.upper)
+        got = self.problem.normal(x)
+        if got is None:
+            return None
+        return (np.asarray(got[0]), *got[1:]) if self._track_one(x, got) else None
+
+    def _track_one(self, x: NDArray, got: tuple) -> bool:
+        """One evaluation at x giving `got` (the cost, then arrays) counted and tracked; whether all of it is finite."""
         self.evaluations += 1
-        ok = np.isfinite(cost) and np.all(np.isfinite(r)) and np.all(np.isfinite(J))
+        ok = bool(np.isfinite(got[0])) and all(np.all(np.isfinite(a)) for a in got[1:])
         if not ok:
             self.penalised += 1
-        elif cost < self.best_cost:
-            self.best_cost, self.best_x, self.best_residuals = float(cost), x.copy(), r
+        elif got[0] < self.best_cost:  # got[1] is the residual vector of both kinds
+            self.best_cost, self.best_x, self.best_residuals = float(got[0]), x.copy(), got[1]
         self.history_evals.append(self.evaluations)
         self.history_cost.append(self.best_cost)
-        return (np.asarray(cost), r, J) if ok else None
+        return ok
 
     def evaluate_residuals(self, X: NDArray, keep: bool = False) -> NDArray:
         """Residual vectors (P, R) of a population, counted and tracked like ``evaluate``; with `keep` a new best

@@ -22,7 +22,9 @@ from .base import BudgetExhausted, Optimizer, Search, register
 from .compressed import trf_compressed
 
 JACOBIAN_STEP = 1e-7  # forward-difference step, as a fraction of each parameter's box width
-LONG_JACOBIAN_BYTES = 16 * 2**20  # a Jacobian larger than this is fitted compressed (optimizers/compressed.py)
+LONG_JACOBIAN_BYTES = 4 * 2**20  # a Jacobian larger than this is fitted compressed (optimizers/compressed.py), or
+# from its normal equations summed over the record (`Problem.normal`): above it scipy's copies of the (R, D) Jacobian
+# (6 of them, 70 MB for 60 s x 8 channels x 3 unknowns) outweigh the memory of the rest of a fit (issue 26)
 
 
 def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1e-12) -> NDArray:
@@ -78,7 +80,8 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
     when the problem has no linearisation at x0 (the caller falls back to `polish`).
 
     Each step solves (H + mu diag H) s = -g with H = J'J, g = J'r in box-width units and evaluates the residuals and
-    Jacobian at the (clipped) new point together: accepted when the sum of squares falls (mu shrinks), else mu grows
+    Jacobian at the (clipped) new point together (a long record's H and g summed over its samples by the problem's
+    `normal`, no (R, D) Jacobian made): accepted when the sum of squares falls (mu shrinks), else mu grows
     and the step is retried. It stops when the proposed step's squared length in the metric H, over the residual
     variance, is below STEP_SD²: the step is then STEP_SD standard deviations of the estimate (H / s² is its Fisher
     information), far below what the data can tell.
@@ -92,11 +95,10 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
     lo, hi = run.problem.lower, run.problem.upper
     width = hi - lo
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
-    got = run.evaluate_linearised(x)
+    got = _normal_point(run, x, width)
     if got is None:
         return None
-    _, r, J = got
-    H, g = _normal_equations(J, r, width)
+    r, H, g = got
     ssq = float(r @ r)
     mu = 0.0
     q_prev = 0.0  # the last accepted undamped step [standard deviations] (0: none)
@@ -119,11 +121,10 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
                 return x_new
             q_prev, mu = 0.0, 1e-3
             continue
-        got = run.evaluate_linearised(x_new)
-        ssq_new = float(got[1] @ got[1]) if got is not None else np.inf
+        got = _normal_point(run, x_new, width)
+        ssq_new = float(got[0] @ got[0]) if got is not None else np.inf
         if ssq_new < ssq:
-            x, (_, r, J), ssq = x_new, got, ssq_new
-            H, g = _normal_equations(J, r, width)
+            x, (r, H, g), ssq = x_new, got, ssq_new
             q_prev = q if mu == 0.0 else 0.0
             mu = mu / 4 if mu > 1e-6 else 0.0
         else:
@@ -145,6 +146,22 @@ def _normal_equations(J: NDArray, r: NDArray, width: NDArray) -> tuple[NDArray, 
     return (J.T @ other) * np.outer(width, width), (J.T @ r) * width
 
 
+def _normal_point(run: Search, x: NDArray, width: NDArray) -> tuple[NDArray, NDArray, NDArray] | None:
+    """The residuals r (R,), H = J'J and g = J'r in box-width units at x, from one evaluation: the problem's normal
+    equations when it has them (a long record: summed over the samples, no (R, D) Jacobian), else its Jacobian."""
+    if run.problem.normal is not None:
+        got = run.evaluate_normal(x)
+        if got is None:
+            return None
+        _, r, H, g = got
+        return r, H * np.outer(width, width), g * width
+    got = run.evaluate_linearised(x)
+    if got is None:
+        return None
+    _, r, J = got
+    return (r, *_normal_equations(J, r, width))
+
+
 @register
 class LeastSquares(Optimizer):
     """Local trust-region least squares from x0 (or a random point in the box), until converged or out of budget."""
@@ -156,7 +173,8 @@ class LeastSquares(Optimizer):
 
     def _step(self, run: Search, state: Any) -> bool | None:
         try:
-            x = gauss_newton(run, state["x"]) if run.problem.linearised is not None else None
+            exact = run.problem.linearised is not None or run.problem.normal is not None
+            x = gauss_newton(run, state["x"]) if exact else None
             state["x"] = polish(run, state["x"]) if x is None else x
         except BudgetExhausted:
             pass

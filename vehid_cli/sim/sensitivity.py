@@ -24,6 +24,8 @@ central differences.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -35,7 +37,10 @@ from .modal import _kept_modes, _phi12
 ASSEMBLY_STEP = 1e-6  # relative step of the central differences of the matrices' assembly (polynomial or rational
 # in the parameters: relative error ~1e-10)
 GAP_MIN = 1e-6  # smallest |lam_i - lam_j| relative to max |lam| the perturbation formulas are trusted at
+Sink = Callable[[int, int, NDArray, NDArray], None]  # (candidate, first sample, outputs (b, ny), dy (b, ny, D))
 BLOCK = 4096  # samples of a record per block of linear_sensitivities (its modal states carried across blocks)
+SINK_BLOCK = 1024  # ... at most, when the blocks go to a sink: its temporaries 16 MB at 60 s x 16 channels x 9
+# unknowns, 42 MB at 4096 (tracemalloc), for the same wall to the noise of the measurement (issue 26)
 _SERIES_BELOW = 1e-2  # |lam dt| below which the derivatives of phi1, phi2 come from Taylor series
 
 
@@ -124,7 +129,8 @@ def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cove
 def linear_sensitivities(
     A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: NDArray, Dy: NDArray,
     dA: NDArray, dBs: NDArray, ds0: NDArray, dCy: NDArray, dDy: NDArray, block: int = BLOCK,
-) -> tuple[NDArray, NDArray, NDArray]:  # fmt: skip
+    sink: Sink | None = None,
+) -> tuple[NDArray, NDArray | None, NDArray]:  # fmt: skip
     """Outputs y = Cy s + Dy u (P, n, ny) of sd = A s + Bs u (exact first-order hold, like ``modal.linear_foh``)
     and their derivatives (P, n, ny, D; a view of (P, n, D, ny)) with respect to D parameters, and which
     candidates (P,) they hold for.
@@ -135,7 +141,11 @@ def linear_sensitivities(
     not to be used (central differences instead).
 
     The record runs in blocks of `block` samples, the modal states carried from one to the next: nothing of the
-    size of the derivatives is held beside the result (the same numbers as one block, to round-off)."""
+    size of the derivatives is held beside the result (the same numbers as one block, to round-off). With `sink`,
+    the derivatives are not kept: each block's are handed to `sink(p, k0, y, dy)` (candidate p, first sample k0, its
+    outputs y (b, ny) and derivatives dy (b, ny, D); blocks of at most SINK_BLOCK) as they are made, and None is
+    returned in their place (a long record's normal equations summed without its (n, ny, D) array,
+    `optimizers.normal`)."""
     lam, w, V, W, good = _kept_modes(A)  # (P, m), (P, m), (P, ns, m), (P, m, ns), (P,)
     P, m = lam.shape
     nu, D, ny = Bs.shape[-1], dA.shape[1], Cy.shape[1]
@@ -189,22 +199,26 @@ def linear_sensitivities(
     Rz = np.concatenate([Rz.real, -Rz.imag], axis=1)  # (P, 2m, ny (1 + D)): Re(c z) = Re c Re z - Im c Im z
     Rg = np.concatenate([Gk.real, -Gk.imag], axis=-1).transpose(0, 2, 1)  # (P, 2m, ny)
     dDyl = dDy.transpose(0, 3, 1, 2).reshape(P, nu, D * ny)  # (P, nu, D ny): dy (d, o)
-    Y, dY = _blocks(e.reshape(-1), zs, ws, cz, G, u, Dy, dDyl, Rz, Rg, (m, D, ny), block)
+    block = block if sink is None else min(block, SINK_BLOCK)
+    Y, dY = _blocks(e.reshape(-1), zs, ws, cz, G, u, Dy, dDyl, Rz, Rg, (m, D, ny), block, sink)
     return Y, dY, ok
 
 
 def _blocks(
     e: NDArray, zs: NDArray, ws: NDArray, cz: NDArray, G: NDArray, u: NDArray, Dy: NDArray, dDyl: NDArray,
-    Rz: NDArray, Rg: NDArray, sizes: tuple[int, int, int], block: int,
-) -> tuple[NDArray, NDArray]:  # fmt: skip
+    Rz: NDArray, Rg: NDArray, sizes: tuple[int, int, int], block: int, sink: Sink | None = None,
+) -> tuple[NDArray, NDArray | None]:  # fmt: skip
     """`linear_sensitivities`' recursion and projections, `block` samples at a time, the states zs, ws carried.
 
     The derivatives are held as (P, n, D, ny), where each product lands contiguous, and returned as the view
-    (P, n, ny, D): no pass that transposes them (a caller that copies a family's channels out transposes there)."""
+    (P, n, ny, D): no pass that transposes them (a caller that copies a family's channels out transposes there).
+    With `sink`, each block's derivatives go to it as they are made (a (b, ny, D) view of one reused buffer, to be
+    consumed before it returns) and none are kept."""
     m, D, ny = sizes
     P, n = Dy.shape[0], u.shape[0]
     Y = np.empty((P, n, ny))
-    dYt = np.empty((P, n, D, ny))
+    dYt = np.empty((P, n, D, ny)) if sink is None else None
+    scratch = None if sink is None else np.empty((max(2, int(block)), D, ny))
     block = max(2, int(block))
     for k0 in range(0, n, block):
         k1 = min(n, k0 + block)
@@ -217,11 +231,14 @@ def _blocks(
         for p in range(P):  # the sums written straight into their places (no temporaries of the derivatives' size)
             Z = zout[:, p] @ Rz[p]  # (b, ny (1 + D)): the outputs, then dy (d, o)
             np.add(Z[:, :ny], u[k0:k1] @ Dy[p].T, out=Y[p, k0:k1])
-            dy = dYt[p, k0:k1].reshape(b * D, ny)  # a view: dYt[p, k0:k1] is contiguous
+            held = dYt[p, k0:k1] if sink is None else scratch[:b]  # contiguous: the reshape is a view
+            dy = held.reshape(b * D, ny)
             np.matmul(wout[:, p].reshape(b * D, 2 * m), Rg[p], out=dy)
             dy += Z[:, ny:].reshape(b * D, ny)
             dy += (u[k0:k1] @ dDyl[p]).reshape(b * D, ny)
-    return Y, dYt.transpose(0, 1, 3, 2)
+            if sink is not None:
+                sink(p, k0, Y[p, k0:k1], held.transpose(0, 2, 1))
+    return Y, (None if dYt is None else dYt.transpose(0, 1, 3, 2))
 
 
 def car_output_matrices(A: NDArray, Bs: NDArray, G: NDArray) -> tuple[NDArray, NDArray]:
