@@ -107,6 +107,7 @@ class CarLoop:
     ranges: dict  # "limits" and "start" of the candidates' unknowns
     files: tuple[str, ...]
     analyse_residuals: bool = True
+    twin: Task | None = None  # the task on the exact integrator when the declared model is the linear car (exact_twin)
 
     @property
     def joint(self) -> bool:
@@ -134,6 +135,16 @@ class CarLoop:
         """The training problem over `names` and their start values."""
         t = self.augmented(self.task, names)
         return self.problem_of(t, self.ref, self.split.keep), t.nominal
+
+    def linear_for(self, names: tuple[str, ...]) -> Problem | None:
+        """The training problem over `names` on the exact integrator with its exact sensitivities (`exact_twin`), or
+        None where that model is not the linear car (an effect's or a sensor's unknowns among `names`)."""
+        if self.twin is None or not set(names) <= set(self.twin.config.vehicle.values()):
+            return None
+        t = self.augmented(self.twin, names)
+        if t.corrections or not t.experiment.exact_applies(t.names):
+            return None
+        return self.problem_of(t, self.ref, self.split.keep)
 
     def analyses(self, t: Task | JointTask, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
         """The residual analysis of each run (its file and its analysis)."""
@@ -272,15 +283,15 @@ def diagnose(
         say(f"check {f.status}: {f.channel} {f.check}: {f.message}")
     specs = {**candidate_specs(config), **sensor_candidates(found, runs[0].channel_views())}
     limits, starts = candidate_ranges(specs)
-    car = CarLoop(task, ref, split, {"limits": limits, "start": starts}, files, analyse_residuals)
+    twin = exact_twin(task)
+    car = CarLoop(task, ref, split, {"limits": limits, "start": starts}, files, analyse_residuals, twin)
     screen, head = screening(task, ref, split, car, specs, files) if is_long(task) else (None, car)
     # 0. can the data tell at all? (before any fit: length, noise, excitation)
     pre = precheck_vehicle(task, ref)
     # 1. the declared model, by the configured algorithm (a long record: on its window), then polished
     step("declared fit", 0, 1)
     search = None if screen is None else screen.problem_for(task.names)[0]
-    twin = exact_twin(task)
-    linear = None if twin is None else car.problem_of(twin, ref, split.keep)
+    linear = car.linear_for(task.names)
     fit = fit_declared(config, task, car.problem_of(task, ref, split.keep), pre.ok, refit_budget, say, search, linear)
     before = car.report(fit, ())
     step("declared fit", 1, 1)
@@ -305,7 +316,7 @@ def diagnose(
     subject = Subject(
         specs=specs, declared=frozenset(config.vehicle.effect_values()), problem_for=car.problem_for,
         validation_J=car.validation_J, residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
-        scale=lambda f: f.J, noise_limit=chi2_limit(R_train), screen=screen,
+        scale=lambda f: f.J, noise_limit=chi2_limit(R_train), screen=screen, linear_for=car.linear_for,
     )  # fmt: skip
     return close(
         subject, fit, before, car.report, quality, alpha=alpha, max_rounds=max_rounds,
