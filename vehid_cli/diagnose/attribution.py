@@ -395,6 +395,7 @@ class Ranked(Result):
     kind: str = "effect"
     validation_per_file: dict[str, float] | None = None
     fixed: tuple[str, ...] = ()  # shape parameters the data could not tell (held at their start value)
+    screened: bool = False  # not fitted: its score statistic stands for its LR (loop's prescreen, score.py)
 
     def to_json(self) -> dict:
         out = {
@@ -409,6 +410,7 @@ class Ranked(Result):
             "accepted": self.accepted,
             "estimates": dict(zip(self.fit.names, map(float, self.fit.x), strict=True)),
             "shape_fixed": list(self.fixed),
+            "fitted": not self.screened,
         }
         if self.validation_per_file:
             out["validation_J_per_file"] = dict(self.validation_per_file)

@@ -47,7 +47,7 @@ from .attribution import (
 )
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
-from .score import effect_score, fitted_basis
+from .score import cannot_win, fitted_basis, screen_effects, screenable
 from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports
 from .unexplained import Unexplained
@@ -227,22 +227,39 @@ class _Augmentation:
             current_v = subject.validation_J(current.names, current.x)
         stage = f"round {len(self.rounds) + 1} candidates"
         self.progress(stage, 0, len(todo))
-        tests, skipped = len(todo), []
+        tests, skipped, scores = len(todo), [], {}
         chi2 = subject.noise_limit is not None  # J is chi² per sample and the LR chi2_statistic: the score applies
         if chi2 and self.rounds and self.claim and all(c.kind == "parameter" and len(c.unknowns) == 1 for c in todo):
             todo, skipped = self.prescreen(todo, subject, current, current_v, tests)
         elif chi2 and self.claim:
-            todo, skipped = self.screen_effects(todo, subject, current, current_v, tests)
-        ranked = rank_candidates(
-            todo, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
-            subject.validation_J, subject.residual_count,
-            self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
-            claim=self.claim, scale=subject.scale(current),
-            prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
-            on_done=lambda n: self.progress(stage, len(skipped) + n, tests), tests=tests,
-            make_linear=lambda names, cand: self.make_linear(names, cand, subject),
-        ) if todo else []  # fmt: skip
-        ranked = sorted(ranked + skipped, key=lambda r: -r.statistic)
+            todo, skipped, scores = self.screen_effects(todo, subject, current, current_v, tests)
+
+        def critical(k: int) -> float:
+            return float(chi2_isf(self.level(tests), k))
+
+        def fit(cands: list[Candidate], before: int) -> list[Ranked]:
+            return rank_candidates(
+                cands, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
+                subject.validation_J, subject.residual_count,
+                self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
+                claim=self.claim, scale=subject.scale(current),
+                prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
+                on_done=lambda n: self.progress(stage, before + n, tests), tests=tests,
+                make_linear=lambda names, cand: self.make_linear(names, cand, subject),
+            ) if cands else []  # fmt: skip
+
+        first = [c for c in todo if c.kind == "parameter"] if scores else todo  # the known parameters first: cheap
+        ranked = fit(first, len(skipped))
+        rest = [c for c in todo if c not in first]
+        rest, beaten = cannot_win(rest, scores, ranked, current, current_v, critical, subject.residual_count)
+        if beaten:
+            self.note(
+                f"round {len(self.rounds) + 1}: {', '.join(r.effect for r in beaten)} not fitted: twice the score "
+                "statistic (reported as the LR) and the critical LR fall short of the best known parameter's LR, so "
+                "they cannot win the round"
+            )
+        ranked = fit(rest, len(skipped) + len(first) + len(beaten)) + ranked
+        ranked = sorted(ranked + skipped + beaten, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))
         self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
         return ranked
@@ -272,46 +289,25 @@ class _Augmentation:
                 effect=c.effect, added=(c.unknowns[0],), k=k, J=current.J - S / R, statistic=float(S),
                 p_value=chi2_sf(S, k), bic_margin=S - k * math.log(R), validation_J=current_v[0], accepted=False,
                 fit=current, seconds=time.perf_counter() - t0, kind=c.kind, validation_per_file=current_v[1],
+                screened=True,
             ))  # fmt: skip
         return fit, skipped
 
     def screen_effects(
         self, todo: list[Candidate], subject: Subject, current: Fit, current_v: tuple, tests: int
-    ) -> tuple[list[Candidate], list[Ranked]]:  # fmt: skip
-        """The effects whose force is proportional to their strengths: Rao's score statistic of the strengths at
-        zero against the current fit (attribution.effect_score, the largest over the starts of their shape), all
-        from one basis of the current fit's derivatives; those below SCORE_SKIP of the critical LR cannot be
-        accepted and are not fitted (as `prescreen` does for a later round's known parameters): their test reports
-        the score statistic as its LR."""
-        screened = [c for c in todo if c.kind == "effect" and c.linear and c.strength]
-        if not screened:
-            return todo, []
-        t0 = time.perf_counter()
+    ) -> tuple[list[Candidate], list[Ranked], dict[str, float]]:  # fmt: skip
+        """score.screen_effects against the current fit (the basis of its derivatives from the exact sensitivities
+        where the model is the linear car): the effects to fit, those not fitted, every screened effect's score."""
         free = np.array([n not in current.fixed for n in current.names])
         problem = subject.problem_for(current.names)[0]
         linear = subject.linear_for(current.names) if subject.linear_for is not None else None
-        basis = fitted_basis(problem, current.x, free, linear)
+        basis = fitted_basis(problem, current.x, free, linear) if any(screenable(c) for c in todo) else None
         if basis is None:
-            return todo, []
-        fit, skipped = [], []
-        R = subject.residual_count
-        for c in todo:
-            if c not in screened:
-                fit.append(c)
-                continue
-            cand_problem, start = self.make_problem(current.names, c, subject)
-            S = effect_score(cand_problem, np.concatenate([current.x, start]), c, basis)
-            k = c.df if c.df is not None else len(c.strength)
-            if not (np.isfinite(S) and S < SCORE_SKIP * chi2_isf(self.level(tests), k)):
-                fit.append(c)
-                continue
-            skipped.append(Ranked(
-                effect=c.effect, added=tuple(cand_problem.names[len(current.names) :]), k=k, J=current.J - S / R,
-                statistic=float(S), p_value=chi2_sf(S, k), bic_margin=S - k * math.log(R), validation_J=current_v[0],
-                accepted=False, fit=current, seconds=time.perf_counter() - t0, kind=c.kind,
-                validation_per_file=current_v[1],
-            ))  # fmt: skip
-        return fit, skipped
+            return todo, [], {}
+        return screen_effects(
+            todo, current, current_v, basis, lambda c: self.make_problem(current.names, c, subject),
+            lambda k: float(chi2_isf(self.level(tests), k)), subject.residual_count,
+        )  # fmt: skip
 
     def choose(self, ranked: list[Ranked]) -> Ranked | None:
         """The best accepted candidate, a known parameter explaining the residual as well preferred; None when none
