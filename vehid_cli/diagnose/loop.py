@@ -47,7 +47,7 @@ from .attribution import (
 )
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
-from .score import cannot_win, fitted_basis, screen_effects, screenable
+from .score import Scores, cannot_win, fitted_basis, screen_effects, screenable
 from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports
 from .unexplained import Unexplained
@@ -295,9 +295,10 @@ class _Augmentation:
 
     def screen_effects(
         self, todo: list[Candidate], subject: Subject, current: Fit, current_v: tuple, tests: int
-    ) -> tuple[list[Candidate], list[Ranked], dict[str, float]]:  # fmt: skip
+    ) -> tuple[list[Candidate], list[Ranked], Scores]:  # fmt: skip
         """score.screen_effects against the current fit (the basis of its derivatives from the exact sensitivities
-        where the model is the linear car): the effects to fit, those not fitted, every screened effect's score."""
+        where the model is the linear car): the effects to fit, those not fitted, every screened effect's score
+        (and the unknowns it adds)."""
         free = np.array([n not in current.fixed for n in current.names])
         problem = subject.problem_for(current.names)[0]
         linear = subject.linear_for(current.names) if subject.linear_for is not None else None

@@ -16,6 +16,9 @@ from ..optimizers.base import Problem
 from .attribution import SCORE_SKIP, Candidate, Fit, Ranked, _jacobian, restricted
 from .tails import chi2_sf
 
+Scores = dict[str, tuple[float, tuple[str, ...]]]  # effect -> its score statistic and the unknowns it adds
+WIN_FACTOR = 2.0  # an effect is fitted unless WIN_FACTOR x its score + the critical LR is below the best parameter's LR
+
 
 def fitted_basis(problem: Problem, x: NDArray, free: NDArray, linear: Problem | None = None) -> NDArray | None:
     """(R, d) an orthonormal basis of the residuals' derivatives along the fit's `free` unknowns at x (the columns a
@@ -87,9 +90,6 @@ def effect_score(problem: Problem, x0: NDArray, cand: Candidate, basis: NDArray)
     return best if tried else float("nan")
 
 
-WIN_FACTOR = 2.0  # an effect is fitted unless WIN_FACTOR x its score + the critical LR is below the best parameter's LR
-
-
 def screenable(cand: Candidate) -> bool:
     """An effect whose force is proportional to its strengths: its score statistic at zero strength applies."""
     return cand.kind == "effect" and cand.linear and bool(cand.strength)
@@ -110,7 +110,7 @@ def score_ranked(cand: Candidate, S: float, added: tuple[str, ...], current: Fit
 def screen_effects(
     todo: list[Candidate], current: Fit, current_v: tuple, basis: NDArray,
     make_problem: Callable[[Candidate], tuple[Problem, NDArray]], critical: Callable[[int], float], R: int,
-) -> tuple[list[Candidate], list[Ranked], dict[str, float]]:  # fmt: skip
+) -> tuple[list[Candidate], list[Ranked], Scores]:  # fmt: skip
     """The effects whose force is proportional to their strengths: Rao's score statistic of the strengths at zero
     against the current fit (effect_score, the largest over the starts of their shape; `basis` the current fit's
     derivatives, `make_problem(candidate)` the augmented problem and the start of its unknowns); those below
@@ -137,7 +137,7 @@ def screen_effects(
 
 
 def cannot_win(
-    rest: list[Candidate], scores: dict, fitted: list[Ranked], current: Fit, current_v: tuple,
+    rest: list[Candidate], scores: Scores, fitted: list[Ranked], current: Fit, current_v: tuple,
     critical: Callable[[int], float], R: int,
 ) -> tuple[list[Candidate], list[Ranked]]:  # fmt: skip
     """The screened effects of `rest` that cannot win the round: WIN_FACTOR x their score (an effect's LR has been
