@@ -12,9 +12,18 @@ import numpy as np
 import pytest
 
 from vehid_cli.config import load_config
-from vehid_cli.diagnose.attribution import Z95, candidate_specs, fit_free, fit_intervals, linear_fit, lsq_fit
+from vehid_cli.diagnose.attribution import (
+    Z95,
+    Ranked,
+    candidate_fit,
+    candidate_specs,
+    fit_free,
+    fit_intervals,
+    linear_fit,
+    lsq_fit,
+)
 from vehid_cli.diagnose.holdout import masked
-from vehid_cli.diagnose.score import effect_score, fitted_basis
+from vehid_cli.diagnose.score import cannot_win, effect_score, fitted_basis, screenable
 from vehid_cli.identify.task import build_task
 from vehid_cli.sim.sensitivity import central_points
 from vehid_cli.systems.vehicle.diagnosis import exact_twin, holdout_mask, prepare_config
@@ -108,3 +117,33 @@ def test_effect_score_is_the_fitted_likelihood_ratio_to_first_order(effect, trut
     else:  # and the one-sided score is what spares the fit: the two-sided one is far above the critical LR
         cproblem_two_sided = dataclasses.replace(cproblem, lower=cproblem.lower - (cproblem.upper - cproblem.lower))
         assert effect_score(cproblem_two_sided, x0, cand, basis) > 100.0
+
+
+@pytest.mark.slow
+def test_effects_that_cannot_win_would_have_lost_to_the_parameter():
+    """A front spring 20 % off: the effects score.cannot_win spares are fitted anyway, and each fitted LR is below the
+    spring's (the premise of not fitting them: the round's best is the parameter whatever their fits give)."""
+    task, ref, keep = case("vehicle.kf=54000")
+    problem = masked(task.problem(ref), keep)
+    declared = lsq_fit(problem, task.nominal, 600)
+    R, D = int(keep.sum()), task.dim
+    with_kf = task.with_unknowns(["kf"])
+    kf = linear_fit(masked(with_kf.problem(ref), keep), masked(exact_twin(with_kf).problem(ref), keep),
+                    np.concatenate([declared.x, with_kf.nominal[D:]]), 100)  # fmt: skip
+    best = (declared.J - kf.J) * R
+    specs = candidate_specs(prepare_config(load_config(BASE, NOISE)))
+    basis = fitted_basis(problem, declared.x, np.ones(D, dtype=bool))
+    scores, problems = {}, {}
+    for cand in (c for c in specs.values() if screenable(c)):
+        aug = task.with_unknowns(list(cand.unknowns + cand.shape), limits={**cand.limits, **cand.shape_limits},
+                                 start=cand.start)  # fmt: skip
+        problems[cand.effect] = masked(aug.problem(ref), keep), aug.nominal[D:]
+        S = effect_score(problems[cand.effect][0], np.concatenate([declared.x, aug.nominal[D:]]), cand, basis)
+        scores[cand.effect] = (S, tuple(problems[cand.effect][0].names[D:]))
+    ranked = Ranked("parameter:kf", ("kf",), 1, kf.J, best, 0.0, 0.0, 1.0, True, kf, 0.0, kind="parameter")
+    _, beaten = cannot_win(list(specs.values()), scores, [ranked], declared, (1.0, None), lambda k: 20.0, R)
+    assert len(beaten) >= 2  # the case tests something
+    for r in beaten:
+        cproblem, x_added = problems[r.effect]
+        fitted = candidate_fit(cproblem, declared, x_added, specs[r.effect], 150, declared.J)
+        assert (declared.J - fitted.J) * R < best, (r.effect, r.statistic, (declared.J - fitted.J) * R, best)
