@@ -5,7 +5,9 @@ Targets (issue 26): a 3 s car case in <= 2 s wall on 2 cores; a 60 s ISO-road re
 the same run (`vehid --help`, the start-up every command pays), so a loaded machine can be read as a ratio.
 Each case is simulated once by `vehid simulate` (the project's own simulator) and then diagnosed through the CLI
 in a fresh process (imports and the cached kernels included), `--repeats` times; the median wall and the peak RSS
-are reported. Run: python benchmarks/bench_diagnose.py [--repeats 3] [--long]
+are reported. `--against DIR` also times each case on the source tree DIR (e.g. an archive of an earlier commit),
+its runs interleaved with this tree's, and prints the ratio of the medians (this tree over DIR).
+Run: python benchmarks/bench_diagnose.py [--repeats 3] [--long] [--against DIR]
 """
 
 from __future__ import annotations
@@ -46,15 +48,17 @@ def vehid(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "vehid_cli", *args], cwd=ROOT, capture_output=True, text=True)
 
 
-def timed(*args: str) -> tuple[float, float, int]:
-    """`vehid args` in a fresh process: its wall time [s], its peak RSS [MiB] and its exit code. The peak is the
-    larger of the process's own high-water mark (VmHWM, read every 20 ms until it exits: it only grows) and the summed
-    RSS of its process tree sampled as often (a logger file's reader runs in a child process). Not os.wait4's
-    ru_maxrss: Linux folds into it the memory of the process that started the child, up to its exec (this benchmark's
-    own, 320 MiB once `time_unexplained` has run in it, which every case then reported as its floor)."""
+def timed(*args: str, root: Path = ROOT) -> tuple[float, float, int]:
+    """`vehid args` in a fresh process (the package of the source tree `root`): its wall time [s], its peak RSS [MiB]
+    and its exit code. The peak is the larger of the process's own high-water mark (VmHWM, read every 20 ms until it
+    exits: it only grows) and the summed RSS of its process tree sampled as often (a logger file's reader runs in a
+    child process). Not os.wait4's ru_maxrss: Linux folds into it the memory of the process that started the child,
+    up to its exec (this benchmark's own, 320 MiB once `time_unexplained` has run in it, which every case then
+    reported as its floor)."""
     start = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "vehid_cli", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    proc = subprocess.Popen([sys.executable, "-m", "vehid_cli", *args], cwd=root, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=env)  # fmt: skip
     peak = 0
     while proc.poll() is None:
         try:
@@ -104,6 +108,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--long", action="store_true", help="also the 60 s record")
+    parser.add_argument("--against", type=Path, help="another source tree, timed interleaved with this one")
     args = parser.parse_args()
     print(f"# {platform.node()} {platform.machine()}, {os.cpu_count()} cpus, python {platform.python_version()}, "
           f"load average {os.getloadavg()[0]:.1f}")  # fmt: skip
@@ -116,11 +121,13 @@ def main() -> None:
             res = vehid("simulate", str(truth), "-o", str(data), "--set", "noise.level=0.05", *sets(sim_sets))
             if res.returncode:
                 raise SystemExit(res.stderr)
-            walls, peaks, anchors = [], [], []
+            walls, peaks, anchors, others = [], [], [], []
+            command = ("diagnose", str(BASE), "--data", str(data), "--json", str(out), *sets(diag_sets))
             for _ in range(args.repeats):  # the anchor timed beside each run: the machine's load moves both
                 anchors.append(anchor(1))
-                wall, peak, code = timed("diagnose", str(BASE), "--data", str(data), "--json", str(out),
-                                         *sets(diag_sets))  # fmt: skip
+                if args.against is not None:
+                    others.append(timed(*command, root=args.against.resolve())[0])
+                wall, peak, code = timed(*command)
                 if code:
                     raise SystemExit(vehid("diagnose", str(BASE), "--data", str(data), *sets(diag_sets)).stderr)
                 walls.append(wall)
@@ -131,6 +138,10 @@ def main() -> None:
             print(f"{name}: median {wall:.1f} s wall ({runs}), peak RSS {max(peaks):.0f} MiB; anchor vehid --help "
                   f"{help_s:.2f} s (ratio {wall / help_s:.0f}); selected {doc['selected']}; "
                   f"verdict: {doc['verdict'][:60]}")  # fmt: skip
+            if others:
+                runs = ", ".join(f"{w:.1f}" for w in others)
+                print(f"    {args.against}: median {statistics.median(others):.1f} s wall ({runs}); this tree / that "
+                      f"{wall / statistics.median(others):.2f}")  # fmt: skip
 
 
 if __name__ == "__main__":

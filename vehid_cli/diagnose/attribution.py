@@ -47,7 +47,7 @@ from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm
 from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
-from ..optimizers.lsq import polish
+from ..optimizers.lsq import gauss_newton, polish
 from ..sim.kernel import available_cores
 from .tails import chi2_isf, chi2_sf
 
@@ -173,6 +173,31 @@ def lsq_fit(problem: Problem, x0: NDArray, budget: int, seed: int = 0, tol: floa
         pass
     x = run.best_x if run.best_x is not None else np.asarray(x0, dtype=float)
     return Fit(tuple(problem.names), x, float(run.best_cost), run.evaluations)
+
+
+def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> Fit | None:
+    """The fit of a linear-car model by Levenberg–Marquardt on `linear`, the same problem on the exact integrator with
+    its exact sensitivities (a few evaluations where finite differences take (D + 1) per step), from x0; its J is
+    `problem`'s at that point (one more evaluation), so that it compares with the other fits on `problem`'s
+    integrator: above `problem`'s own minimum by the square of the integrators' difference (for the car at 1 kHz
+    and rk4 about 1e-5 of the LR). None when the linearisation does not hold there, J is not finite or an unknown
+    ends on its search bound (Levenberg–Marquardt clips its steps into the box, which stalls the others' convergence
+    there): the caller fits on `problem` instead, by the trust region that handles the bounds."""
+    run = Search(linear, np.random.default_rng(0), budget)
+    try:
+        x = gauss_newton(run, np.clip(np.asarray(x0, dtype=float), linear.lower, linear.upper))
+    except BudgetExhausted:
+        x = run.best_x
+    if x is None or run.best_x is None:
+        return None
+    x, lo, hi = run.best_x, linear.lower, linear.upper
+    if np.any(np.minimum(x - lo, hi - x) <= 1e-9 * (hi - lo)):
+        return None
+    with np.errstate(all="ignore"):
+        J = float(problem.cost(run.best_x[None, :])[0])
+    if not np.isfinite(J):
+        return None
+    return Fit(tuple(problem.names), run.best_x, J, run.evaluations + 1)
 
 
 def restricted(problem: Problem, x: NDArray, free: NDArray) -> Problem:
@@ -342,6 +367,18 @@ def candidate_fit(
     return fit_free(problem, x0, free, budget, tol=SCREEN_TOL)
 
 
+def parameter_fit(
+    problem: Problem, base: Fit, x_added: NDArray, cand: Candidate, budget: int,
+    make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None,
+) -> Fit | None:  # fmt: skip
+    """A known parameter's candidate fit by `linear_fit` where the augmented model is the linear car (`make_linear`
+    gives its exact-integrator problem), from the current fit and the configured value; None elsewhere."""
+    if cand.kind != "parameter" or make_linear is None or base.fixed:
+        return None
+    linear = make_linear(base.names, cand)
+    return None if linear is None else linear_fit(problem, linear, np.concatenate([base.x, x_added]), budget)
+
+
 @dataclass(frozen=True)
 class Ranked(Result):
     """One candidate's test."""
@@ -360,6 +397,7 @@ class Ranked(Result):
     kind: str = "effect"
     validation_per_file: dict[str, float] | None = None
     fixed: tuple[str, ...] = ()  # shape parameters the data could not tell (held at their start value)
+    screened: bool = False  # not fitted: its score statistic stands for its LR (loop's prescreen, score.py)
 
     def to_json(self) -> dict:
         out = {
@@ -374,6 +412,7 @@ class Ranked(Result):
             "accepted": self.accepted,
             "estimates": dict(zip(self.fit.names, map(float, self.fit.x), strict=True)),
             "shape_fixed": list(self.fixed),
+            "fitted": not self.screened,
         }
         if self.validation_per_file:
             out["validation_J_per_file"] = dict(self.validation_per_file)
@@ -411,6 +450,7 @@ def rank_candidates(
     prior: dict[str, Ranked] | None = None,
     on_done: Callable[[int], None] | None = None,
     tests: int | None = None,
+    make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -421,7 +461,9 @@ def rank_candidates(
     `scale` is the variance of one residual entry (for the shape parameters' intervals); with claim=False
     nothing is accepted (the data cannot tell); `prior`: each candidate's test of an earlier round, whose
     estimates of its own unknowns are one more start (warm start); `on_done(n)`: n candidates tested so far (called
-    from this thread); `tests`: how many candidates the round tests in all (the Bonferroni count; default these).
+    from this thread); `tests`: how many candidates the round tests in all (the Bonferroni count; default these);
+    `make_linear(names, candidate)`: the augmented problem on the exact integrator with its exact sensitivities, or
+    None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`.
     Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(tests or len(candidates), 1)
@@ -436,7 +478,8 @@ def rank_candidates(
         own = None
         if earlier is not None and earlier.statistic > 0:
             own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
-        fit = candidate_fit(problem, base, x_added, cand, budget, scale, own)
+        fit = parameter_fit(problem, base, x_added, cand, budget, make_linear)
+        fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
         k = cand.df if cand.df is not None else len(added) - len(fit.fixed)

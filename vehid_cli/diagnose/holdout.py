@@ -24,7 +24,8 @@ def holdout_blocks(n: int) -> NDArray:
 
 def masked(problem: Problem, keep: NDArray | None) -> Problem:
     """The problem on the kept residuals only (cost: their chi² per sample); diverging candidates (NaN, inf)
-    are the optimizer's to penalise, without floating-point warnings."""
+    are the optimizer's to penalise, without floating-point warnings. The problem's exact linearisation (the linear
+    car's sensitivities), when it has one, is masked the same way (its rows of the kept entries)."""
 
     def cr(X):
         with np.errstate(all="ignore"):
@@ -32,4 +33,15 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
             r = r if keep is None else r[:, keep]
             return np.mean(r**2, axis=1), r
 
-    return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names)
+    def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
+        got = problem.linearised(x)
+        if got is None:
+            return None
+        _, r, jac = got
+        if keep is not None:
+            r, jac = r[keep], jac[keep]
+        with np.errstate(all="ignore"):
+            return float(np.mean(r**2)), r, jac
+
+    lin = None if problem.linearised is None else linearised
+    return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names, lin)

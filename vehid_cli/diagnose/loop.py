@@ -38,6 +38,7 @@ from .attribution import (
     fit_free,
     fit_intervals,
     identifiable,
+    linear_fit,
     lowers_validation,
     parsimonious,
     rank_candidates,
@@ -46,6 +47,7 @@ from .attribution import (
 )
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
+from .score import Scores, cannot_win, fitted_basis, screen_effects, screenable
 from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports
 from .unexplained import Unexplained
@@ -74,6 +76,9 @@ class Subject:
     min_gain: float = 0.0
     noise_limit: float | None = None  # training J at or below which the residual is noise (None: J is not chi²)
     screen: Subject | None = None  # a long record's screening window (window.py): the candidates are ranked on it
+    # the training problem over `names` on the exact integrator with its exact sensitivities, None where the model
+    # is not the linear car (known parameters' fits by Levenberg–Marquardt on it: attribution.linear_fit)
+    linear_for: Callable[[tuple[str, ...]], Problem | None] | None = None
 
     def J_at(self, fit: Fit) -> Fit:
         """`fit`'s point with its training J on this subject's data (the screening window's J of a whole-record
@@ -158,6 +163,13 @@ class _Augmentation:
         problem, start = (on or self.subject).problem_for(names + new)
         return problem, start[len(names) :]
 
+    def make_linear(self, names: tuple[str, ...], cand: Candidate, on: Subject | None = None) -> Problem | None:
+        """make_problem's problem on the exact integrator with its exact sensitivities (None: not the linear car)."""
+        subject = on or self.subject
+        if subject.linear_for is None:
+            return None
+        return subject.linear_for(names + tuple(n for n in cand.unknowns + cand.shape if n not in names))
+
     def removal_p(self, f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
         """p-value of keeping `cand` in the fit f: a short fit without its own unknowns, the LR test."""
         own = own_unknowns(cand, f.names)
@@ -170,7 +182,10 @@ class _Augmentation:
         same = now.names == reduced and set(now.fixed) == {n for n in f.fixed if n in reduced}
         if self.subject.screen is not None and now is not f and same:
             start = now.x  # a long record: the fit without the candidate is the current one, converged already
-        without = fit_free(problem_r, start, free, budget)
+        linear = self.subject.linear_for(reduced) if self.subject.linear_for is not None and free.all() else None
+        without = None if linear is None else linear_fit(problem_r, linear, start, budget)
+        if without is None:
+            without = fit_free(problem_r, start, free, budget)
         k = cand.df if cand.df is not None else len([n for n in own if n not in f.fixed])
         return float(chi2_sf(self.subject.statistic(f)(without.J, f.J), max(k, 1))), without
 
@@ -212,19 +227,39 @@ class _Augmentation:
             current_v = subject.validation_J(current.names, current.x)
         stage = f"round {len(self.rounds) + 1} candidates"
         self.progress(stage, 0, len(todo))
-        tests, skipped = len(todo), []
+        tests, skipped, scores = len(todo), [], {}
         chi2 = subject.noise_limit is not None  # J is chi² per sample and the LR chi2_statistic: the score applies
         if chi2 and self.rounds and self.claim and all(c.kind == "parameter" and len(c.unknowns) == 1 for c in todo):
             todo, skipped = self.prescreen(todo, subject, current, current_v, tests)
-        ranked = rank_candidates(
-            todo, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
-            subject.validation_J, subject.residual_count,
-            self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
-            claim=self.claim, scale=subject.scale(current),
-            prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
-            on_done=lambda n: self.progress(stage, len(skipped) + n, tests), tests=tests,
-        ) if todo else []  # fmt: skip
-        ranked = sorted(ranked + skipped, key=lambda r: -r.statistic)
+        elif chi2 and self.claim:
+            todo, skipped, scores = self.screen_effects(todo, subject, current, current_v, tests)
+
+        def critical(k: int) -> float:
+            return float(chi2_isf(self.level(tests), k))
+
+        def fit(cands: list[Candidate], before: int) -> list[Ranked]:
+            return rank_candidates(
+                cands, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
+                subject.validation_J, subject.residual_count,
+                self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
+                claim=self.claim, scale=subject.scale(current),
+                prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
+                on_done=lambda n: self.progress(stage, before + n, tests), tests=tests,
+                make_linear=lambda names, cand: self.make_linear(names, cand, subject),
+            ) if cands else []  # fmt: skip
+
+        first = [c for c in todo if c.kind == "parameter"] if scores else todo  # the known parameters first: cheap
+        ranked = fit(first, len(skipped))
+        rest = [c for c in todo if c not in first]
+        rest, beaten = cannot_win(rest, scores, ranked, current, current_v, critical, subject.residual_count)
+        if beaten:
+            self.note(
+                f"round {len(self.rounds) + 1}: {', '.join(r.effect for r in beaten)} not fitted: twice the score "
+                "statistic (reported as the LR) and the critical LR fall short of the best known parameter's LR, so "
+                "they cannot win the round"
+            )
+        ranked = fit(rest, len(skipped) + len(first) + len(beaten)) + ranked
+        ranked = sorted(ranked + skipped + beaten, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))
         self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
         return ranked
@@ -254,8 +289,26 @@ class _Augmentation:
                 effect=c.effect, added=(c.unknowns[0],), k=k, J=current.J - S / R, statistic=float(S),
                 p_value=chi2_sf(S, k), bic_margin=S - k * math.log(R), validation_J=current_v[0], accepted=False,
                 fit=current, seconds=time.perf_counter() - t0, kind=c.kind, validation_per_file=current_v[1],
+                screened=True,
             ))  # fmt: skip
         return fit, skipped
+
+    def screen_effects(
+        self, todo: list[Candidate], subject: Subject, current: Fit, current_v: tuple, tests: int
+    ) -> tuple[list[Candidate], list[Ranked], Scores]:  # fmt: skip
+        """score.screen_effects against the current fit (the basis of its derivatives from the exact sensitivities
+        where the model is the linear car): the effects to fit, those not fitted, every screened effect's score
+        (and the unknowns it adds)."""
+        free = np.array([n not in current.fixed for n in current.names])
+        problem = subject.problem_for(current.names)[0]
+        linear = subject.linear_for(current.names) if subject.linear_for is not None else None
+        basis = fitted_basis(problem, current.x, free, linear) if any(screenable(c) for c in todo) else None
+        if basis is None:
+            return todo, [], {}
+        return screen_effects(
+            todo, current, current_v, basis, lambda c: self.make_problem(current.names, c, subject),
+            lambda k: float(chi2_isf(self.level(tests), k)), subject.residual_count,
+        )  # fmt: skip
 
     def choose(self, ranked: list[Ranked]) -> Ranked | None:
         """The best accepted candidate, a known parameter explaining the residual as well preferred; None when none
