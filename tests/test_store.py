@@ -117,15 +117,25 @@ def test_a_fifo_in_place_of_a_campaign_file_is_refused_at_once(tmp_path):
     assert time.perf_counter() - t0 < 5
 
 
+def _hang(path, budget):
+    """A reader that never finishes (module level: the reader's child is a fresh interpreter, core/isolated.py)."""
+    time.sleep(60)
+
+
+def _segfault(path, budget):
+    """A reader that crashes."""
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
 def test_a_reader_that_hangs_or_crashes_is_an_input_error_naming_the_file(campaign_file, monkeypatch):
     """What HDF5 does on some crafted metadata (a flipped byte in the root's attribute storage loops forever, others
     segfault): the child is killed after the timeout, or seen dying by its signal; vehid goes on."""
-    monkeypatch.setattr(snapshot, "_read", lambda path, budget: time.sleep(60))
+    monkeypatch.setattr(snapshot, "_read", _hang)
     t0 = time.perf_counter()
     with pytest.raises(InputError, match="did not finish within 1 s") as caught:
         snapshot.read_tree(campaign_file, "campaign file", timeout=1.0)
     assert str(campaign_file) in str(caught.value) and time.perf_counter() - t0 < 10
-    monkeypatch.setattr(snapshot, "_read", lambda path, budget: os.kill(os.getpid(), signal.SIGSEGV))
+    monkeypatch.setattr(snapshot, "_read", _segfault)
     with pytest.raises(InputError, match="crashed .SIGSEGV."):
         snapshot.read_tree(campaign_file, "campaign file")
     monkeypatch.undo()

@@ -233,6 +233,8 @@ class _Augmentation:
             todo, skipped = self.prescreen(todo, subject, current, current_v, tests)
         elif chi2 and self.claim:
             todo, skipped, scores = self.screen_effects(todo, subject, current, current_v, tests)
+        if skipped:  # the tests the score settled are done
+            self.progress(stage, len(skipped), tests)
 
         def critical(k: int) -> float:
             return float(chi2_isf(self.level(tests), k))
@@ -258,6 +260,7 @@ class _Augmentation:
                 "statistic (reported as the LR) and the critical LR fall short of the best known parameter's LR, so "
                 "they cannot win the round"
             )
+            self.progress(stage, len(skipped) + len(ranked) + len(beaten), tests)
         ranked = fit(rest, len(skipped) + len(first) + len(beaten)) + ranked
         ranked = sorted(ranked + skipped + beaten, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))
