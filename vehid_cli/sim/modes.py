@@ -10,6 +10,23 @@ import numpy as np
 
 
 @numba.njit(cache=True)
+def _upper_first(lam_p, order):  # pragma: no cover - compiled
+    """The modes' order: those with Im(lam) >= 0 first, then the rest, each in LAPACK's order (a stable argsort of
+    Im(lam) < 0), written into `order`; returns how many come first."""
+    count = 0
+    for i in range(lam_p.size):
+        if lam_p[i].imag >= 0:
+            order[count] = i
+            count += 1
+    kept = count
+    for i in range(lam_p.size):
+        if lam_p[i].imag < 0:
+            order[count] = i
+            count += 1
+    return kept
+
+
+@numba.njit(cache=True)
 def _pick_modes(lam, V, W, lam_k, w_k, V_k, W_k, cond):  # pragma: no cover - compiled
     """Fill lam_k, w_k, V_k, W_k (see ``_kept_modes``) car by car: the modes with Im(lam) >= 0 in LAPACK's order,
     then padding (weight 0: the dropped modes in LAPACK's order, as a stable argsort of ~keep puts them);
@@ -18,16 +35,7 @@ def _pick_modes(lam, V, W, lam_k, w_k, V_k, W_k, cond):  # pragma: no cover - co
     m = lam_k.shape[1]
     order = np.empty(ns, dtype=np.int64)
     for p in range(P):
-        count = 0
-        for i in range(ns):
-            if lam[p, i].imag >= 0:
-                order[count] = i
-                count += 1
-        kept = count
-        for i in range(ns):
-            if lam[p, i].imag < 0:
-                order[count] = i
-                count += 1
+        kept = _upper_first(lam[p], order)
         for j in range(m):
             i = order[j]
             lam_k[p, j] = lam[p, i]
@@ -112,16 +120,7 @@ def _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond):  # pragma: no 
     Mu, Cu, Ku = np.empty(d, dtype=np.complex128), np.empty(d, dtype=np.complex128), np.empty(d, dtype=np.complex128)
     colsum = np.empty(ns)
     for p in range(P):
-        count = 0
-        for i in range(ns):
-            if lam[p, i].imag >= 0:
-                order[count] = i
-                count += 1
-        kept = count
-        for i in range(ns):
-            if lam[p, i].imag < 0:
-                order[count] = i
-                count += 1
+        kept = _upper_first(lam[p], order)
         symmetric = True  # to round-off: the car's K and C come out of a matrix product a few ulps asymmetric
         scales = np.zeros(3)  # max |M|, |C|, |K|
         for i, X in enumerate((M[p], C[p], K[p])):
