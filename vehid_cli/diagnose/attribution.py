@@ -229,7 +229,7 @@ def fit_free(problem: Problem, x0: NDArray, free: NDArray, budget: int, tol: flo
     return Fit(tuple(problem.names), x, sub.J, sub.evaluations, fixed)
 
 
-def _jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
+def forward_jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
     """The Jacobian (R, D) of the problem's residuals at x (forward differences, one batch) and the residual (R,)."""
     width = problem.upper - problem.lower
     h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
@@ -251,7 +251,7 @@ def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArra
     free = np.array([n not in fit.fixed for n in fit.names])
     out = np.full(len(fit.names), np.nan)
     sub = restricted(problem, fit.x, free)
-    Jac, r = _jacobian(sub, fit.x[free])
+    Jac, r = forward_jacobian(sub, fit.x[free])
     if not (np.all(np.isfinite(Jac)) and np.all(np.isfinite(r))):
         return out
     try:
@@ -270,7 +270,7 @@ def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArra
 def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
     """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
     differences, one batch) and `scale` the variance of one residual entry (NaN where singular)."""
-    Jac, _ = _jacobian(problem, x)
+    Jac, _ = forward_jacobian(problem, x)
     if not np.all(np.isfinite(Jac)):
         return np.full(x.size, np.nan)
     try:
@@ -523,7 +523,7 @@ def score_statistics(problem: Problem, x: NDArray, free: NDArray, added: Sequenc
     use = np.zeros(len(x), dtype=bool)
     use[cols] = True
     use[list(added)] = True
-    Jac, r = _jacobian(restricted(problem, x, use), np.asarray(x, dtype=float)[use])
+    Jac, r = forward_jacobian(restricted(problem, x, use), np.asarray(x, dtype=float)[use])
     where = np.cumsum(use) - 1  # column of each unknown in Jac
     out = np.full(len(added), np.nan)
     if not (np.all(np.isfinite(Jac)) and np.all(np.isfinite(r))):

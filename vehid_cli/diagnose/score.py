@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..optimizers.base import Problem
-from .attribution import SCORE_SKIP, Candidate, Fit, Ranked, _jacobian, restricted
+from .attribution import SCORE_SKIP, Candidate, Fit, Ranked, forward_jacobian, restricted
 from .tails import chi2_sf
 
 Scores = dict[str, tuple[float, tuple[str, ...]]]  # effect -> its score statistic and the unknowns it adds
@@ -30,7 +30,7 @@ def fitted_basis(problem: Problem, x: NDArray, free: NDArray, linear: Problem | 
     if got is not None:
         jac = got[2]
     else:
-        jac, _ = _jacobian(restricted(problem, x, free), np.asarray(x, dtype=float)[free])
+        jac, _ = forward_jacobian(restricted(problem, x, free), np.asarray(x, dtype=float)[free])
     if not np.all(np.isfinite(jac)):
         return None
     q, s, _ = np.linalg.svd(jac, full_matrices=False)
