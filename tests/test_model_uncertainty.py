@@ -11,6 +11,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from rich.console import Console
 
 from vehid_cli.diagnose.bench_law import bench_law, eq7
@@ -89,6 +90,27 @@ def test_the_struts_own_rates_are_reported_but_not_judged():
     only = compare_explanations(["progressive_spring", "parameter:kr"], rates, x[2:], ci[2:],
                                 fake_unexplained(rates, [70000.0, 2475.0], [250.0, 9.0]))  # fmt: skip
     assert only.imitates and only.worst == "kr"
+
+
+def test_several_unknowns_judged_together_need_a_wider_separation():
+    """Bonferroni over the unknowns judged: the threshold is z(2.5 % / n) / z(2.5 %) intervals (the normal quantiles
+    from the standard library, independent of diagnose/tails), so an unknown 1.01 intervals apart among five (a
+    progressive spring the library holds) is no disagreement, while one alone is."""
+    from statistics import NormalDist
+
+    from vehid_cli.diagnose.uncertainty import apart
+
+    z = NormalDist().inv_cdf
+    for n in (1, 2, 5, 9):
+        assert apart(n) == pytest.approx(z(1 - 0.025 / n) / z(0.975), rel=1e-9)
+    names = ("m", "Ix", "Iy", "a1", "b1")
+    x, ci = np.full(5, 100.0), np.ones(5)
+    near = x + np.array([0.0, 0.0, 0.0, 1.01 * np.sqrt(2.0), 0.0])
+    mu = compare_explanations(["progressive_spring", "parameter:kf"], names, x, ci, fake_unexplained(names, near, ci))
+    assert mu.separation[3] == pytest.approx(1.01) and not mu.imitates
+    one = compare_explanations(["progressive_spring", "parameter:kf"], ("a1",), x[:1], ci[:1],
+                               fake_unexplained(("a1",), near[3:4], ci[:1]))  # fmt: skip
+    assert one.imitates and one.to_json()["threshold"] == 1.0
 
 
 def test_the_widened_interval_holds_a_truth_that_both_explanations_miss():
