@@ -374,6 +374,19 @@ def test_an_hdf5_unit_attribute_that_is_not_utf8_text_names_the_dataset(tmp_path
     assert len(msg) < 400
 
 
+def test_an_hdf5_dataset_name_that_is_not_utf8_is_listed_escaped(tmp_path):
+    """A flipped byte in a dataset's name (the fuzz campaign's hdf5data-00118): h5py gives the name as bytes; the
+    channel it was is missing, and the names present are listed with the byte escaped (it had been an internal
+    error joining bytes into the message)."""
+    import h5py
+
+    path = tmp_path / "run.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("t", data=np.arange(100) / 100.0)
+        f.create_dataset(b"ACC\xffRR", data=np.zeros(100))
+    raises(path, str(path), "dataset 'ACC_RR' is not in the file", "ACC\\xffRR", channels={"acc": "ACC_RR"})
+
+
 def test_a_damaged_hdf5_chunk_is_damaged_naming_the_file(tmp_path):
     import h5py
 

@@ -84,6 +84,11 @@ class Hdf5(LoggerFormat):
                     f.create_dataset(own[ours], data=stamps).attrs["unit"] = "s"
 
 
+def _text(name: str | bytes) -> str:
+    """A dataset's name as text: h5py gives bytes for a name that is not UTF-8 (a damaged file's), shown escaped."""
+    return name if isinstance(name, str) else name.decode("utf-8", "backslashreplace")
+
+
 def read_hdf5(
     path: Path,
     channels: Mapping[str, str],
@@ -163,7 +168,7 @@ def _load(src: str, variable, matlab: bool, keys: list[str], time: str | None, s
     with h5py.File(src, "r") as f:
         group = _group(f, keys, variable, matlab, src)
         datasets: list[str] = []
-        group.visititems(lambda name, obj: datasets.append(name) if isinstance(obj, h5py.Dataset) else None)
+        group.visititems(lambda name, obj: datasets.append(_text(name)) if isinstance(obj, h5py.Dataset) else None)
         wanted = [*keys, *(own_time_name(k) for k in keys), *([time] if time else TIME_NAMES)]
         loaded = {}
         for name in dict.fromkeys(wanted):
