@@ -118,25 +118,22 @@ class Search:
         `linearised` (one simulation of the response and its sensitivities), counted as one evaluation and tracked
         like ``evaluate`` (a new best keeps its residuals: the caller must not modify them); None when the problem
         has none or its numbers there are not finite. Raises BudgetExhausted when no evaluation is left."""
-        if self.problem.linearised is None:
-            return None
-        if self.remaining < 1:
-            raise BudgetExhausted
-        x = np.clip(np.asarray(x, dtype=float), self.problem.lower, self.problem.upper)
-        got = self.problem.linearised(x)
-        if got is None:
-            return None
-        return (np.asarray(got[0]), *got[1:]) if self._track_one(x, got) else None
+        return self._evaluate_one(self.problem.linearised, x)
 
     def evaluate_normal(self, x: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray] | None:
         """Cost, residuals (R,), J'J (D, D) and J'r (D,) at x (clipped into the box) from the problem's `normal`
         equations (a long record's ``evaluate_linearised`` without its Jacobian), counted and tracked alike."""
-        if self.problem.normal is None:
+        return self._evaluate_one(self.problem.normal, x)
+
+    def _evaluate_one(self, at: Callable | None, x: NDArray) -> tuple | None:
+        """`at(x)` (the problem's `linearised` or `normal`: the cost, then arrays) at x clipped into the box, counted
+        as one evaluation and tracked; None when the problem has no such function or its numbers are not finite."""
+        if at is None:
             return None
         if self.remaining < 1:
             raise BudgetExhausted
         x = np.clip(np.asarray(x, dtype=float), self.problem.lower, self.problem.upper)
-        got = self.problem.normal(x)
+        got = at(x)
         if got is None:
             return None
         return (np.asarray(got[0]), *got[1:]) if self._track_one(x, got) else None

@@ -103,6 +103,20 @@ def _lu_solve(Q, piv, b, transposed):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
+def _null_vector(Q, piv, x, transposed):  # pragma: no cover - compiled
+    """x (d,) <- the (left, when `transposed`) null vector of Q = LU (`piv`): two steps of inverse iteration from
+    ones, each scaled to a largest |Re| + |Im| of 1."""
+    x[:] = 1.0
+    for _ in range(2):
+        _lu_solve(Q, piv, x, transposed)
+        big = 0.0
+        for r in range(x.size):
+            big = max(big, _cabs1(x[r]))
+        for r in range(x.size if big > 0 else 0):
+            x[r] /= big
+
+
+@numba.njit(cache=True)
 def _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond):  # pragma: no cover - compiled
     """Fill lam_k, w_k, V_k, W_k, cond (``_pick_modes``' layout) from the eigenvalues lam (P, 2 d) of the second-order
     systems (M, C, K) (P, d, d): the null vectors of Q(lam) = lam^2 M + lam C + K by two steps of inverse iteration
@@ -163,25 +177,11 @@ def _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond):  # pragma: no 
                     Q[r, c] = f
                     for k in range(c + 1, d):
                         Q[r, k] -= f * Q[c, k]
-            v[:] = 1.0
-            for _ in range(2):
-                _lu_solve(Q, piv, v, False)
-                nv = 0.0
-                for r in range(d):
-                    nv = max(nv, _cabs1(v[r]))
-                for r in range(d if nv > 0 else 0):
-                    v[r] /= nv
+            _null_vector(Q, piv, v, False)
             if symmetric:  # Q(lam)^T = Q(lam): the left null vector is the right one
                 uu[:] = v
             else:
-                uu[:] = 1.0
-                for _ in range(2):
-                    _lu_solve(Q, piv, uu, True)
-                    nu = 0.0
-                    for r in range(d):
-                        nu = max(nu, _cabs1(uu[r]))
-                    for r in range(d if nu > 0 else 0):
-                        uu[r] /= nu
+                _null_vector(Q, piv, uu, True)
             # x = [v, s v] at unit length; y = [(s M + C)^T u, M^T u] / (u^T (2 s M + C) v)
             length = 0.0
             for r in range(d):
