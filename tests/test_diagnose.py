@@ -14,7 +14,7 @@ from vehid_cli.cli.app import app
 from vehid_cli.config import load_config
 from vehid_cli.diagnose.residuals import autocorrelation, bin_residual, ljung_box
 from vehid_cli.identify.task import build_task
-from vehid_cli.report import plain_text
+from vehid_cli.report.campaigns import plain_text
 from vehid_cli.report.diagnosis import diagnosis_tables
 from vehid_cli.systems.vehicle.diagnosis import diagnose
 

@@ -14,7 +14,7 @@ from tests.conftest import BASE_CONFIG, ROOT, cli, read_png, vehid
 from vehid_cli.campaign.results import read_campaign_h5, write_campaign_h5
 from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
-from vehid_cli.report import load_published, render
+from vehid_cli.report.campaigns import load_published, render
 from vehid_cli.systems.vehicle.report import CSV_COLUMNS
 
 SMALL = [
@@ -123,7 +123,7 @@ def test_table_format_writes_to_a_file_and_directories_skip_other_h5(campaign_di
 
 def test_the_cli_knows_the_report_formats():
     from vehid_cli.cli.report import REPORT_FORMATS, REPORT_SUFFIXES
-    from vehid_cli.report import FORMATS
+    from vehid_cli.report.campaigns import FORMATS
 
     assert REPORT_FORMATS == FORMATS and set(REPORT_SUFFIXES.values()) == set(FORMATS)
 
@@ -169,7 +169,7 @@ def test_report_plots_directory_is_checked_before_any_work(campaign_dir, tmp_pat
 
 def test_sweep_notes_tell_a_running_campaign_from_an_interrupted_one(tmp_path):
     from vehid_cli.core.locking import exclusive
-    from vehid_cli.report import sweep_notes
+    from vehid_cli.report.campaigns import sweep_notes
 
     (tmp_path / "a.h5.partial").mkdir()
     (tmp_path / "a.h5.partial" / "run-00000.npz").write_bytes(b"")
@@ -187,7 +187,7 @@ def test_force_map_parameter_names_are_whole_in_a_narrow_terminal(width):
     ellipsis anywhere, every name on a line of its own, and the table no wider than the console."""
     from rich.console import Console
 
-    from vehid_cli.report import rich_tables
+    from vehid_cli.report.campaigns import rich_tables
 
     config = ROOT / "configs" / "dampers" / "synthetic_force_map_steps.yaml"
     campaign = run_campaign(load_config(config, ["identify.runs=1", "identify.budget=5"]), jobs=1)

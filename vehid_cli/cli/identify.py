@@ -123,7 +123,7 @@ def identify(
     from ..campaign.executor import check_executor_options, make_executor
     from ..campaign.runner import run_campaign_to_file, saved_runs_note
     from ..core.jsonio import write_json
-    from ..report import campaign_notes, rich_tables
+    from ..report.campaigns import campaign_notes, rich_tables
     from ..systems import system_class
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)

@@ -42,7 +42,7 @@ def _tables(output: Path | None, tables: list) -> str | None:
         for table in tables:
             out.print(table)
         return None
-    from ..report import plain_text
+    from ..report.campaigns import plain_text
 
     return plain_text(tables)
 
@@ -107,7 +107,7 @@ def report(
     of different experiments (config keys other than the method keys and a sweep's varied keys), data files
     or code versions are refused unless --allow-mixed is given.
     """
-    from ..report import collect, load_published, render, rich_tables, sweep_notes
+    from ..report.campaigns import collect, load_published, render, rich_tables, sweep_notes
     from ..report.compare import check_comparable
 
     tables = html is None or fmt is not None or output is not None  # --html alone writes the page only

@@ -14,14 +14,14 @@ from __future__ import annotations
 import dataclasses
 import typing
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
-import h5py
 import numpy as np
 
 from .jsonio import finite_or_none
 
-STRINGS = h5py.string_dtype()
+if TYPE_CHECKING:  # h5py (30 ms) is loaded by whoever opens the file a result is written to, not with every result
+    import h5py
 
 
 def jsonable(value: Any) -> Any:
@@ -67,6 +67,9 @@ class Result:
 
     def write_h5(self, group: h5py.Group) -> None:
         """Every field (but `h5_omit`) into `group`, by kind (module doc)."""
+        import h5py  # loaded already: `group` is one of its objects (see the import above)
+
+        strings = h5py.string_dtype()
         for f in dataclasses.fields(self):
             if f.name in self.h5_omit:
                 continue
@@ -83,7 +86,7 @@ class Result:
                     sub.attrs[str(key)] = item
             elif isinstance(value, (np.ndarray, tuple, list)):
                 data = np.asarray(value)
-                group.create_dataset(name, data=data.astype(STRINGS) if data.dtype.kind in "UO" else data)
+                group.create_dataset(name, data=data.astype(strings) if data.dtype.kind in "UO" else data)
             else:
                 group.attrs[name] = value
 

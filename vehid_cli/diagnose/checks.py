@@ -139,16 +139,21 @@ def check_channels(
     return Checks(tuple(findings) + (() if trigger is None else (trigger,)))
 
 
-def check_runs(tasks: Sequence[Task]) -> Checks:
-    """The checks of every run (several: each finding tagged with its run's file)."""
-    found = [check_task(t) for t in tasks]
+def check_runs(tasks: Sequence[Task], views: Sequence[Sequence[Channel]] | None = None) -> Checks:
+    """The checks of every run (several: each finding tagged with its run's file); `views`: each run's channel views
+    when the caller has them already (`Task.channel_views`: a simulation of the configured model each)."""
+    each = [None] * len(tasks) if views is None else views
+    found = [check_task(t, views=v) for t, v in zip(tasks, each, strict=True)]
     merged = found[0]
     for t, more in zip(tasks[1:], found[1:], strict=True):
         merged = merged.merged(more, tasks[0].data_file, t.data_file)
     return merged
 
 
-def check_task(task: Task, reference: dict[str, NDArray] | None = None) -> Checks:
-    """The checks of a task's measured run (`reference`: its data, default the measured channels)."""
+def check_task(
+    task: Task, reference: dict[str, NDArray] | None = None, views: Sequence[Channel] | None = None
+) -> Checks:
+    """The checks of a task's measured run (`reference`: its data, default the measured channels; `views`: its
+    channel views of the measured channels, when the caller has them already)."""
     from_data = task.sigma_source.startswith("estimated")
-    return check_channels(task.channel_views(reference), from_data, task.units)
+    return check_channels(task.channel_views(reference) if views is None else views, from_data, task.units)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..identify.records import Campaign
 from ..systems import Simulated, system_class
-from . import system_of
+from .campaigns import system_of
 
 
 def write_plots(campaigns: list[Campaign], files: list[str], out_dir: str | Path) -> list[Path]:

@@ -24,7 +24,7 @@ from ..core.errors import InputError
 from ..core.files import atomic_path
 from ..core.provenance import provenance
 from ..identify.records import Campaign
-from . import campaign_notes, file_provenance, rich_tables
+from .campaigns import campaign_notes, file_provenance, rich_tables
 from .diagnose_plots import plot_diagnosis
 from .diagnosis import diagnosis_tables
 from .figures import write_plots

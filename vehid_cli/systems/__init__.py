@@ -17,37 +17,55 @@ from ..core.progress import ProgressHook
 from ..diagnose.checks import Checks
 from ..identify.source import DataFiles, DataSource, as_paths
 from .base import Box, Log, Simulated, System
-from .damper.findings import Findings
-from .damper.system import DamperSystem
-from .half_car.system import HalfCarSystem
-from .quarter_car.system import QuarterCarSystem
 from .vehicle.system import VehicleSystem
 
-SYSTEMS: dict[str, type[System]] = {
-    VehicleSystem.name: VehicleSystem, DamperSystem.name: DamperSystem, QuarterCarSystem.name: QuarterCarSystem,
-    HalfCarSystem.name: HalfCarSystem,
-}  # fmt: skip
+_SYSTEMS: dict[str, type[System]] = {VehicleSystem.name: VehicleSystem}  # SYSTEMS, the others once `_every` ran
+
+
+def _every() -> dict[str, type[System]]:
+    """SYSTEMS: every known system by name. The car's is imported with this module, the others here at their first
+    need: their modules and the campaign and HDF5 machinery they pull in are start-up a car's command never uses
+    (about 0.05-0.1 s of `vehid diagnose`)."""
+    from .damper.system import DamperSystem
+    from .half_car.system import HalfCarSystem
+    from .quarter_car.system import QuarterCarSystem
+
+    for cls in (DamperSystem, QuarterCarSystem, HalfCarSystem):
+        _SYSTEMS.setdefault(cls.name, cls)  # a system registered under the same name earlier stays
+    return _SYSTEMS
+
+
+def __getattr__(name: str):
+    """`SYSTEMS` (every system, `_every`) and the damper's classes, imported at first use."""
+    if name == "SYSTEMS":
+        return _every()
+    if name in ("DamperSystem", "Findings"):
+        from .damper.findings import Findings
+        from .damper.system import DamperSystem
+
+        return {"DamperSystem": DamperSystem, "Findings": Findings}[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def register_system(cls: type[System]) -> type[System]:
     """Make a system known by its name (usable as a class decorator)."""
-    SYSTEMS[cls.name] = cls
+    _SYSTEMS[cls.name] = cls
     return cls
 
 
 def simulation_suffixes() -> tuple[str, ...]:
     """Every file type some system's `vehid simulate` writes."""
-    return tuple(dict.fromkeys(s for c in SYSTEMS.values() for s in c.simulation_suffixes))
+    return tuple(dict.fromkeys(s for c in _every().values() for s in c.simulation_suffixes))
 
 
 def system_class(config: AnyConfig) -> type[System]:
-    """The system a config describes (its `system` key)."""
-    try:
-        return SYSTEMS[config.system]
-    except KeyError:
+    """The system a config describes (its `system` key): the car's without importing the others."""
+    cls = _SYSTEMS.get(config.system) or _every().get(config.system)
+    if cls is None:
         raise InputError(
-            f"no system '{config.system}' (known: {', '.join(SYSTEMS)})", source=config.source, key="system"
-        ) from None
+            f"no system '{config.system}' (known: {', '.join(_every())})", source=config.source, key="system"
+        )
+    return cls
 
 
 def build_system(config: AnyConfig, data: DataFiles | DataSource = None) -> System:

@@ -278,10 +278,12 @@ def diagnose(
     split = validation_split(config, task, ref, files, validate_file)
     R_train = int(R_total if split.keep is None else split.keep.sum())
     runs = task.tasks if isinstance(task, JointTask) else (task,)
-    found = check_runs(runs)  # the measurement chain first: its faults are candidates beside the physics
+    # each run's channels beside the configured model (one simulation each), read by the checks and the candidates
+    views = tuple(t.channel_views() for t in runs)
+    found = check_runs(runs, views)  # the measurement chain first: its faults are candidates beside the physics
     for f in found.problems:
         say(f"check {f.status}: {f.channel} {f.check}: {f.message}")
-    specs = {**candidate_specs(config), **sensor_candidates(found, runs[0].channel_views())}
+    specs = {**candidate_specs(config), **sensor_candidates(found, views[0])}
     limits, starts = candidate_ranges(specs)
     twin = exact_twin(task)
     car = CarLoop(task, ref, split, {"limits": limits, "start": starts}, files, analyse_residuals, twin)

@@ -7,7 +7,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
-import h5py
 import numpy as np
 from numpy.typing import NDArray
 
@@ -16,7 +15,6 @@ from ...config import Config
 from ...core.errors import InputError
 from ...core.progress import ProgressHook
 from ...core.provenance import provenance
-from ...core.store import h5_file
 from ...core.streams import run_streams
 from ...diagnose.checks import Checks, check_runs
 from ...identify.crlb import CramerRao
@@ -210,6 +208,10 @@ def write_simulation_h5(path: str | Path, run: SimulatedRun, seed: int) -> None:
     `columns` attribute); root attributes hold the resolved config (YAML), its SHA-256, the noise level, the seed
     and provenance.
     """
+    import h5py  # start-up: h5py and the store (about 40 ms) only when a run is written as HDF5, not for diagnose
+
+    from ...core.store import h5_file
+
     exp = run.experiment
     with h5_file(path) as h5:
         h5.attrs["kind"] = "vehid.simulation"
