@@ -11,43 +11,63 @@ from __future__ import annotations
 import types
 import typing
 from pathlib import Path
-from typing import Any, Union
+from typing import TYPE_CHECKING, Any, Union
 
 from pydantic import BaseModel, ValidationError
 
 from ..core.errors import InputError, clip
 from ..core.files import read_text
 from .common import Algorithm, IdentifyCommon, Start, SystemConfig, _did_you_mean, _KeyedError, flatten, scaled_bounds
-from .damper import (
-    DAMPER_STRUCTURAL,
-    BenchSection,
-    DamperConfig,
-    DamperData,
-    DamperIdentify,
-    DamperNoise,
-    DamperSection,
-    DamperStage,
-    DataColumns,
-    DataUnits,
-)
-from .half_car import HalfCarConfig
-from .quarter_car import QuarterCarConfig
 from .safe_yaml import MAX_BYTES, MAX_DEPTH, load_yaml
 from .vehicle import Bump, Config, Identify, Noise, RandomRoad, Road, Simulation, Vehicle
 
-AnyConfig = Union[Config, DamperConfig, QuarterCarConfig, HalfCarConfig]  # noqa: UP007
+if TYPE_CHECKING:
+    from .damper import DamperConfig
+    from .half_car import HalfCarConfig
+    from .quarter_car import QuarterCarConfig
 
-# The config class of each system, by the `system` key of a config (a missing key is the car). A system of its own
-# registers its config here (`register_config`); nothing else in the package asks which system a config is.
-CONFIGS: dict[str, type[SystemConfig]] = {
-    "vehicle": Config, "damper": DamperConfig, "quarter_car": QuarterCarConfig,
-    "half_car": HalfCarConfig,
-}  # fmt: skip
+    AnyConfig = Union[Config, DamperConfig, QuarterCarConfig, HalfCarConfig]  # noqa: UP007
+else:  # at run time their common base: the other systems' config modules load at their first need (`_every`)
+    AnyConfig = SystemConfig
+
+# The config class of each system, by the `system` key of a config (a missing key is the car): CONFIGS. A system of
+# its own registers its config here (`register_config`); nothing else in the package asks which system a config is.
+_CONFIGS: dict[str, type[SystemConfig]] = {"vehicle": Config}
+_DAMPER_NAMES = (
+    "DAMPER_STRUCTURAL", "BenchSection", "DamperConfig", "DamperData", "DamperIdentify", "DamperNoise",
+    "DamperSection", "DamperStage", "DataColumns", "DataUnits",
+)  # fmt: skip
+
+
+def _every() -> dict[str, type[SystemConfig]]:
+    """CONFIGS: every system's config class by name. The car's is imported with this package, the others here at
+    their first need: the damper's, the quarter and half car's modules (and the damper laws they compile) are
+    start-up a car's command never uses (about 0.1 s of `vehid diagnose`)."""
+    from .damper import DamperConfig
+    from .half_car import HalfCarConfig
+    from .quarter_car import QuarterCarConfig
+
+    for name, cls in (("damper", DamperConfig), ("quarter_car", QuarterCarConfig), ("half_car", HalfCarConfig)):
+        _CONFIGS.setdefault(name, cls)  # a config registered under the same name earlier stays
+    return _CONFIGS
+
+
+def __getattr__(name: str):
+    """`CONFIGS` (every system's, `_every`) and the damper's sections, imported at their first use."""
+    if name == "CONFIGS":
+        return _every()
+    if name in _DAMPER_NAMES:
+        from . import damper
+
+        return getattr(damper, name)
+    if name in ("HalfCarConfig", "QuarterCarConfig"):
+        return {"HalfCarConfig": _every()["half_car"], "QuarterCarConfig": _every()["quarter_car"]}[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def register_config(name: str, cls: type[SystemConfig]) -> None:
     """Make `system: <name>` configs validate as `cls`."""
-    CONFIGS[name] = cls
+    _CONFIGS[name] = cls
 
 
 # ------------------------------------------------------------------------------------------ loading
@@ -75,7 +95,9 @@ def config_from_dict(raw: dict[str, Any], source: str = "<config>") -> Config | 
     """Validate a plain dict (e.g. parsed YAML) into a Config, or a DamperConfig when `system: damper`.
     Raises InputError naming the key."""
     name = raw.get("system") if isinstance(raw, dict) else None
-    root = CONFIGS.get(name, Config) if isinstance(name, str) else Config  # else Config's validation names the key
+    if isinstance(name, str) and name not in _CONFIGS:
+        _every()
+    root = _CONFIGS.get(name, Config) if isinstance(name, str) else Config  # else Config's validation names the key
     try:
         cfg = root.model_validate(raw)
     except ValidationError as exc:
