@@ -6,9 +6,11 @@ itself is `diagnose.loop.close`."""
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -96,6 +98,43 @@ def validation_split(
     return ValidationSplit(task, ref, ~held, held, source)
 
 
+class SinglePoints:
+    """The whole residual vectors of the last single-point evaluations of the training problems, by (unknowns, x):
+    a fit's last point is one, and its validation J on held-out blocks of the same runs is then read from it instead
+    of simulating the car again (the same task, data and point give the same vector). At most MAX_BYTES held; the
+    candidates' fits record from several threads."""
+
+    MAX_BYTES = 16 * 2**20
+
+    def __init__(self) -> None:
+        self._store: OrderedDict[tuple, NDArray] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def recording(self, problem: Problem, names: tuple[str, ...]) -> Problem:
+        """`problem` (its residuals the whole vector) recording each single point it evaluates."""
+        inner = problem.residuals
+
+        def residuals(X):
+            costs, r = inner(X)
+            if np.shape(X)[0] == 1:
+                self._put((names, np.asarray(X[0], dtype=float).tobytes()), r[0])
+            return costs, r
+
+        return dataclasses.replace(problem, residuals=residuals)
+
+    def _put(self, key: tuple, r: NDArray) -> None:
+        with self._lock:
+            self._store.pop(key, None)
+            self._store[key] = r
+            while len(self._store) > 1 and sum(v.nbytes for v in self._store.values()) > self.MAX_BYTES:
+                self._store.popitem(last=False)
+
+    def get(self, names: tuple[str, ...], x: NDArray) -> NDArray | None:
+        """The whole residual vector the training problem over `names` computed at x, if still held."""
+        with self._lock:
+            return self._store.get((tuple(names), np.asarray(x, dtype=float).tobytes()))
+
+
 @dataclass(frozen=True)
 class CarLoop:
     """The car's side of the loop: its training and validation problems over any unknowns (the task's own first,
@@ -108,6 +147,7 @@ class CarLoop:
     files: tuple[str, ...]
     analyse_residuals: bool = True
     twin: Task | None = None  # the task on the exact integrator when the declared model is the linear car (exact_twin)
+    points: SinglePoints = field(default_factory=SinglePoints, repr=False, compare=False)
 
     @property
     def joint(self) -> bool:
@@ -127,14 +167,23 @@ class CarLoop:
     def validation_J(self, names: tuple[str, ...], x: NDArray) -> tuple[float, None]:
         """J on the validation data (held-out blocks or the --validate run) at `names` = x."""
         split = self.split
-        vt = self.augmented(split.task, names)
-        cost = self.problem_of(vt, split.reference, split.held).cost(np.asarray(x, dtype=float)[None, :])[0]
+        x = np.asarray(x, dtype=float)
+        whole = self.points.get(names, x) if split.held is not None and split.task is self.task else None
+        if whole is None:
+            vt = self.augmented(split.task, names)
+            cost = self.problem_of(vt, split.reference, split.held).cost(x[None, :])[0]
+        else:  # the training problem's vector at x: held-out entries taken as masked() takes them
+            with np.errstate(all="ignore"):
+                cost = np.mean(whole[None, :][:, split.held] ** 2, axis=1)[0]
         return (float(cost) if np.isfinite(cost) else float("inf")), None
 
     def problem_for(self, names: tuple[str, ...]) -> tuple[Problem, NDArray]:
         """The training problem over `names` and their start values."""
         t = self.augmented(self.task, names)
-        return self.problem_of(t, self.ref, self.split.keep), t.nominal
+        problem = t.problem(self.ref)
+        if self.split.held is not None and problem.residuals is not None:  # its fits' validation J from their points
+            problem = self.points.recording(problem, tuple(names))
+        return masked(problem, self.split.keep), t.nominal
 
     def linear_for(self, names: tuple[str, ...]) -> Problem | None:
         """The training problem over `names` on the exact integrator with its exact sensitivities (`exact_twin`), or
