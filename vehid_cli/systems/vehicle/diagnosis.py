@@ -343,7 +343,7 @@ def diagnose(
     step("declared fit", 0, 1)
     search = None if screen is None else screen.problem_for(task.names)[0]
     linear = car.linear_for(task.names)
-    fit = fit_declared(config, task, car.problem_of(task, ref, split.keep), pre.ok, refit_budget, say, search, linear)
+    fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear)
     before = car.report(fit, ())
     step("declared fit", 1, 1)
     quality = assess_vehicle(task, ref, before, pre)
