@@ -104,7 +104,7 @@ class SinglePoints:
     of simulating the car again (the same task, data and point give the same vector). At most MAX_BYTES held; the
     candidates' fits record from several threads."""
 
-    MAX_BYTES = 16 * 2**20
+    MAX_BYTES = 8 * 2**20  # a 60 s record's vector is 6 MB: one held (the newest is always kept)
 
     def __init__(self) -> None:
         self._store: OrderedDict[tuple, NDArray] = OrderedDict()
