@@ -193,7 +193,8 @@ class CarLoop:
         t = self.augmented(self.twin, names)
         if t.corrections or not t.experiment.exact_applies(t.names):
             return None
-        return self.problem_of(t, self.ref, self.split.keep)
+        problem = self.problem_of(t, self.ref, self.split.keep)
+        return problem if problem.linearised is not None else None  # none where its Jacobian is too long to hold
 
     def analyses(self, t: Task | JointTask, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
         """The residual analysis of each run (its file and its analysis)."""
