@@ -68,3 +68,20 @@ def test_the_validation_j_from_a_fits_own_point_equals_the_one_simulated_again()
     assert plain.points.get(names, x) is None
     assert got == again  # bit for bit
     assert got != plain.validation_J(names, task.nominal)[0]
+
+
+def test_linear_for_is_none_where_the_twins_problem_holds_no_exact_linearisation(monkeypatch):
+    """An objective whose Jacobian is too long to hold carries its normal sums, no linearisation: the loop must not
+    be handed it as the linear car's problem (score.fitted_basis called its linearised: the README's four-post rig
+    crashed)."""
+    from vehid_cli.optimizers import lsq
+    from vehid_cli.systems.vehicle.diagnosis import exact_twin
+
+    task = build_task(prepare_config(load_config(BASE, NOISE)))
+    ref = task.reference(0)
+    split = validation_split(task.config, task, ref, ["run.csv"], None)
+    car = CarLoop(task, ref, split, {"limits": {}, "start": {}}, ("run.csv",), twin=exact_twin(task))
+    linear = car.linear_for(task.names)
+    assert linear is not None and linear.linearised is not None
+    monkeypatch.setattr(lsq, "LONG_JACOBIAN_BYTES", 1)  # every Jacobian "too long": normal sums only
+    assert car.linear_for(task.names) is None
