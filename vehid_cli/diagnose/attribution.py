@@ -49,6 +49,7 @@ from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import gauss_newton, polish
 from ..sim.kernel import available_cores
+from .starts import screen_starts
 from .tails import chi2_isf, chi2_sf
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
@@ -60,8 +61,6 @@ SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR
 SCORE_SKIP = (
     0.25  # a later round's known parameter whose score statistic is below this share of the critical LR is not fitted
 )
-SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
-PROBE = 1e-4  # difference step of the screening's Gauss-Newton step, as a fraction of each unknown's range
 Z95 = 1.959963984540054
 MISFIT_BLOCKS = 30  # stretches of the record the misfit-robust (sandwich) intervals compare
 PARAMETER_GROUPS = {
@@ -300,89 +299,6 @@ def identifiable(names: Sequence[str], x: NDArray, ci: NDArray, shape: Sequence[
     return out
 
 
-def screen_starts(
-    problem: Problem, x0: NDArray, cand: Candidate, extra: Sequence[dict[str, float]] = (), base: int | None = None
-) -> NDArray:  # fmt: skip
-    """The best start of a candidate: its `starts` (and `extra` ones) applied to x0, then SCREEN_STEPS damped
-    Gauss-Newton steps from each over every unknown but the shape parameters (the car moves back where the
-    declared fit bent it to mimic the effect), all starts in one batched evaluation per Jacobian and per
-    trial step; the point with the lowest cost.
-
-    What is simulated once: the starts' costs are their first Jacobian's centre rows; a start whose last step was
-    rejected has not moved, so its next step would be the same step again and is not taken; the starts of an effect
-    whose force is proportional to its strengths (`cand.linear`) with the strengths at their null have no force, so
-    with the same values of the first `base` unknowns (the current fit's: the car's) they share their response and
-    its derivatives along those unknowns (only the derivatives along the candidate's own differ)."""
-    names = list(problem.names)
-    lo, hi = problem.lower, problem.upper
-    points = []
-    for s in (*(cand.starts or ({},)), *extra):
-        x = np.array(x0, dtype=float)
-        for k, v in s.items():
-            if k in names:
-                j = names.index(k)
-                x[j] = np.clip(v, lo[j], hi[j])
-        points.append(x)
-    free = [j for j, n in enumerate(names) if n not in cand.shape]
-    strength = [(names.index(n), cand.null.get(n, 0.0)) for n in cand.strength if n in names]
-    base = len(names) if base is None else base
-    h = PROBE * (hi - lo)
-    P = np.array(points)
-    cost = np.full(len(P), np.inf)
-    moved = np.ones(len(P), dtype=bool)  # starts whose point changed since their last Jacobian
-
-    def add(rows: list[NDArray], x: NDArray, j: int) -> int:
-        q = x.copy()
-        q[j] = x[j] + h[j] if x[j] + h[j] <= hi[j] else x[j] - h[j]
-        rows.append(q)
-        return len(rows) - 1
-
-    for _ in range(SCREEN_STEPS):
-        rows: list[NDArray] = []
-        at: dict[int, tuple[int, dict[int, int]]] = {}  # start -> its centre row, its rows by unknown differenced
-        shared: dict[bytes, tuple[int, dict[int, int]]] = {}  # force-free starts' centre and car rows, by car values
-
-        for i in np.flatnonzero(moved):
-            x = P[i]
-            off = cand.linear and bool(strength) and all(x[j] == v for j, v in strength)
-            key = x[:base].tobytes() if off else None
-            if key is not None and key in shared:
-                centre, car = shared[key]
-            else:
-                centre = len(rows)
-                rows.append(x)
-                car = {j: add(rows, x, j) for j in free if j < base}
-                if key is not None:
-                    shared[key] = (centre, car)
-            at[i] = (centre, {**car, **{j: add(rows, x, j) for j in free if j >= base}})
-        if not rows:
-            break
-        with np.errstate(all="ignore"):
-            C, R = problem.residuals(np.array(rows))
-        trial = P.copy()
-        for i, (centre, by) in at.items():
-            x, r0 = P[i], R[centre]
-            if not np.isfinite(cost[i]):
-                cost[i] = C[centre] if np.isfinite(C[centre]) else np.inf
-            with np.errstate(over="ignore", invalid="ignore"):  # an unstable trial point: inf, not a printed warning
-                D = np.stack([(R[by[j]] - r0) / (rows[by[j]][j] - x[j]) for j in free], 1)
-            if not (np.all(np.isfinite(D)) and np.all(np.isfinite(r0))):
-                continue
-            JtJ = D.T @ D
-            step = np.linalg.lstsq(JtJ + 1e-3 * np.diag(np.diag(JtJ)), -D.T @ r0, rcond=None)[0]
-            trial[i, free] = np.clip(x[free] + step, lo[free], hi[free])
-        tried = np.flatnonzero(np.any(trial != P, axis=1))
-        moved[:] = False
-        if tried.size == 0:
-            break
-        with np.errstate(all="ignore"):
-            c = problem.cost(trial[tried])
-        better = np.isfinite(c) & (c < cost[tried])
-        P[tried[better]], cost[tried[better]] = trial[tried[better]], c[better]
-        moved[tried[better]] = True
-    return P[int(np.argmin(cost))]
-
-
 def candidate_fit(
     problem: Problem, base: Fit, x_added: NDArray, cand: Candidate, budget: int, scale: float,
     prior: dict[str, float] | None = None,
@@ -393,7 +309,8 @@ def candidate_fit(
     x0 = np.clip(x0, problem.lower, problem.upper)
     extra = (prior,) if prior else ()
     if cand.starts or cand.linear or extra:
-        x0 = screen_starts(problem, x0, cand, extra, base.x.size)
+        starts = (*(cand.starts or ({},)), *extra)
+        x0 = screen_starts(problem, x0, starts, cand.shape, cand.strength, cand.null, cand.linear, base.x.size)
     free = np.ones(x0.size, dtype=bool)
     shapes = [n for n in cand.shape if n in problem.names]
     if shapes:
