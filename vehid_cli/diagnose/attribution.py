@@ -301,16 +301,17 @@ def identifiable(names: Sequence[str], x: NDArray, ci: NDArray, shape: Sequence[
 
 def candidate_fit(
     problem: Problem, base: Fit, x_added: NDArray, cand: Candidate, budget: int, scale: float,
-    prior: dict[str, float] | None = None,
+    prior: dict[str, float] | None = None, car: NDArray | None = None,
 ) -> Fit:  # fmt: skip
     """A candidate's fit: the best of its starts (and of `prior`, its own estimates from an earlier round),
-    its identifiable shape parameters freed, least squares to SCREEN_TOL."""
+    its identifiable shape parameters freed, least squares to SCREEN_TOL; `car`: the residuals' derivatives along
+    `base`'s unknowns at `base` (R, D), which the screening of the starts steers by (screen_starts)."""
     x0 = np.concatenate([base.x, x_added])
     x0 = np.clip(x0, problem.lower, problem.upper)
     extra = (prior,) if prior else ()
     if cand.starts or cand.linear or extra:
         starts = (*(cand.starts or ({},)), *extra)
-        x0 = screen_starts(problem, x0, starts, cand.shape, cand.strength, cand.null, cand.linear, base.x.size)
+        x0 = screen_starts(problem, x0, starts, cand.shape, cand.strength, cand.null, cand.linear, base.x.size, car)
     free = np.ones(x0.size, dtype=bool)
     shapes = [n for n in cand.shape if n in problem.names]
     if shapes:
@@ -402,6 +403,7 @@ def rank_candidates(
     on_done: Callable[[int], None] | None = None,
     tests: int | None = None,
     make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None = None,
+    car: Callable[[], NDArray | None] | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -414,8 +416,9 @@ def rank_candidates(
     estimates of its own unknowns are one more start (warm start); `on_done(n)`: n candidates tested so far (called
     from this thread); `tests`: how many candidates the round tests in all (the Bonferroni count; default these);
     `make_linear(names, candidate)`: the augmented problem on the exact integrator with its exact sensitivities, or
-    None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`.
-    Candidate fits run in parallel threads."""
+    None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`;
+    `car()`: the residuals' derivatives (R, D) along `base`'s unknowns at `base` (all free), which the effects'
+    screenings steer by. Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation
@@ -430,7 +433,8 @@ def rank_candidates(
         if earlier is not None and earlier.statistic > 0:
             own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
         fit = parameter_fit(problem, base, x_added, cand, budget, make_linear)
-        fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own)
+        at_base = cols if cand.kind == "effect" and names[: len(base.names)] == base.names else None
+        fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
         k = cand.df if cand.df is not None else len(added) - len(fit.fixed)
@@ -444,7 +448,16 @@ def rank_candidates(
             kind=cand.kind, validation_per_file=per, fixed=fit.fixed,
         )  # fmt: skip
 
-    done = on_done or (lambda _n: None)
+    cols = car() if car is not None and not base.fixed and any(c.kind == "effect" for c in candidates) else None
+    out = run_all(one, candidates, prior, on_done or (lambda _n: None))
+    out.sort(key=lambda r: -r.statistic)
+    return out
+
+
+def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], prior: dict[str, Ranked] | None,
+            done: Callable[[int], None]) -> list[Ranked]:  # fmt: skip
+    """one(c) for every candidate, in parallel threads where there are cores (the longest fits first, so that none
+    runs alone at the end: expected_seconds), in the candidates' order; done(n) after each."""
     n = min(available_cores(), len(candidates))
     if n > 1:
         with ThreadPoolExecutor(n) as pool:  # the longest fits first, so that none runs alone at the end
@@ -460,7 +473,6 @@ def rank_candidates(
         for c in candidates:
             out.append(one(c))
             done(len(out))
-    out.sort(key=lambda r: -r.statistic)
     return out
 
 

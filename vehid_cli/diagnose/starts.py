@@ -13,57 +13,59 @@ from ..optimizers.base import Problem
 
 SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
 PROBE = 1e-4  # difference step of the screening's Gauss-Newton step, as a fraction of each unknown's range
-SECANT = False  # after its first step a start's car columns follow Broyden's update (only the candidate's differenced)
+SECANT = True  # after its first step a start's car columns follow Broyden's update (only the candidate's differenced)
 
 
 def screen_starts(
     problem: Problem, x0: NDArray, starts: Sequence[dict[str, float]], shape: Sequence[str] = (),
     strength: Sequence[str] = (), null: dict[str, float] | None = None, linear: bool = False, base: int | None = None,
+    car: NDArray | None = None,
 ) -> NDArray:  # fmt: skip
     """The best start of a candidate (attribution.Candidate): its `starts` (values of some unknowns) applied to x0,
-    then SCREEN_STEPS damped
-    Gauss-Newton steps from each over every unknown but the shape parameters (the car moves back where the
-    declared fit bent it to mimic the effect), all starts in one batched evaluation per Jacobian and per
-    trial step; the point with the lowest cost.
+    then SCREEN_STEPS damped Gauss-Newton steps from each over every unknown but the `shape` ones (the car moves back
+    where the declared fit bent it to mimic the effect), all starts in one batched evaluation per Jacobian and per
+    trial step; the point with the lowest cost. The first `base` unknowns are the current fit's (the car's), the
+    others the candidate's.
 
-    What is simulated once: the starts' costs are their first Jacobian's centre rows; a start whose last step was
-    rejected has not moved, so its next step would be the same step again and is not taken; the starts of an effect
-    whose force is proportional to its `strength` unknowns (`linear`) with the strengths at their null have no force, so
-    with the same values of the first `base` unknowns (the current fit's: the car's) they share their response and
-    its derivatives along those unknowns (only the derivatives along the candidate's own differ). `null`: the
-    strengths' null values (default zero); `shape`: the unknowns not stepped."""
+    The steps' Jacobians (SECANT): the columns of the candidate's own unknowns by forward differences at every step
+    (where the effect's nonlinearity is); the car's from `car` (R, base), the current fit's Jacobian, exact where the
+    effect has no force (else by forward differences at the first step), then by Broyden's update along each accepted
+    step. They only steer: every step is kept only where the exact cost falls, and the candidate's fit that follows
+    (trust region, exact forward differences) decides the LR. Simulated once: the starts' costs are their first
+    Jacobian's centre rows, a trial's residual is its next Jacobian's centre; a start whose last step was rejected
+    has not moved (its next step would be the same) and is not stepped again; the starts of an effect whose force
+    is proportional to its `strength` unknowns (`linear`) with those at their `null` (default zero) have no force,
+    so with the same car they share their response and its derivatives along the car's unknowns."""
     names = list(problem.names)
     lo, hi = problem.lower, problem.upper
     P = _start_points(problem, x0, starts)
     free = [j for j, n in enumerate(names) if n not in shape]
     at_null = [(names.index(n), (null or {}).get(n, 0.0)) for n in strength if n in names]
     base = len(names) if base is None else base
-    own = [m for m, j in enumerate(free) if j >= base]  # the candidate's columns, differenced at every step
     h = PROBE * (hi - lo)
     cost = np.full(len(P), np.inf)
     resid: list[NDArray | None] = [None] * len(P)  # the residual at each start's point, once known
-    last: list[tuple[NDArray, NDArray, NDArray] | None] = [None] * len(P)  # point, residual, Jacobian of its last step
+    last = _first_jacobians(P, car, free, base)  # point, residual, Jacobian of each start's last step
     moved = np.ones(len(P), dtype=bool)  # starts whose point changed since their last Jacobian
     for _ in range(SCREEN_STEPS):
         rows: list[NDArray] = []
         at: dict[int, tuple[int, dict[int, int]]] = {}  # start -> its centre row (-1: known), its rows by unknown
-        shared: dict[bytes, tuple[int, dict[int, int]]] = {}  # force-free starts' centre and car rows, by car values
+        shared: dict[tuple, tuple[int, dict[int, int]]] = {}  # force-free starts' centre and car rows, by car values
         for i in np.flatnonzero(moved):
             x = P[i]
-            if SECANT and last[i] is not None:  # the car's columns by Broyden's update: the candidate's only
-                at[i] = (-1, {free[m]: _row(rows, x, free[m], h, hi) for m in own})
-                continue
-            key = x[:base].tobytes() if linear and at_null and all(x[j] == v for j, v in at_null) else None
+            secant = SECANT and last[i] is not None  # the car's columns by Broyden's update: the candidate's only
+            off = linear and at_null and all(x[j] == v for j, v in at_null)
+            key = (secant, x[:base].tobytes()) if off else None
             if key is not None and key in shared:
-                centre, car = shared[key]
+                centre, car_rows = shared[key]
             else:
                 centre = -1 if resid[i] is not None else len(rows)
                 if centre >= 0:
                     rows.append(x)
-                car = {j: _row(rows, x, j, h, hi) for j in free if j < base}
+                car_rows = {} if secant else {j: _row(rows, x, j, h, hi) for j in free if j < base}
                 if key is not None:
-                    shared[key] = (centre, car)
-            at[i] = (centre, {**car, **{j: _row(rows, x, j, h, hi) for j in free if j >= base}})
+                    shared[key] = (centre, car_rows)
+            at[i] = (centre, {**car_rows, **{j: _row(rows, x, j, h, hi) for j in free if j >= base}})
         if not at:
             break
         with np.errstate(all="ignore"):
@@ -108,6 +110,18 @@ def _jacobian(R: NDArray, rows: list[NDArray], by: dict[int, int], x: NDArray, r
             if j in diff:
                 D[:, m] = diff[j]
         return D
+
+
+def _first_jacobians(P: NDArray, car: NDArray | None, free: list[int], base: int) -> list:
+    """Each start's (point, residual, Jacobian) to update at its first step: the current fit's Jacobian `car` in the
+    car's columns (SECANT; the candidate's own filled at the step), else None (forward differences throughout)."""
+    if not SECANT or car is None:
+        return [None] * len(P)
+    first = np.zeros((car.shape[0], len(free)))
+    for m, j in enumerate(free):
+        if j < base:
+            first[:, m] = car[:, j]
+    return [(x.copy(), np.zeros(car.shape[0]), first) for x in P]
 
 
 def _start_points(problem: Problem, x0: NDArray, starts: Sequence[dict[str, float]]) -> NDArray:
