@@ -89,8 +89,10 @@ def trf_stops(
     prediction above 1/4, or the step below xtol of x) with a STOP_MARGIN to spare, trf is given J again, which it
     does not use. The prediction is trf's own: its Coleman-Li scaled quadratic model at xp. A wrong guess (never
     seen) would only cost trf one step on the previous Jacobian, the costs staying exact."""
-    from scipy.optimize._lsq.common import CL_scaling_vector, evaluate_quadratic
-
+    try:  # scipy's private helpers: without them no guess, every Jacobian computed
+        from scipy.optimize._lsq.common import CL_scaling_vector, evaluate_quadratic
+    except ImportError:  # pragma: no cover - another scipy
+        return False
     g = J.T @ rp
     v, dv = CL_scaling_vector(xp, g, lo, hi)
     v[dv != 0] /= width[dv != 0]
