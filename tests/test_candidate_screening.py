@@ -9,6 +9,7 @@ import pytest
 
 from vehid_cli.diagnose import attribution as A
 from vehid_cli.diagnose import starts as S
+from vehid_cli.diagnose.score import fitted_basis
 from vehid_cli.optimizers import lsq
 from vehid_cli.optimizers.base import Problem, Search
 
@@ -128,3 +129,21 @@ def test_parallel_fits_come_back_in_the_candidates_order():
     seen = []
     got = A.run_all(lambda c: c.effect, cands, None, seen.append)
     assert got == [c.effect for c in cands] and sorted(seen) == [1, 2, 3, 4]
+
+
+def test_fitted_basis_without_exact_sensitivities_falls_back_to_differences():
+    """A linear twin whose problem has no `linearised` (a long record's has normal equations only; the four-post
+    rig's README example raised TypeError here): the basis from forward differences, as with no twin."""
+    rng = np.random.default_rng(5)
+    A_, y = rng.standard_normal((100, 4)), rng.standard_normal(100)
+
+    def residuals(X):
+        R = np.atleast_2d(X) @ A_.T - y
+        return np.mean(R**2, axis=1), R
+
+    lo, hi = -np.ones(4), np.ones(4)
+    problem = Problem(lo, hi, lambda X: residuals(X)[0], residuals, names=("a", "b", "c", "d"))
+    free = np.ones(4, dtype=bool)  # all free: where the twin's exact sensitivities would be used
+    got = fitted_basis(problem, np.zeros(4), free, Problem(lo, hi, problem.cost, residuals))
+    want = np.linalg.svd(A_, full_matrices=False)[0]
+    np.testing.assert_allclose(np.abs(got.T @ want), np.eye(4), atol=1e-6)  # the same span (signs aside)
