@@ -49,6 +49,7 @@ from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import gauss_newton, polish
 from ..sim.kernel import available_cores
+from .starts import screen_starts
 from .tails import chi2_isf, chi2_sf
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
@@ -60,8 +61,6 @@ SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR
 SCORE_SKIP = (
     0.25  # a later round's known parameter whose score statistic is below this share of the critical LR is not fitted
 )
-SCREEN_STEPS = 3  # damped Gauss-Newton steps from each start before they are compared
-PROBE = 1e-4  # difference step of the screening's Gauss-Newton step, as a fraction of each unknown's range
 Z95 = 1.959963984540054
 MISFIT_BLOCKS = 30  # stretches of the record the misfit-robust (sandwich) intervals compare
 PARAMETER_GROUPS = {
@@ -300,66 +299,19 @@ def identifiable(names: Sequence[str], x: NDArray, ci: NDArray, shape: Sequence[
     return out
 
 
-def screen_starts(problem: Problem, x0: NDArray, cand: Candidate, extra: Sequence[dict[str, float]] = ()) -> NDArray:
-    """The best start of a candidate: its `starts` (and `extra` ones) applied to x0, then SCREEN_STEPS damped
-    Gauss-Newton steps from each over every unknown but the shape parameters (the car moves back where the
-    declared fit bent it to mimic the effect), all starts in one batched evaluation per Jacobian and per
-    trial step; the point with the lowest cost."""
-    names = list(problem.names)
-    lo, hi = problem.lower, problem.upper
-    points = []
-    for s in (*(cand.starts or ({},)), *extra):
-        x = np.array(x0, dtype=float)
-        for k, v in s.items():
-            if k in names:
-                j = names.index(k)
-                x[j] = np.clip(v, lo[j], hi[j])
-        points.append(x)
-    free = [j for j, n in enumerate(names) if n not in cand.shape]
-    h = PROBE * (hi - lo)
-    P = np.array(points)
-    with np.errstate(all="ignore"):
-        cost = problem.cost(P)
-    cost = np.where(np.isfinite(cost), cost, np.inf)
-    for _ in range(SCREEN_STEPS):
-        rows = []
-        for x in P:
-            rows.append(x)
-            for j in free:
-                q = x.copy()
-                q[j] = x[j] + h[j] if x[j] + h[j] <= hi[j] else x[j] - h[j]
-                rows.append(q)
-        with np.errstate(all="ignore"):
-            _, R = problem.residuals(np.array(rows))
-        k = len(free) + 1
-        trial = P.copy()
-        for i, x in enumerate(P):
-            r0 = R[i * k]
-            with np.errstate(over="ignore", invalid="ignore"):  # an unstable trial point: inf, not a printed warning
-                D = np.stack([(R[i * k + 1 + m] - r0) / (rows[i * k + 1 + m][j] - x[j]) for m, j in enumerate(free)], 1)
-            if not (np.all(np.isfinite(D)) and np.all(np.isfinite(r0))):
-                continue
-            JtJ = D.T @ D
-            step = np.linalg.lstsq(JtJ + 1e-3 * np.diag(np.diag(JtJ)), -D.T @ r0, rcond=None)[0]
-            trial[i, free] = np.clip(x[free] + step, lo[free], hi[free])
-        with np.errstate(all="ignore"):
-            c = problem.cost(trial)
-        better = np.isfinite(c) & (c < cost)
-        P[better], cost[better] = trial[better], c[better]
-    return P[int(np.argmin(cost))]
-
-
 def candidate_fit(
     problem: Problem, base: Fit, x_added: NDArray, cand: Candidate, budget: int, scale: float,
-    prior: dict[str, float] | None = None,
+    prior: dict[str, float] | None = None, car: NDArray | None = None,
 ) -> Fit:  # fmt: skip
     """A candidate's fit: the best of its starts (and of `prior`, its own estimates from an earlier round),
-    its identifiable shape parameters freed, least squares to SCREEN_TOL."""
+    its identifiable shape parameters freed, least squares to SCREEN_TOL; `car`: the residuals' derivatives along
+    `base`'s unknowns at `base` (R, D), which the screening of the starts steers by (screen_starts)."""
     x0 = np.concatenate([base.x, x_added])
     x0 = np.clip(x0, problem.lower, problem.upper)
     extra = (prior,) if prior else ()
     if cand.starts or cand.linear or extra:
-        x0 = screen_starts(problem, x0, cand, extra)
+        starts = (*(cand.starts or ({},)), *extra)
+        x0 = screen_starts(problem, x0, starts, cand.shape, cand.strength, cand.null, cand.linear, base.x.size, car)
     free = np.ones(x0.size, dtype=bool)
     shapes = [n for n in cand.shape if n in problem.names]
     if shapes:
@@ -451,6 +403,7 @@ def rank_candidates(
     on_done: Callable[[int], None] | None = None,
     tests: int | None = None,
     make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None = None,
+    car: Callable[[], NDArray | None] | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -463,8 +416,9 @@ def rank_candidates(
     estimates of its own unknowns are one more start (warm start); `on_done(n)`: n candidates tested so far (called
     from this thread); `tests`: how many candidates the round tests in all (the Bonferroni count; default these);
     `make_linear(names, candidate)`: the augmented problem on the exact integrator with its exact sensitivities, or
-    None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`.
-    Candidate fits run in parallel threads."""
+    None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`;
+    `car()`: the residuals' derivatives (R, D) along `base`'s unknowns at `base` (all free), which the effects'
+    screenings steer by. Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation
@@ -479,7 +433,8 @@ def rank_candidates(
         if earlier is not None and earlier.statistic > 0:
             own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
         fit = parameter_fit(problem, base, x_added, cand, budget, make_linear)
-        fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own)
+        at_base = cols if cand.kind == "effect" and names[: len(base.names)] == base.names else None
+        fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
         k = cand.df if cand.df is not None else len(added) - len(fit.fixed)
@@ -493,11 +448,21 @@ def rank_candidates(
             kind=cand.kind, validation_per_file=per, fixed=fit.fixed,
         )  # fmt: skip
 
-    done = on_done or (lambda _n: None)
+    cols = car() if car is not None and not base.fixed and any(c.kind == "effect" for c in candidates) else None
+    out = run_all(one, candidates, prior, on_done or (lambda _n: None))
+    out.sort(key=lambda r: -r.statistic)
+    return out
+
+
+def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], prior: dict[str, Ranked] | None,
+            done: Callable[[int], None]) -> list[Ranked]:  # fmt: skip
+    """one(c) for every candidate, in parallel threads where there are cores (the longest fits first, so that none
+    runs alone at the end: expected_seconds), in the candidates' order; done(n) after each."""
     n = min(available_cores(), len(candidates))
     if n > 1:
-        with ThreadPoolExecutor(n) as pool:
-            futures = {pool.submit(one, c): i for i, c in enumerate(candidates)}
+        with ThreadPoolExecutor(n) as pool:  # the longest fits first, so that none runs alone at the end
+            order = sorted(range(len(candidates)), key=lambda i: -expected_seconds(candidates[i], prior))
+            futures = {pool.submit(one, candidates[i]): i for i in order}
             results: list[Ranked | None] = [None] * len(candidates)
             for k, future in enumerate(as_completed(futures), start=1):
                 results[futures[future]] = future.result()
@@ -508,8 +473,17 @@ def rank_candidates(
         for c in candidates:
             out.append(one(c))
             done(len(out))
-    out.sort(key=lambda r: -r.statistic)
     return out
+
+
+def expected_seconds(cand: Candidate, prior: dict[str, Ranked] | None = None) -> float:
+    """A guess of how long a candidate's fit takes, to start the longest first (longest-processing-time scheduling
+    of the parallel fits; the results do not depend on it): its fit's time in an earlier round, else its starts
+    and shape parameters times a nonlinear effect's extra cost (a relative scale)."""
+    earlier = (prior or {}).get(cand.effect)
+    if earlier is not None and not earlier.screened:
+        return earlier.seconds
+    return (1 + len(cand.starts)) * (1 + len(cand.shape)) * (1 if cand.linear else 2) * 1e-3
 
 
 def score_statistics(problem: Problem, x: NDArray, free: NDArray, added: Sequence[int]) -> NDArray:

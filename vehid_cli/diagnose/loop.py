@@ -37,6 +37,7 @@ from .attribution import (
     fisher_ci,
     fit_free,
     fit_intervals,
+    forward_jacobian,
     identifiable,
     linear_fit,
     lowers_validation,
@@ -247,8 +248,16 @@ class _Augmentation:
                 claim=self.claim, scale=subject.scale(current),
                 prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
                 on_done=lambda n: self.progress(stage, before + n, tests), tests=tests,
-                make_linear=lambda names, cand: self.make_linear(names, cand, subject),
+                make_linear=lambda names, cand: self.make_linear(names, cand, subject), car=car,
             ) if cands else []  # fmt: skip
+
+        def car() -> NDArray | None:  # the current fit's Jacobian, once per round (the effects' screening)
+            if "J" not in jacobian:
+                J, _ = forward_jacobian(subject.problem_for(current.names)[0], current.x)
+                jacobian["J"] = J if np.all(np.isfinite(J)) else None
+            return jacobian["J"]
+
+        jacobian: dict[str, NDArray | None] = {}
 
         first = [c for c in todo if c.kind == "parameter"] if scores else todo  # the known parameters first: cheap
         ranked = fit(first, len(skipped))

@@ -26,7 +26,8 @@ def fitted_basis(problem: Problem, x: NDArray, free: NDArray, linear: Problem | 
     integrator, the linear car) when given and all are free, else forward differences of `problem` (one batch);
     None where they are not finite."""
     free = np.asarray(free, dtype=bool)
-    got = linear.linearised(np.asarray(x, dtype=float)) if linear is not None and free.all() else None
+    exact = linear is not None and linear.linearised is not None and free.all()  # (a long record's has `normal` only)
+    got = linear.linearised(np.asarray(x, dtype=float)) if exact else None
     if got is not None:
         jac = got[2]
     else:

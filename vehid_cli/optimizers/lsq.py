@@ -52,8 +52,15 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         R /= step[:, None]
         return R
 
+    last: dict[str, NDArray] = {}  # the point, residual and Jacobian trf was last given
+
     def jacobian(x: NDArray) -> NDArray:
-        return jacobian_rows(x).T
+        r = residual(x)
+        if last and trf_stops(last["x"], last["r"], last["J"], x, r, lo, hi, width, tol):
+            return last["J"]  # trf stops at x without using its Jacobian there: D simulations saved
+        J = jacobian_rows(x).T
+        last.update(x=x.copy(), r=r, J=J)
+        return J
 
     from scipy.optimize import least_squares  # 0.3 s to import: not when a config naming lsq is only validated
     from scipy.optimize._lsq.common import make_strictly_feasible  # what least_squares does to x0 (idempotent)
@@ -67,6 +74,37 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
     )  # fmt: skip
     return result.x
+
+
+STOP_MARGIN = 0.5  # trf_stops claims a stop only with this margin on scipy's own tests (else it differences)
+
+
+def trf_stops(
+    xp: NDArray, rp: NDArray, J: NDArray, x: NDArray, r: NDArray, lo: NDArray, hi: NDArray, width: NDArray, tol: float
+) -> bool:  # fmt: skip
+    """Will scipy's trust-region least squares ('trf', bounds, x_scale = width, ftol = xtol = tol) stop at x, the
+    point it accepted after the last Jacobian J at xp (residuals rp there, r at x)? It asks for the Jacobian at x
+    before it tests for the stop (scipy 1.x `trf_bounds`), so the D simulations of the last one are wasted: where the
+    step passes scipy's own tests (its cost fall below ftol of the cost with the ratio to its quadratic model's
+    prediction above 1/4, or the step below xtol of x) with a STOP_MARGIN to spare, trf is given J again, which it
+    does not use. The prediction is trf's own: its Coleman-Li scaled quadratic model at xp. A wrong guess (never
+    seen) would only cost trf one step on the previous Jacobian, the costs staying exact."""
+    try:  # scipy's private helpers: without them no guess, every Jacobian computed
+        from scipy.optimize._lsq.common import CL_scaling_vector, evaluate_quadratic
+    except ImportError:  # pragma: no cover - another scipy
+        return False
+    g = J.T @ rp
+    v, dv = CL_scaling_vector(xp, g, lo, hi)
+    v[dv != 0] /= width[dv != 0]
+    d = np.sqrt(v) * width
+    step = x - xp
+    predicted = -float(evaluate_quadratic(J * d, d * g, step / d, diag=g * dv * width))
+    F = 0.5 * float(rp @ rp)
+    dF = F - 0.5 * float(r @ r)
+    ratio = dF / predicted if predicted > 0 else float(predicted == dF == 0)
+    ftol = dF < STOP_MARGIN * tol * F and ratio > 0.25 / STOP_MARGIN
+    xtol = float(np.linalg.norm(step)) < STOP_MARGIN * tol * (tol + float(np.linalg.norm(xp)))
+    return bool(np.isfinite(dF) and (ftol or xtol))
 
 
 STEP_SD = 1e-2  # gauss_newton stops when its step is below this many of the estimate's standard deviations

@@ -1,0 +1,149 @@
+"""The candidate fits' savings of simulations (issue 26): Broyden's update, the screening of the starts with shared and
+approximate car columns, trf's unused last Jacobian and the longest-first order of the parallel fits; each against
+an independent truth (the secant condition, a closed-form least squares, scipy's own run, the serial order)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vehid_cli.diagnose import attribution as A
+from vehid_cli.diagnose import starts as S
+from vehid_cli.diagnose.score import fitted_basis
+from vehid_cli.optimizers import lsq
+from vehid_cli.optimizers.base import Problem, Search
+
+
+def counted(problem: Problem) -> tuple[Problem, list[int]]:
+    """The problem with a count of the points its residuals were asked for."""
+    n = [0]
+
+    def residuals(X):
+        n[0] += len(X)
+        return problem.residuals(X)
+
+    return Problem(problem.lower, problem.upper, lambda X: residuals(X)[0], residuals, names=problem.names), n
+
+
+def linear_problem(seed: int = 0) -> tuple[Problem, np.ndarray, np.ndarray]:
+    """r = A x - y over 4 'car' unknowns and 2 'effect' strengths (the effect's columns scaled by a shape unknown, the
+    last): cost the mean square; its matrix A (at shape 1) and data y."""
+    rng = np.random.default_rng(seed)
+    A_ = rng.standard_normal((200, 6))
+    y = A_ @ np.array([1.0, -2.0, 0.5, 3.0, 0.7, -0.4]) + 0.01 * rng.standard_normal(200)
+
+    def residuals(X):
+        X = np.atleast_2d(X)
+        R = X[:, :4] @ A_[:, :4].T + (X[:, 4:6] * X[:, 6:7]) @ A_[:, 4:6].T - y
+        return np.mean(R**2, axis=1), R
+
+    lo, hi = np.r_[-10 * np.ones(6), 0.5], np.r_[10 * np.ones(6), 2.0]
+    names = ("a", "b", "c", "d", "e.s1", "e.s2", "e.shape")
+    return Problem(lo, hi, lambda X: residuals(X)[0], residuals, names=names), A_, y
+
+
+def test_broyden_update_reproduces_the_secant_and_leaves_other_directions():
+    rng = np.random.default_rng(3)
+    J, dx, dr = rng.standard_normal((50, 4)), rng.standard_normal(4), rng.standard_normal(50)
+    width = np.array([1.0, 1e3, 1e-2, 10.0])
+    new = S.broyden(J, dx, dr, width)
+    np.testing.assert_allclose(new @ dx, dr, rtol=1e-10, atol=1e-10)  # the secant condition
+    du = dx / width
+    v = rng.standard_normal(4)
+    v -= (v @ du) / (du @ du) * du  # orthogonal to the step in box-width units
+    np.testing.assert_allclose(new @ (v * width), J @ (v * width), rtol=1e-10, atol=1e-10)
+    assert np.array_equal(S.broyden(J, np.zeros(4), dr, width), J)  # no step, no update
+
+
+@pytest.mark.parametrize("secant", [False, True])
+def test_screening_reaches_the_least_squares_solution(monkeypatch, secant):
+    """On a model linear in the car's unknowns and the strengths, three damped Gauss-Newton steps from each start
+    reach the closed-form least squares over the unknowns it steps (the shape held), with the car's columns by forward
+    differences or from the current fit's Jacobian."""
+    monkeypatch.setattr(S, "SECANT", secant)
+    problem, A_, y = linear_problem()
+    x0 = np.r_[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    starts = ({"e.shape": 1.0}, {"e.shape": 1.5})
+    car = A_[:, :4]  # the current fit's Jacobian along the car's unknowns (exact: linear)
+    got = S.screen_starts(problem, x0, starts, ("e.shape",), ("e.s1", "e.s2"), {}, True, 4, car)
+    for shape in (1.0, 1.5):
+        M = np.c_[A_[:, :4], shape * A_[:, 4:6]]
+        x = np.linalg.lstsq(M, y, rcond=None)[0]
+        if got[6] == shape:
+            np.testing.assert_allclose(got[:6], x, rtol=1e-4, atol=1e-6)
+    assert got[6] in (1.0, 1.5)
+
+
+def test_shared_force_free_starts_change_nothing_and_save_simulations(monkeypatch):
+    """Starts whose strengths are at null share the response and the car's derivatives: the same point, bit for bit,
+    as when every start is differenced on its own (the effect declared nonlinear), with fewer simulations."""
+    monkeypatch.setattr(S, "SECANT", False)
+    problem, _, _ = linear_problem(1)
+    x0 = np.r_[0.3, -0.2, 0.1, 0.4, 0.0, 0.0, 1.0]
+    starts = tuple({"e.shape": s} for s in (0.6, 1.0, 1.4, 1.9))
+    got = {}
+    for linear in (False, True):
+        p, n = counted(problem)
+        got[linear] = (S.screen_starts(p, x0, starts, ("e.shape",), ("e.s1", "e.s2"), {}, linear, 4), n[0])
+    assert np.array_equal(got[True][0], got[False][0])
+    assert got[True][1] <= got[False][1] - 3 * 4  # 3 starts' car columns (4 each) not simulated again
+
+
+def decaying(seed: int = 0) -> Problem:
+    """Fit y = a exp(-b t) + c to noisy samples: a small nonlinear least squares."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 4, 120)
+    y = 2.0 * np.exp(-1.3 * t) + 0.5 + 0.02 * rng.standard_normal(t.size)
+
+    def residuals(X):
+        X = np.atleast_2d(X)
+        R = X[:, :1] * np.exp(-X[:, 1:2] * t) + X[:, 2:3] - y
+        return np.mean(R**2, axis=1), R
+
+    return Problem(np.array([0.1, 0.1, -2.0]), np.array([5.0, 5.0, 2.0]), lambda X: residuals(X)[0], residuals,
+                   names=("a", "b", "c"))  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_polish_gives_trf_its_last_jacobian_again_without_changing_the_fit(monkeypatch, seed):
+    """The polish skips the Jacobian at the point trf stops at: the same final point as trf given every Jacobian
+    (scipy's own run), bit for bit, with D fewer evaluations."""
+    problem = decaying(seed)
+    x0 = np.array([1.0, 0.5, 0.0])
+    runs = {}
+    for skip in (True, False):
+        if not skip:
+            monkeypatch.setattr(lsq, "trf_stops", lambda *a: False)
+        run = Search(problem, np.random.default_rng(0), 10_000)
+        runs[skip] = (lsq.polish(run, x0, tol=1e-10), run.evaluations)
+    assert np.array_equal(runs[True][0], runs[False][0])
+    assert runs[True][1] == runs[False][1] - 3
+
+
+def test_parallel_fits_come_back_in_the_candidates_order():
+    """Longest first in the pool, the results in the candidates' order whatever the finishing order."""
+    cands = [A.parameter_candidate(n, 1.0) for n in ("kf", "kr", "cf")] + [
+        A.Candidate("slow", ("slow.a",), shape=("slow.s",), starts=({}, {}, {}), linear=False)
+    ]  # fmt: skip
+    assert max(cands, key=A.expected_seconds).effect == "slow"
+    seen = []
+    got = A.run_all(lambda c: c.effect, cands, None, seen.append)
+    assert got == [c.effect for c in cands] and sorted(seen) == [1, 2, 3, 4]
+
+
+def test_fitted_basis_without_exact_sensitivities_falls_back_to_differences():
+    """A linear twin whose problem has no `linearised` (a long record's has normal equations only; the four-post
+    rig's README example raised TypeError here): the basis from forward differences, as with no twin."""
+    rng = np.random.default_rng(5)
+    A_, y = rng.standard_normal((100, 4)), rng.standard_normal(100)
+
+    def residuals(X):
+        R = np.atleast_2d(X) @ A_.T - y
+        return np.mean(R**2, axis=1), R
+
+    lo, hi = -np.ones(4), np.ones(4)
+    problem = Problem(lo, hi, lambda X: residuals(X)[0], residuals, names=("a", "b", "c", "d"))
+    free = np.ones(4, dtype=bool)  # all free: where the twin's exact sensitivities would be used
+    got = fitted_basis(problem, np.zeros(4), free, Problem(lo, hi, problem.cost, residuals))
+    want = np.linalg.svd(A_, full_matrices=False)[0]
+    np.testing.assert_allclose(np.abs(got.T @ want), np.eye(4), atol=1e-6)  # the same span (signs aside)
