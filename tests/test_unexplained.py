@@ -13,6 +13,7 @@ from tests.conftest import BASE_CONFIG, ROOT, read_png
 from vehid_cli.config import load_config
 from vehid_cli.diagnose.attribution import lsq_fit
 from vehid_cli.diagnose.holdout import holdout_blocks
+from vehid_cli.diagnose.linear_response import car_at, responses, responses_blocks
 from vehid_cli.diagnose.psplines import basis as _basis
 from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, candidate_order, resemblance
 from vehid_cli.diagnose.unexplained import Unexplained, estimate_unexplained
@@ -182,3 +183,20 @@ def test_candidate_order_follows_the_dominant_curve(damping):
     order = candidate_order(u, ["coulomb_friction", "damper_lag", "parameter:cr", "parameter:cf"])
     assert order[0] == "parameter:cf"
     assert order.index("parameter:cr") > order.index("damper_lag")  # the rear shows nothing
+
+
+@pytest.mark.parametrize("block", [2, 5, 256, 2999])
+def test_responses_in_blocks_equal_one_recursion(damping, block):
+    """The linear car's states driven by many strut-force histories, made a block of time at a time with the
+    recursion carried over (what the force's columns and the trajectory's correction use), are those of one
+    recursion over the record, bit for bit (a last block of one sample joins the one before)."""
+    task = damping[0]
+    exp = task.experiment
+    car = car_at(exp, {}, exp.dt)
+    rng = np.random.default_rng(3)
+    U = rng.standard_normal((exp.t.size, 4, 6)) * 100.0
+    whole = responses(car, U)
+    parts = list(responses_blocks(car, U, block))
+    assert all(s.shape[0] >= 2 for _, s in parts)
+    np.testing.assert_array_equal(np.concatenate([s for _, s in parts]), whole)
+    assert [k0 for k0, _ in parts] == list(np.cumsum([0] + [s.shape[0] for _, s in parts[:-1]]))

@@ -27,14 +27,16 @@ from ..models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
 from ..models.noise import NoiseModel, add_channel_noise
 from ..models.road import road_function
 from ..models.sensors import Layout
+from ..sim.kernel import in_parallel
 from ..sim.linear import Response, simulate, simulate_columns
-from ..sim.nonlinear import simulate_effects
+from ..sim.nonlinear import BLOCK_SAMPLES, effects_blocks, simulate_effects
 from ..sim.sensitivity import car_output_matrices, central_slopes, linear_sensitivities, stencil
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
 BlockSink = Callable[[int, dict, dict], None]  # (first sample, family -> (b, k) channels, -> (b, k, D) derivatives)
 CHUNK_BYTES = 40 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs):
 # 2 cars of a 60 s record at 1 kHz (18 MB each), one per core (3 at 64 MB: the 60 s diagnosis peaked 37 MB higher)
+LONG_BLOCKS = 4  # a record longer than this many blocks of BLOCK_SAMPLES runs the RK4 kernel in time blocks
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,8 @@ class Experiment:
                 assemble(p), self.road, self.dt, self.layout.column_groups, "exact", self.layout.points(p)
             )
             return self.layout.read_columns(columns)
+        if self._blocked(values):
+            return self._read_blocks(values)
         arrays = [np.asarray(v) for v in (values or {}).values()]
         sizes = {a.shape[0] for a in arrays if a.ndim == 1}
         if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
@@ -138,11 +142,63 @@ class Experiment:
             parts.append(self.read(self.simulate(part)))
         return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
 
+    def _blocked(self, values: Mapping[str, ArrayLike] | None) -> bool:
+        """Whether `outputs` runs the RK4 kernel in time blocks: a long record (more than LONG_BLOCKS blocks of
+        BLOCK_SAMPLES) on the kernel's RK4 path."""
+        sim = self.config.simulation
+        if self.t.size <= LONG_BLOCKS * BLOCK_SAMPLES or sim.integrator != "rk4" or self.road.ndim != 2:
+            return False
+        return not self._linear(self.effects(values))
+
+    def _read_blocks(self, values: Mapping[str, ArrayLike] | None) -> dict[str, NDArray]:
+        """The layout's channels of a batch (`outputs`), the RK4 kernel run over the record in time blocks
+        (`sim.nonlinear.effects_blocks`): only the channels are kept whole, never the cars' full trajectories (the
+        same numbers: the kernel resumes each block where the one before ended, and the layout reads each sample
+        alone)."""
+        arrays = [np.asarray(v) for v in (values or {}).values()]
+        sizes = {a.shape[0] for a in arrays if a.ndim == 1}
+        if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
+            return self._read_blocks_of(values)
+        (P,) = sizes  # a one-dimensional batch: its cars split over threads, each running its own blocks
+        n = self.t.size
+        out = {f: np.empty((P, n, len(self.layout.names(f)))) for f in self.layout.families}
+
+        def rows(s: slice) -> None:
+            part = {k: (v[s] if np.ndim(v) == 1 else v) for k, v in values.items()}
+            self._read_blocks_of(part, {f: y[s] for f, y in out.items()})
+
+        in_parallel(P, rows)
+        return out
+
+    def _read_blocks_of(
+        self, values: Mapping[str, ArrayLike] | None, out: dict[str, NDArray] | None = None
+    ) -> dict[str, NDArray]:
+        """`_read_blocks` of a batch in this thread (the kernel's own split over threads per block would start a
+        pool per block: twice the wall of one call at 2048-sample blocks), written into `out` when given."""
+        effects = self.effects(values)
+        p = self.parameters(values)
+        sim = self.config.simulation
+        blocks = effects_blocks(assemble(p), p["cf"], p["cr"], effects, self.road, self.dt, sim.substeps or 1,
+                                self.layout.points(p))  # fmt: skip
+        out = {} if out is None else out
+        n = self.t.size
+        for k0, response in blocks:
+            part = self.read(response)
+            for family, y in part.items():
+                if family not in out:
+                    out[family] = np.empty(y.shape[:-2] + (n, y.shape[-1]))
+                out[family][..., k0 : k0 + y.shape[-2], :] = y
+        return out
+
     @property
     def cars_per_chunk(self) -> int:
         """How many cars `outputs` simulates at once: their full response (about 45 columns per sample) within
-        CHUNK_BYTES, at least one car."""
-        per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
+        CHUNK_BYTES, at least one car. A record simulated in time blocks holds the layout's channels of each car
+        (and an objective's error and residual beside them: three copies) instead."""
+        if self._blocked(None):
+            per_car = self.t.size * 3 * len(self.layout.sensors) * 8
+        else:
+            per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
         return max(1, CHUNK_BYTES // per_car)
 
     def exact_sensitivities(
