@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..config import Config
+from ..core.allocator import hand_back_freed_memory
 from ..core.errors import InputError
 from ..core.streams import experiment_rng
 from ..io.measurement import read_measurement, time_grid
@@ -47,6 +48,13 @@ class Experiment:
     t: NDArray  # (n,) [s]
     road: NDArray  # (n, 4) [m]
     road_source: str  # "config" or the measurement file the road came from
+
+    def __post_init__(self) -> None:
+        """A long record (more than LONG_BLOCKS blocks of BLOCK_SAMPLES, simulated or measured) has the process hand
+        freed memory back to the system from then on (`core.allocator.hand_back_freed_memory`: its arrays are tens
+        of MB, and a diagnosis's phases otherwise keep each other's freed memory mapped)."""
+        if self.t.size > LONG_BLOCKS * BLOCK_SAMPLES:
+            hand_back_freed_memory()
 
     @cached_property
     def layout(self) -> Layout:
