@@ -13,8 +13,8 @@ A long record is the opposite case (`hand_back_freed_memory`, set when one is lo
 per evaluation, and a diagnosis runs phases of different shapes one after the other (the declared fit's, the missing
 force's columns, candidate fits in threads, each with its own malloc arena); with 64 MiB kept per arena the freed
 memory of one phase stayed mapped under the next one's (the 60 s diagnosis peaked 87 MiB higher: 432 vs 345 MiB).
-Lower thresholds (LONG_MMAP_THRESHOLD, LONG_TRIM_THRESHOLD) hand it back; the page faults they cost are small beside
-a long record's evaluation.
+Lower thresholds (LONG_MMAP_THRESHOLD, LONG_TRIM_THRESHOLD) hand it back, and fewer arenas (LONG_ARENA_MAX) keep
+less of it in the threads' own; the page faults they cost are small beside a long record's evaluation.
 """
 
 from __future__ import annotations
@@ -25,10 +25,12 @@ import sys
 
 M_TRIM_THRESHOLD = -1  # glibc's mallopt parameter numbers (malloc.h)
 M_MMAP_THRESHOLD = -3
+M_ARENA_MAX = -8
 MMAP_THRESHOLD = 32 * 2**20  # [bytes] blocks below this come from the heap (glibc's default starts at 128 kB)
 TRIM_THRESHOLD = 64 * 2**20  # [bytes] free heap kept mapped for reuse (glibc's default starts at 128 kB)
 LONG_MMAP_THRESHOLD = 4 * 2**20  # [bytes] the same for a long record (`hand_back_freed_memory`)
 LONG_TRIM_THRESHOLD = 8 * 2**20
+LONG_ARENA_MAX = 2  # malloc arenas at most for a long record (glibc's default: 8 per core), each keeping its own
 
 
 def keep_freed_memory() -> bool:
@@ -37,12 +39,13 @@ def keep_freed_memory() -> bool:
 
 
 def hand_back_freed_memory() -> bool:
-    """Lower glibc's thresholds for a long record (see the module docstring); True when they were set."""
-    return _thresholds(LONG_MMAP_THRESHOLD, LONG_TRIM_THRESHOLD)
+    """Lower glibc's thresholds and arena count for a long record (see the module docstring); True when set."""
+    return _thresholds(LONG_MMAP_THRESHOLD, LONG_TRIM_THRESHOLD, LONG_ARENA_MAX)
 
 
-def _thresholds(mmap_bytes: int, trim_bytes: int) -> bool:
-    """glibc's mmap threshold and trim threshold [bytes] set by mallopt; False where that is not glibc's."""
+def _thresholds(mmap_bytes: int, trim_bytes: int, arenas: int | None = None) -> bool:
+    """glibc's mmap threshold and trim threshold [bytes] (and the most arenas, when given) set by mallopt; False
+    where that is not glibc's."""
     if not sys.platform.startswith("linux"):
         return False
     try:
@@ -52,4 +55,5 @@ def _thresholds(mmap_bytes: int, trim_bytes: int) -> bool:
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
-    return bool(mallopt(M_MMAP_THRESHOLD, mmap_bytes)) and bool(mallopt(M_TRIM_THRESHOLD, trim_bytes))
+    done = bool(mallopt(M_MMAP_THRESHOLD, mmap_bytes)) and bool(mallopt(M_TRIM_THRESHOLD, trim_bytes))
+    return done and (arenas is None or bool(mallopt(M_ARENA_MAX, arenas)))

@@ -28,7 +28,7 @@ from ..models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
 from ..models.noise import NoiseModel, add_channel_noise
 from ..models.road import road_function
 from ..models.sensors import Layout
-from ..sim.kernel import in_parallel
+from ..sim.kernel import available_cores, in_parallel
 from ..sim.linear import Response, simulate, simulate_columns
 from ..sim.nonlinear import BLOCK_SAMPLES, effects_blocks, simulate_effects
 from ..sim.sensitivity import car_output_matrices, central_slopes, linear_sensitivities, stencil
@@ -201,12 +201,13 @@ class Experiment:
     @property
     def cars_per_chunk(self) -> int:
         """How many cars `outputs` simulates at once: their full response (about 45 columns per sample) within
-        CHUNK_BYTES, at least one car. A record simulated in time blocks holds the layout's channels of each car
-        (and an objective's error and residual beside them: three copies) instead."""
+        CHUNK_BYTES, at least one car. A record simulated in time blocks holds only the layout's channels of each
+        car (and an objective's error and residuals beside them): one car per core, within CHUNK_BYTES of those
+        three copies (more cars at once would only hold more: the blocks already split the cars over the cores)."""
         if self._blocked(None):
             per_car = self.t.size * 3 * len(self.layout.sensors) * 8
-        else:
-            per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
+            return max(1, min(CHUNK_BYTES // per_car, available_cores()))
+        per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
         return max(1, CHUNK_BYTES // per_car)
 
     def exact_sensitivities(
