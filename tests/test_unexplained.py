@@ -17,6 +17,7 @@ from vehid_cli.diagnose.linear_response import car_at, responses, responses_bloc
 from vehid_cli.diagnose.psplines import basis as _basis
 from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, candidate_order, resemblance
 from vehid_cli.diagnose.unexplained import Unexplained, estimate_unexplained
+from vehid_cli.identify.experiment import Experiment
 from vehid_cli.identify.task import build_task
 from vehid_cli.report.diagnose_plots import plot_unexplained
 
@@ -200,3 +201,19 @@ def test_responses_in_blocks_equal_one_recursion(damping, block):
     assert all(s.shape[0] >= 2 for _, s in parts)
     np.testing.assert_array_equal(np.concatenate([s for _, s in parts]), whole)
     assert [k0 for k0, _ in parts] == list(np.cumsum([0] + [s.shape[0] for _, s in parts[:-1]]))
+
+
+def test_a_record_simulated_in_time_blocks_gives_the_same_estimate(monkeypatch):
+    """On a record the experiment simulates in time blocks (6 s on the RK4 kernel: channels and strut trajectories
+    read a block at a time), the estimate is the one from whole simulations, bit for bit."""
+    sets = [*NOISE, "simulation.integrator=rk4", "simulation.duration=6", "road.bump=null", "road.random.iso_class=C"]
+    truth = build_task(load_config(ROOT / "configs" / "effects" / "hysteresis.yaml", sets))
+    task = dataclasses.replace(build_task(load_config(BASE_CONFIG, sets)), sigma=truth.sigma)
+    ref = truth.reference(0)
+    assert task.experiment.blocked(None)
+    blocked = estimate_unexplained(task, ref, task.names, task.nominal, iterations=2)
+    monkeypatch.setattr(Experiment, "_blocked", lambda self, values: False)
+    assert not task.experiment.blocked(None)
+    whole = estimate_unexplained(task, ref, task.names, task.nominal, iterations=2)
+    assert blocked.p_value < 1e-6  # the hysteresis is seen
+    assert json.dumps(blocked.to_json()) == json.dumps(whole.to_json())

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import functools
 import sys
 
 M_TRIM_THRESHOLD = -1  # glibc's mallopt parameter numbers (malloc.h)
@@ -46,14 +47,41 @@ def hand_back_freed_memory() -> bool:
 def _thresholds(mmap_bytes: int, trim_bytes: int, arenas: int | None = None) -> bool:
     """glibc's mmap threshold and trim threshold [bytes] (and the most arenas, when given) set by mallopt; False
     where that is not glibc's."""
-    if not sys.platform.startswith("linux"):
-        return False
+    libc = _libc()
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
         mallopt = libc.mallopt
-    except (OSError, AttributeError):  # musl or another C library without mallopt
+    except AttributeError:  # no C library found, or one without mallopt (musl)
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
     done = bool(mallopt(M_MMAP_THRESHOLD, mmap_bytes)) and bool(mallopt(M_TRIM_THRESHOLD, trim_bytes))
     return done and (arenas is None or bool(mallopt(M_ARENA_MAX, arenas)))
+
+
+def release_free_pages() -> bool:
+    """Hand the free pages inside glibc's heaps back to the system (malloc_trim(0): every arena, not only the memory
+    above the top chunk that the trim threshold governs). A long record's evaluation calls it when done: the compiled
+    kernels' and the blocks' small allocations interleave with its arrays, so freed memory in the middle of a heap
+    stays mapped otherwise, and the floor under every later phase rises. False where that is not glibc's."""
+    libc = _libc()
+    if libc is None:
+        return False
+    try:
+        trim = libc.malloc_trim
+    except AttributeError:
+        return False
+    trim.argtypes = (ctypes.c_size_t,)
+    trim.restype = ctypes.c_int
+    trim(0)
+    return True
+
+
+@functools.cache
+def _libc():
+    """The C library (Linux), or None."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+    except OSError:
+        return None

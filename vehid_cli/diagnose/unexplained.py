@@ -255,16 +255,33 @@ class Unexplained(Result):
 
 
 def _trajectories(task: Task, names: tuple[str, ...], X: NDArray):
-    """Simulate the batch X (P, D): responses and each corner's deflection and velocity (P, n, 4)."""
+    """Simulate the batch X (P, D): the layout's channels (family -> (P, n, k)) and each corner's deflection and
+    velocity (P, n, 4). A record the experiment simulates in time blocks is read a block at a time (the same
+    numbers; its whole trajectories are not held)."""
     exp = task.experiment
     values = {n: X[:, j] for j, n in enumerate(names)}
     with np.errstate(all="ignore"):
-        resp = exp.simulate(values)
         G = np.broadcast_to(exp.matrices(values).G, (X.shape[0], N_CORNERS, 3))
-    Gt = np.swapaxes(G, -1, -2)[:, None, :, :]
+        Gt = np.swapaxes(G, -1, -2)[:, None, :, :]
+        if not exp.blocked(values):
+            resp = exp.simulate(values)
+            return exp.read(resp), *_struts(resp, Gt)
+        n = exp.t.size
+        channels: dict[str, NDArray] = {}
+        d, v = np.empty((X.shape[0], n, N_CORNERS)), np.empty((X.shape[0], n, N_CORNERS))
+        for k0, resp in exp.simulate_blocks(values):
+            b = resp.q.shape[-2]
+            for family, y in exp.read(resp).items():
+                channels.setdefault(family, np.empty(y.shape[:-2] + (n, y.shape[-1])))[..., k0 : k0 + b, :] = y
+            d[:, k0 : k0 + b], v[:, k0 : k0 + b] = _struts(resp, Gt)
+    return channels, d, v
+
+
+def _struts(resp, Gt: NDArray) -> tuple[NDArray, NDArray]:
+    """Each corner's strut deflection and velocity (P, n, 4) of a response (P, n, .), Gt (P, 1, 3, 4) its body rows."""
     d = (resp.q[..., None, :3] @ Gt)[..., 0, :] - resp.q[..., 3:]
     v = (resp.qd[..., None, :3] @ Gt)[..., 0, :] - resp.qd[..., 3:]
-    return resp, d, v
+    return d, v
 
 
 @dataclass(frozen=True)
@@ -314,8 +331,9 @@ class _FittedCar:
             h = 1e-6 * np.maximum(np.abs(at), np.maximum(1e-3 * width, 1e-9))
             steps = np.where(at + h <= hi, h, -h)
         X = np.vstack([at[None, :], at[None, :] + np.diag(steps)]) if steps.size else at[None, :]
-        resp, d_all, v_all = _trajectories(self.task, self.names, X)
-        res = np.asarray(self.objective.residuals(exp.read(resp)), dtype=float)  # (P, R_all)
+        channels, d_all, v_all = _trajectories(self.task, self.names, X)
+        res = np.asarray(self.objective.residuals(channels), dtype=float)  # (P, R_all)
+        del channels
         if not np.all(np.isfinite(res[0])):
             raise ValueError("the fitted model's residual is not finite")
         if steps.size:
