@@ -17,6 +17,7 @@ from vehid_cli.diagnose.linear_response import car_at, responses, responses_bloc
 from vehid_cli.diagnose.psplines import basis as _basis
 from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, candidate_order, resemblance
 from vehid_cli.diagnose.unexplained import Unexplained, estimate_unexplained
+from vehid_cli.identify import experiment
 from vehid_cli.identify.experiment import Experiment
 from vehid_cli.identify.task import build_task
 from vehid_cli.report.diagnose_plots import plot_unexplained
@@ -204,8 +205,10 @@ def test_responses_in_blocks_equal_one_recursion(damping, block):
 
 
 def test_a_record_simulated_in_time_blocks_gives_the_same_estimate(monkeypatch):
-    """On a record the experiment simulates in time blocks (6 s on the RK4 kernel: channels and strut trajectories
-    read a block at a time), the estimate is the one from whole simulations, bit for bit."""
+    """On a record the experiment simulates in time blocks (6 s on the RK4 kernel, blocked from 2 blocks of 2048 samples
+    on: channels and strut trajectories read a block at a time), the estimate is the one from whole simulations, bit
+    for bit."""
+    monkeypatch.setattr(experiment, "BLOCKED_FROM", 2)
     sets = [*NOISE, "simulation.integrator=rk4", "simulation.duration=6", "road.bump=null", "road.random.iso_class=C"]
     truth = build_task(load_config(ROOT / "configs" / "effects" / "hysteresis.yaml", sets))
     task = dataclasses.replace(build_task(load_config(BASE_CONFIG, sets)), sigma=truth.sigma)

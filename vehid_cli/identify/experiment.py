@@ -38,8 +38,9 @@ BlockSink = Callable[[int, dict, dict], None]  # (first sample, family -> (b, k)
 CHUNK_BYTES = 40 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs):
 # 2 cars of a 60 s record at 1 kHz (18 MB each), one per core (3 at 64 MB: the 60 s diagnosis peaked 37 MB higher)
 LONG_BLOCKS = 4  # a record longer than this many blocks of BLOCK_SAMPLES is long: freed memory handed back
-BLOCKED_FROM = 2  # a record longer than this many blocks runs the RK4 kernel in time blocks (a long record's 5000-
-# sample screening window too: its candidate fits ran 13 cars' whole trajectories per thread, 80 MB on two cores)
+BLOCKED_FROM = LONG_BLOCKS  # a record longer than this many blocks runs the RK4 kernel in time blocks. (From 2, the
+# long record's 5000-sample screening window too: its candidate threads' peak ~10 MiB lower, but each evaluation
+# 1.5x slower on 4-13 cars, the setup repeated per thread: the 60 s diagnosis 1.3-1.6x the wall)
 
 
 @dataclass(frozen=True)
