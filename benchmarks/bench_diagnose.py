@@ -121,12 +121,14 @@ def main() -> None:
             res = vehid("simulate", str(truth), "-o", str(data), "--set", "noise.level=0.05", *sets(sim_sets))
             if res.returncode:
                 raise SystemExit(res.stderr)
-            walls, peaks, anchors, others = [], [], [], []
+            walls, peaks, anchors, others, other_peaks = [], [], [], [], []
             command = ("diagnose", str(BASE), "--data", str(data), "--json", str(out), *sets(diag_sets))
             for _ in range(args.repeats):  # the anchor timed beside each run: the machine's load moves both
                 anchors.append(anchor(1))
                 if args.against is not None:
-                    others.append(timed(*command, root=args.against.resolve())[0])
+                    other = timed(*command, root=args.against.resolve())
+                    others.append(other[0])
+                    other_peaks.append(other[1])
                 wall, peak, code = timed(*command)
                 if code:
                     raise SystemExit(vehid("diagnose", str(BASE), "--data", str(data), *sets(diag_sets)).stderr)
@@ -140,8 +142,9 @@ def main() -> None:
                   f"verdict: {doc['verdict'][:60]}")  # fmt: skip
             if others:
                 runs = ", ".join(f"{w:.1f}" for w in others)
-                print(f"    {args.against}: median {statistics.median(others):.1f} s wall ({runs}); this tree / that "
-                      f"{wall / statistics.median(others):.2f}")  # fmt: skip
+                other = statistics.median(others)
+                print(f"    {args.against}: median {other:.1f} s wall ({runs}), peak RSS {max(other_peaks):.0f} MiB; "
+                      f"this tree / that {wall / other:.2f}")  # fmt: skip
 
 
 if __name__ == "__main__":

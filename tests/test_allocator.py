@@ -50,3 +50,23 @@ def test_freed_blocks_of_a_few_mb_are_reused_without_page_faults():
     default, kept = faults(False), faults(True)
     assert default > 50 * 100, default  # the default really re-faults (else this test could not fail)
     assert kept < default / 10, (kept, default)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_a_long_record_hands_freed_memory_back():
+    """After hand_back_freed_memory (a long record's Experiment sets it) the same pattern faults its pages in again:
+    freed blocks of a few MB go back to the system instead of staying mapped (at least half the default's faults)."""
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    pattern = PATTERN.replace(
+        "    assert keep_freed_memory()",
+        "    from vehid_cli.core.allocator import hand_back_freed_memory\n"
+        "    assert keep_freed_memory() and hand_back_freed_memory()",
+    ).replace("3000 *", "30000 *")  # blocks of 10-20 MB: above the long record's mmap threshold
+    default = int(subprocess.run([sys.executable, "-c", pattern, "0"], capture_output=True, text=True, env=env,
+                                 check=True).stdout.split()[-1])  # fmt: skip
+    handed = int(subprocess.run([sys.executable, "-c", pattern, "1"], capture_output=True, text=True, env=env,
+                                check=True).stdout.split()[-1])  # fmt: skip
+    kept = int(subprocess.run([sys.executable, "-c", pattern.replace(" and hand_back_freed_memory()", ""), "1"],
+                              capture_output=True, text=True, env=env, check=True).stdout.split()[-1])  # fmt: skip
+    assert kept < default / 10, (kept, default)  # 64 MiB kept: the 10-20 MB blocks are reused
+    assert handed > default / 2, (handed, default)  # handed back: faulted in again like glibc's defaults

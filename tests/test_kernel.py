@@ -5,14 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.conftest import PAPER_CAR
+from tests.conftest import PAPER_CAR, ROOT
 from tests.reference import rel_rms
 from tests.test_linear import smooth_road
+from vehid_cli.config import load_config
+from vehid_cli.identify.task import build_task
 from vehid_cli.io.measurement import time_grid
+from vehid_cli.models.effects import effect_rows
 from vehid_cli.models.fullcar import assemble
-from vehid_cli.sim.kernel import cubic_spring, integrate
+from vehid_cli.sim.kernel import cubic_spring, integrate, integrate_blocks
 from vehid_cli.sim.linear import simulate
-from vehid_cli.sim.nonlinear import simulate_fullcar
+from vehid_cli.sim.nonlinear import fullcar_struts, simulate_fullcar
 
 K3 = 5e7  # N/m³: at 3 cm of deflection the cubic force is ~ the linear spring's, so the car is clearly nonlinear
 KNOT = 8e-3  # s: the test road is linear between knots every 8 ms, so every step size below samples it exactly
@@ -98,3 +101,64 @@ def test_strut_forces_and_generic_structure():
     np.testing.assert_allclose(m * res.qdd[0, :, 0], -k * res.q[0, :, 0] - res.force[0, :, 0], rtol=1e-9, atol=1e-12)
     with pytest.raises(ValueError, match="unknown method"):
         integrate("euler", [[m]], [[0.0]], [[k]], [[0.0]], y, dt)
+
+
+def _hysteretic_cars():
+    """Three cars with Bouc-Wen struts and damped tyres (the road drives the tyre struts: the slopes' right limits
+    at the samples matter) on a random road, as the kernel's inputs, and a knotted road 0.6 s long."""
+    masses = np.array([1100.0, 1300.0, 1500.0])
+    mats = assemble({**PAPER_CAR, "m": masses})
+    effects = {"hysteresis": {"alpha_f": 3e4, "alpha_r": 3e4, "beta": 2e4, "gamma": 2e4}, "tyre_damping": {}}
+    es = effect_rows(effects, PAPER_CAR["cf"], PAPER_CAR["cr"], (3,))
+    tyre = np.zeros((3, 4, 7))
+    tyre[:, :, 3:] = np.eye(4)
+    D = np.concatenate([fullcar_struts(mats), tyre], axis=1)
+    E = np.concatenate([np.zeros((4, 4)), -np.eye(4)], axis=0)
+    road = 5 * knotted_road(time_grid(0.6, 1e-3))
+    return (mats.M, mats.C, mats.K, mats.B, road, 1e-3, es.law, es.rows, es.n_z), {"D": D, "E": E}
+
+
+@pytest.mark.parametrize("block", [2, 7, 64, 599])
+def test_blocks_equal_one_call(block):
+    """A record integrated in time blocks, the state carried from each to the next (integrate_blocks), gives the
+    numbers of one call bit for bit (a last block of one sample joins the one before); so does a call resumed by
+    hand from a previous call's state (start, q0, v0, z0)."""
+    args, struts = _hysteretic_cars()
+    one = integrate("rk4", *args, **struts)
+    assert np.ptp(one.z) > 0 and np.all(np.isfinite(one.q))  # the hysteresis is active
+    parts = list(integrate_blocks(*args, **struts, block=block, forces=True))
+    assert all(r.q.shape[1] >= 2 for _, r in parts) and parts[0][0] == 0
+    for field in ("q", "qd", "qdd", "force", "z"):
+        joined = np.concatenate([getattr(r, field) for _, r in parts], axis=1)
+        np.testing.assert_array_equal(joined, getattr(one, field), err_msg=field)
+    cut = min(block, 300)
+    head = integrate("rk4", *args, **struts, stop=cut)
+    rest = integrate("rk4", *args, **struts, start=cut, q0=head.q[:, -1], v0=head.qd[:, -1], z0=head.z[:, -1])
+    np.testing.assert_array_equal(np.concatenate([head.qdd, rest.qdd], axis=1), one.qdd)
+    np.testing.assert_array_equal(rest.state, one.state)
+
+
+def test_resuming_is_rk4_only_and_needs_the_state():
+    args, struts = _hysteretic_cars()
+    with pytest.raises(ValueError, match="only the rk4 kernel"):
+        integrate("newmark", *args, **struts, start=5, q0=np.zeros(7))
+    with pytest.raises(ValueError, match="needs the state"):
+        integrate("rk4", *args, **struts, start=5)
+    skipped = integrate("rk4", *args, **struts, start=0, stop=10, forces=False)
+    assert skipped.force.shape[1] == 0 and skipped.q.shape[1] == 10
+
+
+def test_long_record_outputs_in_blocks_equal_one_simulation():
+    """Experiment.outputs on a record longer than LONG_BLOCKS blocks runs the kernel in time blocks and keeps only
+    the layout's channels: the same channels as reading one whole simulation, bit for bit."""
+    config = load_config(
+        ROOT / "configs" / "effects" / "hysteresis.yaml",
+        ["road.bump=null", "road.random.iso_class=C", "simulation.duration=10", "simulation.substeps=2"],
+    )
+    exp = build_task(config).experiment
+    values = {"m": np.array([1200.0, 1300.0, 1250.0]), "hysteresis.beta": np.array([1e4, 2e4, 3e4])}
+    assert exp._blocked(values)
+    blocked, whole = exp.outputs(values), exp.read(exp.simulate(values))
+    assert set(blocked) == set(whole)
+    for family in whole:
+        np.testing.assert_array_equal(blocked[family], whole[family])

@@ -13,9 +13,12 @@ from tests.conftest import BASE_CONFIG, ROOT, read_png
 from vehid_cli.config import load_config
 from vehid_cli.diagnose.attribution import lsq_fit
 from vehid_cli.diagnose.holdout import holdout_blocks
+from vehid_cli.diagnose.linear_response import car_at, responses, responses_blocks
 from vehid_cli.diagnose.psplines import basis as _basis
 from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, candidate_order, resemblance
 from vehid_cli.diagnose.unexplained import Unexplained, estimate_unexplained
+from vehid_cli.identify import experiment
+from vehid_cli.identify.experiment import Experiment
 from vehid_cli.identify.task import build_task
 from vehid_cli.report.diagnose_plots import plot_unexplained
 
@@ -182,3 +185,38 @@ def test_candidate_order_follows_the_dominant_curve(damping):
     order = candidate_order(u, ["coulomb_friction", "damper_lag", "parameter:cr", "parameter:cf"])
     assert order[0] == "parameter:cf"
     assert order.index("parameter:cr") > order.index("damper_lag")  # the rear shows nothing
+
+
+@pytest.mark.parametrize("block", [2, 5, 256, 2999])
+def test_responses_in_blocks_equal_one_recursion(damping, block):
+    """The linear car's states driven by many strut-force histories, made a block of time at a time with the
+    recursion carried over (what the force's columns and the trajectory's correction use), are those of one
+    recursion over the record, bit for bit (a last block of one sample joins the one before)."""
+    task = damping[0]
+    exp = task.experiment
+    car = car_at(exp, {}, exp.dt)
+    rng = np.random.default_rng(3)
+    U = rng.standard_normal((exp.t.size, 4, 6)) * 100.0
+    whole = responses(car, U)
+    parts = list(responses_blocks(car, U, block))
+    assert all(s.shape[0] >= 2 for _, s in parts)
+    np.testing.assert_array_equal(np.concatenate([s for _, s in parts]), whole)
+    assert [k0 for k0, _ in parts] == list(np.cumsum([0] + [s.shape[0] for _, s in parts[:-1]]))
+
+
+def test_a_record_simulated_in_time_blocks_gives_the_same_estimate(monkeypatch):
+    """On a record the experiment simulates in time blocks (6 s on the RK4 kernel, blocked from 2 blocks of 2048 samples
+    on: channels and strut trajectories read a block at a time), the estimate is the one from whole simulations, bit
+    for bit."""
+    monkeypatch.setattr(experiment, "BLOCKED_FROM", 2)
+    sets = [*NOISE, "simulation.integrator=rk4", "simulation.duration=6", "road.bump=null", "road.random.iso_class=C"]
+    truth = build_task(load_config(ROOT / "configs" / "effects" / "hysteresis.yaml", sets))
+    task = dataclasses.replace(build_task(load_config(BASE_CONFIG, sets)), sigma=truth.sigma)
+    ref = truth.reference(0)
+    assert task.experiment.blocked(None)
+    blocked = estimate_unexplained(task, ref, task.names, task.nominal, iterations=2)
+    monkeypatch.setattr(Experiment, "_blocked", lambda self, values: False)
+    assert not task.experiment.blocked(None)
+    whole = estimate_unexplained(task, ref, task.names, task.nominal, iterations=2)
+    assert blocked.p_value < 1e-6  # the hysteresis is seen
+    assert json.dumps(blocked.to_json()) == json.dumps(whole.to_json())

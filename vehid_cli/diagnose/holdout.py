@@ -27,11 +27,16 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
     are the optimizer's to penalise, without floating-point warnings. The problem's exact linearisation (the linear
     car's sensitivities), when it has one, is masked the same way (its rows of the kept entries)."""
 
+    rows = None if keep is None else np.flatnonzero(keep)
+
     def cr(X):
         with np.errstate(all="ignore"):
             _, r = problem.residuals(X)
-            r = r if keep is None else r[:, keep]
-            return np.mean(r**2, axis=1), r
+            if r.nbytes <= IN_PLACE_BYTES:
+                r = r if keep is None else r[:, keep]
+                return np.mean(r**2, axis=1), r
+            r = r if rows is None else kept_in_place(r, rows)  # a long record's: no second (P, R) array
+            return mean_squares(r), r
 
     def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
         got = problem.linearised(x)
@@ -45,3 +50,23 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
 
     lin = None if problem.linearised is None else linearised
     return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names, lin)
+
+
+def kept_in_place(r: NDArray, rows: NDArray) -> NDArray:
+    """The kept entries `rows` (increasing) of each residual vector of r (P, R), moved to the front of its own row:
+    a view (P, rows.size) of r's memory, not a second array beside it (a long record's Jacobian batch of residuals is
+    50 MB, its kept entries 37). r is the caller's to give up."""
+    n = rows.size
+    for i in range(r.shape[0]):
+        r[i, :n] = r[i, rows]
+    return r[:, :n]
+
+
+MEAN_ROWS = 2  # residual vectors squared at a time by `mean_squares`
+IN_PLACE_BYTES = 16 * 2**20  # residuals above this (a long record's) are masked in place and squared a few rows at a
+# time: the same numbers to round-off (NumPy's sums depend on the rows' alignment in memory), not bit for bit
+
+
+def mean_squares(r: NDArray) -> NDArray:
+    """np.mean(r**2, axis=1) of r (P, R) to round-off, MEAN_ROWS rows squared at a time: no (P, R) square beside r."""
+    return np.concatenate([np.mean(r[i : i + MEAN_ROWS] ** 2, axis=1) for i in range(0, r.shape[0], MEAN_ROWS)])

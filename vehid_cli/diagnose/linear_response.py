@@ -8,6 +8,7 @@ deflection from q.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,16 +80,37 @@ def car_at(exp, values: dict[str, float], dt: float) -> LinearCar:
     return linear_car(exp.matrices(values), dt, layout, layout.points(exp.parameters(values)))
 
 
-def channel_columns(objective, family: str, car: LinearCar, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
-    """The weighted residual entries of `family` (the objective's layout: time-major, observed entries only) that
-    the K input histories U (n, 4, K) with states s (n, 14, K) explain, (R_family, K): the channels' responses over
-    sigma, without what the profiled offsets absorb."""
-    Y = (car.out_s[family] @ s + car.out_u[family] @ U) / sigma[None, :, None]  # (n, k, K)
-    if objective.offsets:
-        objective.project(family, np.moveaxis(Y, -1, 0))  # in place, through the (K, n, k) view
-    Y = Y.reshape(Y.shape[0] * Y.shape[1], -1)
-    rows = objective.entries(family)
-    return Y if rows is None else Y[rows]
+def response_columns(objective, car: LinearCar, U: NDArray, sigma: dict[str, NDArray]) -> NDArray:
+    """The weighted residual entries (the objective's layout: family by family, time-major, observed entries only)
+    that the K input histories U (n, 4, K) explain, (R, K): each family's channels' responses over its `sigma`,
+    without what the profiled offsets absorb. The states are made a block of time at a time (`responses_blocks`)
+    and each family's rows written straight into the result: a long window's states (n, 14, K) are not held."""
+    n, K = U.shape[0], U.shape[2]
+    sizes = {}
+    for f in sigma:
+        rows = objective.entries(f)
+        sizes[f] = n * car.out_s[f].shape[0] if rows is None else rows.size
+    S = np.empty((sum(sizes.values()), K))
+    Ys, first = {}, 0
+    for f in sigma:  # each family's (n, k, K) responses: a view of its rows of S when every entry is kept
+        k = car.out_s[f].shape[0]
+        whole = objective.entries(f) is None
+        Ys[f] = S[first : first + sizes[f]].reshape(n, k, K) if whole else np.empty((n, k, K))
+        first += sizes[f]
+    for k0, s in responses_blocks(car, U):
+        b = s.shape[0]
+        for f, sg in sigma.items():
+            Ys[f][k0 : k0 + b] = (car.out_s[f] @ s + car.out_u[f] @ U[k0 : k0 + b]) / sg[None, :, None]
+    first = 0
+    for f in sigma:
+        Y = Ys.pop(f)
+        if objective.offsets:
+            objective.project(f, np.moveaxis(Y, -1, 0))  # in place, through the (K, n, k) view
+        rows = objective.entries(f)
+        if rows is not None:
+            S[first : first + sizes[f]] = Y.reshape(-1, K)[rows]
+        first += sizes[f]
+    return S
 
 
 def responses(car: LinearCar, U: NDArray) -> NDArray:
@@ -102,3 +124,30 @@ def responses(car: LinearCar, U: NDArray) -> NDArray:
     for k in range(n - 1):
         s[k + 1] += Phi @ s[k]
     return s
+
+
+RESPONSE_BLOCK = 256  # samples of states `responses_blocks` makes at a time: 256 x 14 x 50 inputs, 1.4 MB
+
+
+def responses_blocks(car: LinearCar, U: NDArray, block: int = RESPONSE_BLOCK) -> Iterator[tuple[int, NDArray]]:
+    """`responses` in time blocks: yields (first sample, states (b, 14, K)), the recursion carried from each block
+    to the next, the same numbers as one call (a last block of one sample joins the one before)."""
+    n = U.shape[0]
+    starts = list(range(0, n, max(1, block)))
+    if len(starts) > 1 and n - starts[-1] < 2:
+        starts.pop()
+    Phi, prev = car.Phi, None
+    for k0, k1 in zip(starts, [*starts[1:], n], strict=True):
+        s = np.empty((k1 - k0, 2 * N_DOF, U.shape[2]))
+        if prev is None:
+            s[0] = 0.0
+            np.matmul(car.G1, U[: k1 - 1], out=s[1:])
+            s[1:] += car.G2 @ np.diff(U[:k1], axis=0)
+        else:
+            np.matmul(car.G1, U[k0 - 1 : k1 - 1], out=s)
+            s += car.G2 @ np.diff(U[k0 - 1 : k1], axis=0)
+            s[0] += Phi @ prev
+        for k in range(k1 - k0 - 1):
+            s[k + 1] += Phi @ s[k]
+        prev = s[-1]
+        yield k0, s

@@ -58,7 +58,7 @@ from ..core.result import Result
 from ..identify.objectives import Objective
 from ..identify.task import Task
 from ..models.fullcar import N_CORNERS, N_DOF
-from .linear_response import LinearCar, car_at, channel_columns, responses
+from .linear_response import LinearCar, car_at, response_columns, responses_blocks
 from .psplines import Basis, PenalisedFit, basis, penalised_fit
 from .shapes import Resemblance, resemblance
 from .tails import f_sf
@@ -73,6 +73,7 @@ VARIABLES = ("deflection", "velocity")
 UNITS = {"deflection": "m", "velocity": "m/s"}
 SIGNIFICANCE = 1e-3  # the F test's level for "the residual holds a strut force" (the loop's alpha)
 SIGNIFICANT_Z = 3.0  # a curve is significant where |force| exceeds 3 standard errors somewhere on its grid
+COPY_ROWS = 8192  # rows of the force's columns copied into the fit's matrix at a time
 
 
 # ------------------------------------------------------------------------------------------ results
@@ -254,16 +255,33 @@ class Unexplained(Result):
 
 
 def _trajectories(task: Task, names: tuple[str, ...], X: NDArray):
-    """Simulate the batch X (P, D): responses and each corner's deflection and velocity (P, n, 4)."""
+    """Simulate the batch X (P, D): the layout's channels (family -> (P, n, k)) and each corner's deflection and
+    velocity (P, n, 4). A record the experiment simulates in time blocks is read a block at a time (the same
+    numbers; its whole trajectories are not held)."""
     exp = task.experiment
     values = {n: X[:, j] for j, n in enumerate(names)}
     with np.errstate(all="ignore"):
-        resp = exp.simulate(values)
         G = np.broadcast_to(exp.matrices(values).G, (X.shape[0], N_CORNERS, 3))
-    Gt = np.swapaxes(G, -1, -2)[:, None, :, :]
+        Gt = np.swapaxes(G, -1, -2)[:, None, :, :]
+        if not exp.blocked(values):
+            resp = exp.simulate(values)
+            return exp.read(resp), *_struts(resp, Gt)
+        n = exp.t.size
+        channels: dict[str, NDArray] = {}
+        d, v = np.empty((X.shape[0], n, N_CORNERS)), np.empty((X.shape[0], n, N_CORNERS))
+        for k0, resp in exp.simulate_blocks(values):
+            b = resp.q.shape[-2]
+            for family, y in exp.read(resp).items():
+                channels.setdefault(family, np.empty(y.shape[:-2] + (n, y.shape[-1])))[..., k0 : k0 + b, :] = y
+            d[:, k0 : k0 + b], v[:, k0 : k0 + b] = _struts(resp, Gt)
+    return channels, d, v
+
+
+def _struts(resp, Gt: NDArray) -> tuple[NDArray, NDArray]:
+    """Each corner's strut deflection and velocity (P, n, 4) of a response (P, n, .), Gt (P, 1, 3, 4) its body rows."""
     d = (resp.q[..., None, :3] @ Gt)[..., 0, :] - resp.q[..., 3:]
     v = (resp.qd[..., None, :3] @ Gt)[..., 0, :] - resp.qd[..., 3:]
-    return resp, d, v
+    return d, v
 
 
 @dataclass(frozen=True)
@@ -313,8 +331,9 @@ class _FittedCar:
             h = 1e-6 * np.maximum(np.abs(at), np.maximum(1e-3 * width, 1e-9))
             steps = np.where(at + h <= hi, h, -h)
         X = np.vstack([at[None, :], at[None, :] + np.diag(steps)]) if steps.size else at[None, :]
-        resp, d_all, v_all = _trajectories(self.task, self.names, X)
-        res = np.asarray(self.objective.residuals(exp.read(resp)), dtype=float)  # (P, R_all)
+        channels, d_all, v_all = _trajectories(self.task, self.names, X)
+        res = np.asarray(self.objective.residuals(channels), dtype=float)  # (P, R_all)
+        del channels
         if not np.all(np.isfinite(res[0])):
             raise ValueError("the fitted model's residual is not finite")
         if steps.size:
@@ -328,8 +347,9 @@ class _FittedCar:
 
     def force_columns(self, car: LinearCar, d: NDArray, v: NDArray, n_knots: int):
         """The basis of each function (front g, front h, rear g, rear h) on the trajectory d, v (n, 4), its columns
-        applied as input forces at the corners of its axle: the bases, the car's states driven by them (n, 14, K)
-        and their weighted responses laid out like the residual (R_all, K)."""
+        applied as input forces at the corners of its axle: the bases, the input histories U (n, 4, K) and their
+        weighted responses laid out like the residual (R_all, K). (The car's states driven by U, (n, 14, K), are
+        made a block of time at a time and not kept: `trajectory_shift` makes them again.)"""
         n = self.task.experiment.t.size
         bases, cols = [], []
         for _axle, corners in AXLES:
@@ -341,9 +361,19 @@ class _FittedCar:
                     U[:, c, :] = b(traj[:, c])
                 cols.append(U)
         U = np.concatenate(cols, axis=2)  # (n, 4, K)
-        s = responses(car, U)
-        S = np.concatenate([channel_columns(self.objective, f, car, s, U, sg) for f, sg in self.sigma.items()], axis=0)
-        return tuple(bases), s, S
+        return tuple(bases), U, response_columns(self.objective, car, U, self.sigma)
+
+
+def trajectory_shift(car: LinearCar, U: NDArray, theta: NDArray) -> tuple[NDArray, NDArray]:
+    """The strut deflections and velocities (n, 4) that the force U theta drives the linear car to (the states'
+    responses to the basis inputs U (n, 4, K) combined by theta (K,), through the struts' D), a block at a time."""
+    n = U.shape[0]
+    new_d, new_v = np.empty((n, N_CORNERS)), np.empty((n, N_CORNERS))
+    for k0, s in responses_blocks(car, U):
+        b = s.shape[0]
+        new_d[k0 : k0 + b] = (s[:, :N_DOF, :] @ theta) @ car.D.T
+        new_v[k0 : k0 + b] = (s[:, N_DOF:, :] @ theta) @ car.D.T
+    return new_d, new_v
 
 
 def _fit_without_force(Jk: NDArray, rk0: NDArray) -> tuple[float, float]:
@@ -362,13 +392,13 @@ def _fit_without_force(Jk: NDArray, rk0: NDArray) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class _ForceFit:
-    """The force and the unknowns' re-fit on one trajectory d, v (n, 4): the bases, the states their forces drive,
+    """The force and the unknowns' re-fit on one trajectory d, v (n, 4): the bases, their input histories U,
     the kept columns A = [J | S] (the p nuisance columns first), the kept residual and the penalised solution."""
 
     d: NDArray
     v: NDArray
     bases: tuple[Basis, ...]
-    s: NDArray
+    U: NDArray
     A: NDArray
     rk: NDArray
     sol: PenalisedFit
@@ -392,14 +422,19 @@ def _fit_force(
     one smoothing parameter per function (REML or GCV)."""
     rk, Jk = lin.r[keep], lin.Jm[keep]
     p = Jk.shape[1]
-    bases, s, S = fitted.force_columns(lin.car, d, v, n_knots)
-    A = np.hstack([Jk, S[keep]])
+    bases, U, S = fitted.force_columns(lin.car, d, v, n_knots)
+    A = np.empty((rk.size, p + S.shape[1]))  # [Jk | S[keep]] written in place: no copy of S's kept rows beside it
+    A[:, :p] = Jk
+    rows = np.flatnonzero(keep)
+    for start in range(0, rows.size, COPY_ROWS):
+        A[start : start + COPY_ROWS, p:] = S[rows[start : start + COPY_ROWS]]
+    del S
     blocks, k0 = [], p
     for b in bases:
         blocks.append((slice(k0, k0 + b.size), b.P))
         k0 += b.size
     sol = penalised_fit(A.T @ A, A.T @ rk, float(rk @ rk), int(keep.sum()), blocks, criterion)
-    return _ForceFit(d, v, bases, s, A, rk, sol, p)
+    return _ForceFit(d, v, bases, U, A, rk, sol, p)
 
 
 @dataclass(frozen=True)
@@ -423,11 +458,11 @@ def _iterate(
     done = 0
     for it in range(max(0, iterations) + 1):
         d, v = lin.d + corr_d, lin.v + corr_v
+        fit = None  # the last fit's columns freed before the next are made (a long window's are tens of MB)
         fit = _fit_force(fitted, lin, d, v, keep, n_knots, criterion)
-        theta, dx, s = fit.theta, fit.dx, fit.s
+        theta, dx = fit.theta, fit.dx
         # the trajectory of the corrected model: fitted + the unknowns' shift + the estimate's own response
-        new_d = (s[:, :N_DOF, :] @ theta) @ lin.car.D.T
-        new_v = (s[:, N_DOF:, :] @ theta) @ lin.car.D.T
+        new_d, new_v = trajectory_shift(lin.car, fit.U, theta)
         shift_d, shift_v = np.tensordot(dx, lin.dd, axes=1), np.tensordot(dx, lin.dv, axes=1)
         change = max(float(np.max(np.abs(new_d + shift_d - corr_d)) / np.ptp(d)),
                      float(np.max(np.abs(new_v + shift_v - corr_v)) / np.ptp(v)))  # fmt: skip

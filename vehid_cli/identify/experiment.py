@@ -10,7 +10,7 @@ of runs or the number of worker processes.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import cached_property, partial
 from pathlib import Path
@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..config import Config
+from ..core.allocator import hand_back_freed_memory, release_free_pages
 from ..core.errors import InputError
 from ..core.streams import experiment_rng
 from ..io.measurement import read_measurement, time_grid
@@ -27,14 +28,19 @@ from ..models.fullcar import N_DOF, FullCarMatrices, assemble, parameter_batch
 from ..models.noise import NoiseModel, add_channel_noise
 from ..models.road import road_function
 from ..models.sensors import Layout
+from ..sim.kernel import available_cores, in_parallel
 from ..sim.linear import Response, simulate, simulate_columns
-from ..sim.nonlinear import simulate_effects
+from ..sim.nonlinear import BLOCK_SAMPLES, effects_blocks, simulate_effects
 from ..sim.sensitivity import car_output_matrices, central_slopes, linear_sensitivities, stencil
 
 MIN_SAMPLES_PER_PERIOD = 10  # of the fastest undamped mode (the wheel hop)
 BlockSink = Callable[[int, dict, dict], None]  # (first sample, family -> (b, k) channels, -> (b, k, D) derivatives)
 CHUNK_BYTES = 40 * 2**20  # the full response of a batch of cars simulated at once, at most (see Experiment.outputs):
 # 2 cars of a 60 s record at 1 kHz (18 MB each), one per core (3 at 64 MB: the 60 s diagnosis peaked 37 MB higher)
+LONG_BLOCKS = 4  # a record longer than this many blocks of BLOCK_SAMPLES is long: freed memory handed back
+BLOCKED_FROM = LONG_BLOCKS  # a record longer than this many blocks runs the RK4 kernel in time blocks. (From 2, the
+# long record's 5000-sample screening window too: its candidate threads' peak ~10 MiB lower, but each evaluation
+# 1.5x slower on 4-13 cars, the setup repeated per thread: the 60 s diagnosis 1.3-1.6x the wall)
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,18 @@ class Experiment:
     t: NDArray  # (n,) [s]
     road: NDArray  # (n, 4) [m]
     road_source: str  # "config" or the measurement file the road came from
+
+    def __post_init__(self) -> None:
+        """A long record (more than LONG_BLOCKS blocks of BLOCK_SAMPLES, simulated or measured) has the process hand
+        freed memory back to the system from then on (`core.allocator.hand_back_freed_memory`: its arrays are tens
+        of MB, and a diagnosis's phases otherwise keep each other's freed memory mapped)."""
+        if self._long:
+            hand_back_freed_memory()
+
+    @property
+    def _long(self) -> bool:
+        """A long record: more than LONG_BLOCKS blocks of BLOCK_SAMPLES."""
+        return self.t.size > LONG_BLOCKS * BLOCK_SAMPLES
 
     @cached_property
     def layout(self) -> Layout:
@@ -124,6 +142,8 @@ class Experiment:
                 assemble(p), self.road, self.dt, self.layout.column_groups, "exact", self.layout.points(p)
             )
             return self.layout.read_columns(columns)
+        if self._blocked(values):
+            return self._read_blocks(values)
         arrays = [np.asarray(v) for v in (values or {}).values()]
         sizes = {a.shape[0] for a in arrays if a.ndim == 1}
         if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
@@ -138,10 +158,75 @@ class Experiment:
             parts.append(self.read(self.simulate(part)))
         return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
 
+    def simulate_blocks(self, values: Mapping[str, ArrayLike] | None = None) -> Iterator[tuple[int, Response]]:
+        """`simulate(values)` in time blocks on the RK4 kernel's path (`sim.nonlinear.effects_blocks`): yields (first
+        sample, the Response of the block's samples), the same numbers, one block's trajectories held at a time."""
+        sim = self.config.simulation
+        if sim.integrator != "rk4" or self._linear(self.effects(values)):
+            raise ValueError("only the RK4 kernel's path is simulated in time blocks")
+        p = self.parameters(values)
+        return effects_blocks(assemble(p), p["cf"], p["cr"], self.effects(values), self.road, self.dt,
+                              sim.substeps or 1, self.layout.points(p))  # fmt: skip
+
+    def blocked(self, values: Mapping[str, ArrayLike] | None = None) -> bool:
+        """Whether this record's batches are simulated in time blocks (`simulate_blocks`, by `outputs`)."""
+        return self._blocked(values)
+
+    def _blocked(self, values: Mapping[str, ArrayLike] | None) -> bool:
+        """Whether `outputs` runs the RK4 kernel in time blocks: a record of more than BLOCKED_FROM blocks of
+        BLOCK_SAMPLES on the kernel's RK4 path."""
+        sim = self.config.simulation
+        if self.t.size <= BLOCKED_FROM * BLOCK_SAMPLES or sim.integrator != "rk4" or self.road.ndim != 2:
+            return False
+        return not self._linear(self.effects(values))
+
+    def _read_blocks(self, values: Mapping[str, ArrayLike] | None) -> dict[str, NDArray]:
+        """The layout's channels of a batch (`outputs`), the RK4 kernel run over the record in time blocks
+        (`sim.nonlinear.effects_blocks`): only the channels are kept whole, never the cars' full trajectories (the
+        same numbers: the kernel resumes each block where the one before ended, and the layout reads each sample
+        alone)."""
+        arrays = [np.asarray(v) for v in (values or {}).values()]
+        sizes = {a.shape[0] for a in arrays if a.ndim == 1}
+        if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
+            return self._read_blocks_of(values)
+        (P,) = sizes  # a one-dimensional batch: its cars split over threads, each running its own blocks
+        n = self.t.size
+        out = {f: np.empty((P, n, len(self.layout.names(f)))) for f in self.layout.families}
+
+        def rows(s: slice) -> None:
+            part = {k: (v[s] if np.ndim(v) == 1 else v) for k, v in values.items()}
+            self._read_blocks_of(part, {f: y[s] for f, y in out.items()})
+
+        in_parallel(P, rows)
+        if self._long:
+            release_free_pages()  # the blocks' freed memory back to the system (core/allocator.py)
+        return out
+
+    def _read_blocks_of(
+        self, values: Mapping[str, ArrayLike] | None, out: dict[str, NDArray] | None = None
+    ) -> dict[str, NDArray]:
+        """`_read_blocks` of a batch in this thread (the kernel's own split over threads per block would start a
+        pool per block: twice the wall of one call at 2048-sample blocks), written into `out` when given."""
+        out = {} if out is None else out
+        n = self.t.size
+        for k0, response in self.simulate_blocks(values):
+            part = self.read(response)
+            for family, y in part.items():
+                if family not in out:
+                    out[family] = np.empty(y.shape[:-2] + (n, y.shape[-1]))
+                out[family][..., k0 : k0 + y.shape[-2], :] = y
+        return out
+
     @property
     def cars_per_chunk(self) -> int:
         """How many cars `outputs` simulates at once: their full response (about 45 columns per sample) within
-        CHUNK_BYTES, at least one car."""
+        CHUNK_BYTES, at least one car. A record simulated in time blocks holds only the layout's channels of each
+        car (and an objective's error and residuals beside them): within CHUNK_BYTES of those three copies, and one
+        car per core on a long record (more cars at once would only hold more: the blocks already split the cars
+        over the cores)."""
+        if self._blocked(None):
+            per_car = self.t.size * 3 * len(self.layout.sensors) * 8
+            return max(1, min(CHUNK_BYTES // per_car, available_cores() if self._long else CHUNK_BYTES))
         per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
         return max(1, CHUNK_BYTES // per_car)
 

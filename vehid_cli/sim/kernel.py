@@ -30,8 +30,10 @@ finite numbers; a diverging candidate still turns NaN everywhere, through the de
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import threading
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal
@@ -72,6 +74,7 @@ class KernelResult:
     force: NDArray  # (P, n, n_s) strut forces [N]
     z: NDArray  # (P, n, n_z) internal states of the force law
     unconverged: NDArray  # (P,) Newmark steps whose fixed-point iteration did not converge (0 for RK4)
+    state: NDArray | None = None  # (P, 2 n_q + n_z) [q, qd, z] at the last sample (RK4): where the next block resumes
 
 
 def _batched(X: ArrayLike, P: int, ndim: int = 2) -> NDArray:
@@ -120,7 +123,7 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _in_parallel(P: int, rows) -> None:
+def in_parallel(P: int, rows) -> None:
     """rows(slice) over the batch's P systems, split into contiguous parts over threads (the compiled loops
     release the GIL; each system is integrated alone, so results are the same as in one call). Only from the
     main thread: a caller already running threads (parallel candidate fits) keeps its own split."""
@@ -152,21 +155,26 @@ class _Batch:
     params: NDArray
     q0: NDArray
     z0: NDArray
+    v0: NDArray
 
-    def outputs(self, n_z: int) -> KernelResult:
-        """Empty trajectories for the batch. One buffer for q, qd, qdd: an allocation this large is returned to the
-        allocator whole and reused by the next call, where three separate ones page-fault afresh every call (~5 ms
-        for a batch of 20 cars)."""
-        P, n, nq, ns = self.P, self.u.shape[1], self.M.shape[-1], self.Dr[0].shape[0]
+    def outputs(self, n_z: int, n: int | None = None, forces: bool = True) -> KernelResult:
+        """Empty trajectories for the batch, of n samples (default the road's); without `forces` the strut forces
+        and internal states are not kept (zero samples). One buffer for q, qd, qdd: an allocation this large is
+        returned to the allocator whole and reused by the next call, where three separate ones page-fault afresh
+        every call (~5 ms for a batch of 20 cars)."""
+        P, nq, ns = self.P, self.M.shape[-1], self.Dr[0].shape[0]
+        n = self.u.shape[1] if n is None else n
         out_q, out_v, out_a = np.empty((3, P, n, nq))
+        kept = n if forces else 0
         return KernelResult(
-            q=out_q, qd=out_v, qdd=out_a, force=np.empty((P, n, ns)), z=np.empty((P, n, n_z)),
-            unconverged=np.zeros(P, dtype=np.int64),
+            q=out_q, qd=out_v, qdd=out_a, force=np.empty((P, kept, ns)), z=np.empty((P, kept, n_z)),
+            unconverged=np.zeros(P, dtype=np.int64), state=np.concatenate([self.q0, self.v0, self.z0], axis=1),
         )  # fmt: skip
 
 
-def _prepare(M, C, K, B, road, params, n_z, D, E, q0, z0) -> _Batch:
-    """Every input as a (P, ...) array of one type; the static equilibrium K q0 = B y0 when q0 is not given."""
+def _prepare(M, C, K, B, road, params, n_z, D, E, q0, z0, v0=None) -> _Batch:
+    """Every input as a (P, ...) array of one type; the static equilibrium K q0 = B y0 when q0 is not given, at
+    rest when v0 is not."""
     road = np.asarray(road, dtype=float)
     shapes = [np.shape(X)[:-2] for X in (M, C, K, B)] + [road.shape[:-2]]
     P = int(np.prod(np.broadcast_shapes(*shapes), dtype=int))
@@ -183,14 +191,16 @@ def _prepare(M, C, K, B, road, params, n_z, D, E, q0, z0) -> _Batch:
     q0 = np.linalg.solve(K, B @ np.broadcast_to(u[:, 0], (P, nu))[..., None])[..., 0] if q0 is None else q0
     q0 = _batched(q0, P, ndim=1)
     z0 = _batched(np.zeros(n_z) if z0 is None else z0, P, ndim=1)
+    v0 = _batched(np.zeros(M.shape[-1]) if v0 is None else v0, P, ndim=1)
     Minv = np.linalg.inv(M)
     CT, KT = (np.ascontiguousarray(np.swapaxes(X, -1, -2)) for X in (C, K))
     Mr, Br, Dr, Er = (_nonzero_rows(X) for X in (Minv, B, D, E))
-    return _Batch(P, Mr, Br, Dr, Er, M, C, K, CT, KT, u, params, q0, z0)
+    return _Batch(P, Mr, Br, Dr, Er, M, C, K, CT, KT, u, params, q0, z0, v0)
 
 
-def _run_rk4(b: _Batch, dt: float, force, out: KernelResult) -> None:
-    """The RK4 loop over the batch, split into contiguous parts over threads."""
+def _run_rk4(b: _Batch, dt: float, force, out: KernelResult, start: int = 0) -> None:
+    """The RK4 loop over the batch from sample `start` (out.state: where it resumes, then where it ended), split into
+    contiguous parts over threads."""
     nq, ns, nu = b.M.shape[-1], b.Dr[0].shape[0], b.u.shape[2]
     run = rk4_loop(force, nq, ns, nu)
 
@@ -199,10 +209,10 @@ def _run_rk4(b: _Batch, dt: float, force, out: KernelResult) -> None:
             return (X[0], X[1][s], X[2])
 
         us = b.u if b.u.shape[0] == 1 else b.u[s]
-        run(part(b.Mr), b.CT[s], b.KT[s], part(b.Br), part(b.Dr), part(b.Er), us, float(dt), b.params[s], b.q0[s],
-            b.z0[s], out.q[s], out.qd[s], out.qdd[s], out.force[s], out.z[s])  # fmt: skip
+        run(part(b.Mr), b.CT[s], b.KT[s], part(b.Br), part(b.Dr), part(b.Er), us, float(dt), b.params[s],
+            out.state[s], int(start), out.q[s], out.qd[s], out.qdd[s], out.force[s], out.z[s])  # fmt: skip
 
-    _in_parallel(b.P, rows)
+    in_parallel(b.P, rows)
 
 
 def _run_newmark(b: _Batch, dt: float, force, out: KernelResult) -> None:
@@ -230,16 +240,75 @@ def integrate(
     E: ArrayLike | None = None,
     q0: ArrayLike | None = None,
     z0: ArrayLike | None = None,
+    v0: ArrayLike | None = None,
+    start: int = 0,
+    stop: int | None = None,
+    forces: bool = True,
 ) -> KernelResult:
     """Integrate M qdd + C qd + K q + D' f(d, dd, z) = B y for a batch of systems at fixed step dt [s].
 
     Matrices are (P, ., .) or shared (., .); road (n, n_u) shared or (P, n, n_u), linear between samples;
     params (P, n_par) rows of the force law (shared if 1-D); D (n_s, n_q) and E (n_s, n_u) default to no
-    struts. q0 defaults to the linear static equilibrium K q0 = B y0, z0 to zero; velocities start at zero.
+    struts. q0 defaults to the linear static equilibrium K q0 = B y0, z0 to zero, v0 (velocities) to zero.
+
+    RK4 only: samples start .. stop - 1 of the record (the road is the whole record's), resuming from the state
+    q0, v0, z0 at sample start - 1 (a block before's ``state``, or its last q, qd, z), with the numbers of one
+    call over the record (tests/test_kernel.py); without `forces` the strut forces and internal states are not
+    returned (zero samples: a long record's blocks keep only what they read).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}: choose from {sorted(METHODS)}")
-    batch = _prepare(M, C, K, B, road, params, n_z, D, E, q0, z0)
-    out = batch.outputs(n_z)
-    (_run_rk4 if method == "rk4" else _run_newmark)(batch, dt, force, out)
+    resumed = start != 0 or stop is not None or v0 is not None or not forces
+    if method != "rk4" and resumed:
+        raise ValueError("only the rk4 kernel resumes mid-record (start, stop, v0, forces)")
+    if start > 0 and q0 is None:
+        raise ValueError("resuming at a sample after the first needs the state there (q0, v0, z0)")
+    batch = _prepare(M, C, K, B, road, params, n_z, D, E, q0, z0, v0)
+    n = batch.u.shape[1]
+    stop = n if stop is None else stop
+    if not 0 <= start < stop <= n:
+        raise ValueError(f"samples {start}..{stop} outside the road's 0..{n}")
+    out = batch.outputs(n_z, stop - start, forces)
+    if method == "rk4":
+        _run_rk4(batch, dt, force, out, start)
+    else:
+        _run_newmark(batch, dt, force, out)
+        out = dataclasses.replace(out, state=None)  # Newmark's loop does not report where it ended
     return out
+
+
+def integrate_blocks(
+    M: ArrayLike,
+    C: ArrayLike,
+    K: ArrayLike,
+    B: ArrayLike,
+    road: ArrayLike,
+    dt: float,
+    force=no_force,
+    params: ArrayLike | None = None,
+    n_z: int = 0,
+    D: ArrayLike | None = None,
+    E: ArrayLike | None = None,
+    block: int = 4096,
+    forces: bool = False,
+    tail: int = 2,
+) -> Iterator[tuple[int, KernelResult]]:
+    """`integrate('rk4', ...)` over the record in time blocks of `block` samples, the state carried from each to
+    the next: yields (first sample, KernelResult of the block), the same numbers as one call, with only a block's
+    trajectories held at a time (a long record's whole trajectories are about 18 MB per car). A last block shorter
+    than `tail` samples joins the one before (a one-sample block's products take BLAS's vector path, whose
+    rounding differs). The batch is prepared once; the systems start at rest on the static equilibrium of the first
+    road sample."""
+    batch = _prepare(M, C, K, B, road, params, n_z, D, E, None, None)
+    n = batch.u.shape[1]
+    starts = list(range(0, n, max(1, block)))
+    if len(starts) > 1 and n - starts[-1] < tail:
+        starts.pop()
+    state = None
+    for start, stop in zip(starts, [*starts[1:], n], strict=True):
+        out = batch.outputs(n_z, stop - start, forces)
+        if state is not None:
+            out.state[...] = state
+        _run_rk4(batch, dt, force, out, start)
+        state = out.state
+        yield start, out

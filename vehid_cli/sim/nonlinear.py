@@ -14,7 +14,8 @@ there when the road starts level, as every configured road does).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -22,8 +23,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..models.effects import effect_rows
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
-from .kernel import KernelResult, integrate, no_force
+from .kernel import KernelResult, integrate, integrate_blocks, no_force
 from .linear import Response
+
+BLOCK_SAMPLES = 2048  # samples of a long record's block (`effects_blocks`): 13 cars' trajectories in about 6 MB
 
 
 def fullcar_struts(mats: FullCarMatrices) -> NDArray:
@@ -82,6 +85,63 @@ def upsample(road: NDArray, substeps: int) -> NDArray:
     return np.concatenate([fine, road[..., -1:, :]], axis=-2)
 
 
+@dataclass(frozen=True)
+class _EffectsSystem:
+    """A batch of cars with effects as the kernel's structure: the flattened (P, ...) matrices, struts and the
+    composite law, the batch shape and the body points' rows G (P, 3, nb)."""
+
+    batch: tuple[int, ...]
+    M: NDArray
+    C: NDArray
+    K: NDArray
+    B: NDArray
+    G: NDArray
+    D: NDArray
+    E: NDArray
+    law: object
+    rows: NDArray
+    n_z: int
+
+
+def _effects_system(mats: FullCarMatrices, cf, cr, effects, road: NDArray, substeps: int, points) -> _EffectsSystem:
+    """Check the inputs of `simulate_effects` and build the kernel's structure of its batch."""
+    G = mats.G if points is None else np.asarray(points, dtype=float)
+    if road.ndim != 2 or road.shape[-1] != N_CORNERS:
+        raise ValueError(f"road must be (n, 4), got {road.shape}")
+    if int(substeps) < 1:
+        raise ValueError(f"substeps must be >= 1, got {substeps}")
+    shapes = [mats.batch_shape, np.shape(cf), np.shape(cr), G.shape[:-2]]
+    shapes += [np.shape(v) for params in effects.values() for v in params.values()]
+    batch = np.broadcast_shapes(*shapes)
+    P = int(np.prod(batch, dtype=int))
+    es = effect_rows(effects, cf, cr, batch)
+
+    def flat(X: NDArray) -> NDArray:
+        return np.broadcast_to(X, batch + X.shape[-2:]).reshape((P,) + X.shape[-2:])
+
+    M, C, K, B, G = (flat(X) for X in (mats.M, mats.C, mats.K, mats.B, G))
+    D = flat(fullcar_struts(mats))
+    E = np.zeros((N_CORNERS, N_CORNERS))
+    if es.tyres:
+        tyre = np.zeros((P, N_CORNERS, N_DOF))
+        tyre[:, :, 3:] = np.eye(N_CORNERS)
+        D = np.concatenate([D, tyre], axis=1)
+        E = np.concatenate([E, -np.eye(N_CORNERS)], axis=0)
+    return _EffectsSystem(batch, M, C, K, B, G, D, E, es.law, es.rows, es.n_z)
+
+
+def _response(sys_: _EffectsSystem, res: KernelResult, substeps: int, t: NDArray) -> Response:
+    """The Response (batch..., n, .) of the kernel's trajectories at every substeps-th sample, at times t."""
+    q, qd, qdd = (X[:, ::substeps] for X in (res.q, res.qd, res.qdd))
+    Gt = np.swapaxes(sys_.G, -1, -2)
+    disp, acc = q[..., :3] @ Gt, qdd[..., :3] @ Gt
+
+    def shaped(X: NDArray) -> NDArray:
+        return X.reshape(sys_.batch + X.shape[1:])
+
+    return Response(t=t, q=shaped(q), qd=shaped(qd), qdd=shaped(qdd), disp=shaped(disp), acc=shaped(acc))
+
+
 def simulate_effects(
     mats: FullCarMatrices,
     cf: ArrayLike,
@@ -100,39 +160,35 @@ def simulate_effects(
     broadcast of the matrices' batch and the effect values' shapes; arrays come back as (batch..., n, k)
     like ``sim.linear.simulate``; `disp` and `acc` at the body `points` (..., nb, 3) (default the corners').
     """
-    G = mats.G if points is None else np.asarray(points, dtype=float)
     road = np.asarray(road, dtype=float)
-    if road.ndim != 2 or road.shape[-1] != N_CORNERS:
-        raise ValueError(f"road must be (n, 4), got {road.shape}")
-    if int(substeps) < 1:
-        raise ValueError(f"substeps must be >= 1, got {substeps}")
+    sys_ = _effects_system(mats, cf, cr, effects, road, substeps, points)
     substeps = int(substeps)
-    shapes = [mats.batch_shape, np.shape(cf), np.shape(cr), G.shape[:-2]]
-    shapes += [np.shape(v) for params in effects.values() for v in params.values()]
-    batch = np.broadcast_shapes(*shapes)
-    P = int(np.prod(batch, dtype=int))
-    es = effect_rows(effects, cf, cr, batch)
+    res = integrate(method, sys_.M, sys_.C, sys_.K, sys_.B, upsample(road, substeps), dt / substeps, sys_.law,
+                    sys_.rows, sys_.n_z, D=sys_.D, E=sys_.E)  # fmt: skip
+    return _response(sys_, res, substeps, np.arange(road.shape[0]) * dt)
 
-    def flat(X: NDArray) -> NDArray:
-        return np.broadcast_to(X, batch + X.shape[-2:]).reshape((P,) + X.shape[-2:])
 
-    M, C, K, B, G = (flat(X) for X in (mats.M, mats.C, mats.K, mats.B, G))
-    D = flat(fullcar_struts(mats))
-    E = np.zeros((N_CORNERS, N_CORNERS))
-    if es.tyres:
-        tyre = np.zeros((P, N_CORNERS, N_DOF))
-        tyre[:, :, 3:] = np.eye(N_CORNERS)
-        D = np.concatenate([D, tyre], axis=1)
-        E = np.concatenate([E, -np.eye(N_CORNERS)], axis=0)
-    res = integrate(method, M, C, K, B, upsample(road, substeps), dt / substeps, es.law, es.rows, es.n_z, D=D, E=E)
-    q, qd, qdd = (X[:, ::substeps] for X in (res.q, res.qd, res.qdd))
-    Gt = np.swapaxes(G, -1, -2)
-    disp, acc = q[..., :3] @ Gt, qdd[..., :3] @ Gt
-    n = road.shape[0]
-
-    def shaped(X: NDArray) -> NDArray:
-        return X.reshape(batch + X.shape[1:])
-
-    return Response(
-        t=np.arange(n) * dt, q=shaped(q), qd=shaped(qd), qdd=shaped(qdd), disp=shaped(disp), acc=shaped(acc)
-    )
+def effects_blocks(
+    mats: FullCarMatrices,
+    cf: ArrayLike,
+    cr: ArrayLike,
+    effects: Mapping[str, Mapping[str, ArrayLike]],
+    road: ArrayLike,
+    dt: float,
+    substeps: int = 1,
+    points: ArrayLike | None = None,
+    block: int = BLOCK_SAMPLES,
+) -> Iterator[tuple[int, Response]]:
+    """`simulate_effects` (RK4) in time blocks of `block` samples: yields (first sample, the Response of the block's
+    samples), the same numbers as one call (the kernel's state carried from block to block; a last block of one
+    sample joins the one before), holding one block's trajectories at a time: a long record's whole trajectories
+    are about 18 MB per car, its channels 4."""
+    road = np.asarray(road, dtype=float)
+    sys_ = _effects_system(mats, cf, cr, effects, road, substeps, points)
+    substeps = int(substeps)
+    fine = upsample(road, substeps)
+    blocks = integrate_blocks(sys_.M, sys_.C, sys_.K, sys_.B, fine, dt / substeps, sys_.law, sys_.rows, sys_.n_z,
+                              D=sys_.D, E=sys_.E, block=block * substeps, tail=substeps + 1)  # fmt: skip
+    for k0, res in blocks:
+        first = k0 // substeps
+        yield first, _response(sys_, res, substeps, (first + np.arange(-(-res.q.shape[1] // substeps))) * dt)

@@ -72,9 +72,14 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
 
     The law is inlined at its four evaluations per step (``_inlined``) and the sizes are compile-time
     constants, so the small loops of the step unroll (twice as fast as with the sizes read from the arrays).
-    Returns run(Mr, CT, KT, Br, Dr, Er, u, dt, params, q0, z0, out_q, out_v, out_a, out_f, out_z), arguments
-    as ``newmark_loop``'s; compiled on first use, once per law and sizes, and cached on disk by numba
-    (loaded in about 0.2 s instead of compiled in about six). (The law is part of the code: a law passed as
+    Returns run(Mr, CT, KT, Br, Dr, Er, u, dt, params, state, k_start, out_q, out_v, out_a, out_f, out_z),
+    arguments as ``newmark_loop``'s but for the state: `state` (P, 2 n_q + n_z) holds [q, v, z] of each system at
+    sample max(k_start - 1, 0) on entry and at the last sample written on return, so that a record is integrated
+    in time blocks (the outputs are samples k_start .. k_start + out_q.shape[1] - 1 of the whole record's road u),
+    each block resuming where the one before ended, with the same numbers as one call (the rates at the resumed
+    sample and the road's slopes are recomputed from the state and the road, as the one call had them). out_f and
+    out_z of zero samples are not written. Compiled on first use, once per law and sizes, and cached on disk by
+    numba (loaded in about 0.2 s instead of compiled in about six). (The law is part of the code: a law passed as
     an argument, as Newmark's loop takes it, cannot be inlined.)"""
     law, error_model = _inlined(force)
     key = _cache_key(force, error_model, nq, ns, nu)
@@ -87,13 +92,19 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
         linear_rates(q, v, y, f, Mr, CT, KT, Br, Dr, rhs, a)
 
     @numba.njit(nogil=True, error_model=error_model)  # nogil: candidate fits run in parallel threads
-    def run(Mr, CT, KT, Br, Dr, Er, u, dt, params, q0, z0, out_q, out_v, out_a, out_f, out_z):  # pragma: no cover
-        """Every system p of the batch, every step k, by classical RK4; see ``newmark_loop``.
+    def run(
+        Mr, CT, KT, Br, Dr, Er, u, dt, params, state, k_start, out_q, out_v, out_a, out_f, out_z
+    ):  # pragma: no cover
+        """Every system p of the batch, every step k from k_start, by classical RK4; see ``newmark_loop``.
 
         The rates are evaluated at two places, the stages and the current state (fewer copies of the inlined
-        law: compile time), the stage-1 slopes of a step being the rates at the end of the step before."""
+        law: compile time), the stage-1 slopes of a step being the rates at the end of the step before. A block
+        that resumes (k_start > 0) starts at sample k_start - 1 without a step: its rates there, as the block
+        before ended with them."""
         P, n = out_q.shape[0], u.shape[1]
-        nz = z0.shape[1]
+        nz = state.shape[1] - 2 * nq
+        k_first, k_stop = max(k_start - 1, 0), k_start + out_q.shape[1]
+        write_fz = out_f.shape[1] > 0
         q, v, qs, vs, a_s, rhs = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(nq), np.empty(nq), np.empty(nq)
         z, zs, zd_s = np.empty(nz), np.empty(nz), np.empty(nz)
         f, d, dd = np.empty(ns), np.empty(ns), np.empty(ns)
@@ -114,14 +125,14 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
             Dp, Ep = (Dr[0], Dr[1][p], Dr[2]), (Er[0], Er[1][p], Er[2])
             CTp, KTp = CT[p], KT[p]
             for i in range(nq):
-                q[i] = q0[p, i]
-                v[i] = 0.0
+                q[i] = state[p, i]
+                v[i] = state[p, nq + i]
             for i in range(nz):
-                z[i] = z0[p, i]
+                z[i] = state[p, 2 * nq + i]
             for c in range(nu):
                 slopes[c] = (u[r, 1, c] - u[r, 0, c]) / dt
                 yd[c] = slopes[c]  # the slope at the first sample (later: of the step just taken)
-            for k in range(n):
+            for k in range(k_first, k_stop):
                 for c in range(nu):
                     y1[c] = u[r, k, c]
                 if k > 0:
@@ -129,6 +140,9 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
                         y0c = u[r, k - 1, c]
                         yd[c] = (y1[c] - y0c) / dt
                         ym[c] = 0.5 * (y0c + y1[c])
+                        if k < k_start:  # resuming: the slope the step into sample k left (as in one call)
+                            slopes[c] = yd[c]
+                if 0 < k and k >= k_start:  # a step from k - 1 to k (resuming at k_start - 1: none)
                     for stage in range(1, 4):
                         h = dt if stage == 3 else 0.5 * dt
                         for i in range(nq):
@@ -164,15 +178,22 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
                         for c in range(nu):
                             yd[c] = slopes[c]
                     rates(q, v, z, y1, yd, Mp, CTp, KTp, Bp, Dp, Ep, par, d, dd, f, zd, rhs, a)
-                    if not again:
+                    if not again and k >= k_start:
+                        j = k - k_start
                         for i in range(nq):
-                            out_q[p, k, i] = q[i]
-                            out_v[p, k, i] = v[i]
-                            out_a[p, k, i] = kv[0, i]
-                        for i in range(ns):
-                            out_f[p, k, i] = f[i]
-                        for i in range(nz):
-                            out_z[p, k, i] = z[i]
+                            out_q[p, j, i] = q[i]
+                            out_v[p, j, i] = v[i]
+                            out_a[p, j, i] = kv[0, i]
+                        if write_fz:
+                            for i in range(ns):
+                                out_f[p, j, i] = f[i]
+                            for i in range(nz):
+                                out_z[p, j, i] = z[i]
+            for i in range(nq):
+                state[p, i] = q[i]
+                state[p, nq + i] = v[i]
+            for i in range(nz):
+                state[p, 2 * nq + i] = z[i]
 
     if key is not None:
         run._cache = _KeyedCache(run.py_func, key)  # numba's on-disk cache, under our own key

@@ -1,0 +1,43 @@
+"""diagnose/holdout.py: the masked problem's residuals and costs without a second (P, R) array."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vehid_cli.diagnose import holdout
+from vehid_cli.diagnose.holdout import holdout_blocks, kept_in_place, masked, mean_squares
+from vehid_cli.optimizers.base import Problem
+
+
+@pytest.mark.parametrize("P, R", [(1, 1000), (13, 4801), (4, 12345)])
+def test_kept_entries_and_costs_equal_numpy_indexing(P, R):
+    """kept_in_place and mean_squares give what r[:, keep] and np.mean(r**2, axis=1) give, bit for bit."""
+    rng = np.random.default_rng(P)
+    r = rng.standard_normal((P, R)) * rng.uniform(0.1, 10.0, R)
+    keep = ~np.repeat(holdout_blocks(R // 8 + 1), 8)[:R]
+    want = r[:, keep]
+    got = kept_in_place(r.copy(), np.flatnonzero(keep))
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_allclose(mean_squares(got), np.mean(want**2, axis=1), rtol=1e-13, atol=0)
+
+
+def test_masked_problem_residuals(monkeypatch):
+    """The masked problem's residuals are the kept entries of the problem's, its costs their mean square."""
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((600, 2))
+
+    def cr(X):
+        r = X @ A.T - 1.0  # fresh each call, as every problem's residuals are
+        return np.mean(r**2, axis=1), r
+
+    problem = Problem(np.zeros(2), np.ones(2), lambda X: cr(X)[0], cr, names=("a", "b"))
+    keep = rng.uniform(size=600) > 0.3
+    X = rng.uniform(size=(5, 2))
+    costs, r = masked(problem, keep).residuals(X)  # short: NumPy's own expressions, bit for bit
+    np.testing.assert_array_equal(r, cr(X)[1][:, keep])
+    np.testing.assert_array_equal(costs, np.mean(cr(X)[1][:, keep] ** 2, axis=1))
+    monkeypatch.setattr(holdout, "IN_PLACE_BYTES", 0)  # as a long record's: in place, to round-off
+    costs, r = masked(problem, keep).residuals(X)
+    np.testing.assert_array_equal(r, cr(X)[1][:, keep])
+    np.testing.assert_allclose(costs, np.mean(cr(X)[1][:, keep] ** 2, axis=1), rtol=1e-13, atol=0)
