@@ -84,11 +84,14 @@ def trf_compressed(
     x_scale: NDArray,
     tol: float,
     max_nfev: int | None = None,
+    stops: Callable[..., bool] | None = None,
 ) -> NDArray:
     """scipy's trust-region reflective least squares (`least_squares(method='trf', x_scale=x_scale, xtol=ftol=gtol=
     tol)`) of `residual` (x -> (R,)) from x0 inside [lower, upper], its Jacobian given transposed by
     `jacobian_rows` (x -> (D, R), may be overwritten) and compressed (`compress`); returns the final point.
-    x0 must be strictly inside the box (scipy's `make_strictly_feasible`)."""
+    x0 must be strictly inside the box (scipy's `make_strictly_feasible`). `stops(xp, rp, J, x, r, lower, upper,
+    x_scale, tol)` (lsq.trf_stops): True where trf will stop at x without using its Jacobian there; it is then given
+    the last one again (D simulations saved), judged on the compressed pair, which gives J'J, J'r and r'r exactly."""
     from scipy.optimize._lsq.trf import trf_bounds  # private: the loop least_squares runs (see the module's doc)
 
     D = x0.size
@@ -105,10 +108,16 @@ def trf_compressed(
         f = last["f"]
         if not np.array_equal(last["x"], x):  # scipy asks for the Jacobian at the point it evaluated last
             raise RuntimeError("trf asked for the Jacobian at a point other than its last residual's")
+        before = last.get("J")
+        if before is not None and stops is not None:
+            if stops(last["xJ"], last["fJ"], before, x, f, lower, upper, x_scale, tol):
+                return before  # f keeps the residual's norm: trf stops without forming a gradient from it
         rj, z, rho = compress(jacobian_rows(x), residual(x))
         f[:D] = z  # in place: the very array scipy holds as the residual at x
         f[D] = rho
-        return np.vstack([rj, np.zeros((1, D))])
+        J = np.vstack([rj, np.zeros((1, D))])
+        last["xJ"], last["fJ"], last["J"] = x.copy(), f.copy(), J
+        return J
 
     f0 = fun(x0)
     j0 = jac(x0)

@@ -68,7 +68,7 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
     x0 = make_strictly_feasible(x0, lo, hi)
     if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES:  # a long record: the same steps on D + 1 rows
-        return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev)
+        return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev, stops=trf_stops)
     result = least_squares(
         residual, x0, jac=jacobian, bounds=(lo, hi), method="trf", x_scale=width,
         xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
