@@ -47,7 +47,7 @@ def main() -> None:
     exp = build_task(load_config(ROOT / "configs" / "effects" / "hysteresis.yaml", LONG)).experiment
     for P in (1, 3, 13):
         values = {"m": np.linspace(1200.0, 1300.0, P), "hysteresis.beta": np.linspace(1e4, 3e4, P)}
-        assert exp._blocked(values)
+        assert exp.blocked(values)
 
         def blocked(values=values):
             return exp.outputs(values)

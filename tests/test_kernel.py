@@ -157,7 +157,7 @@ def test_long_record_outputs_in_blocks_equal_one_simulation():
     )
     exp = build_task(config).experiment
     values = {"m": np.array([1200.0, 1300.0, 1250.0]), "hysteresis.beta": np.array([1e4, 2e4, 3e4])}
-    assert exp._blocked(values)
+    assert exp.blocked(values)
     blocked, whole = exp.outputs(values), exp.read(exp.simulate(values))
     assert set(blocked) == set(whole)
     for family in whole:

@@ -215,7 +215,7 @@ def test_a_record_simulated_in_time_blocks_gives_the_same_estimate(monkeypatch):
     ref = truth.reference(0)
     assert task.experiment.blocked(None)
     blocked = estimate_unexplained(task, ref, task.names, task.nominal, iterations=2)
-    monkeypatch.setattr(Experiment, "_blocked", lambda self, values: False)
+    monkeypatch.setattr(Experiment, "blocked", lambda self, values=None: False)
     assert not task.experiment.blocked(None)
     whole = estimate_unexplained(task, ref, task.names, task.nominal, iterations=2)
     assert blocked.p_value < 1e-6  # the hysteresis is seen

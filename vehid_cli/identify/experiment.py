@@ -43,6 +43,15 @@ BLOCKED_FROM = LONG_BLOCKS  # a record longer than this many blocks runs the RK4
 # 1.5x slower on 4-13 cars, the setup repeated per thread: the 60 s diagnosis 1.3-1.6x the wall)
 
 
+def _cars(values: Mapping[str, ArrayLike] | None) -> int | None:
+    """The number of cars of a one-dimensional batch of values (every array 1-D, of one length), else None."""
+    arrays = [np.asarray(v) for v in (values or {}).values()]
+    sizes = {a.shape[0] for a in arrays if a.ndim == 1}
+    if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
+        return None
+    return sizes.pop()
+
+
 @dataclass(frozen=True)
 class Experiment:
     """The configured car on a sampled road. Simulates any batch of parameter sets on that road."""
@@ -142,13 +151,11 @@ class Experiment:
                 assemble(p), self.road, self.dt, self.layout.column_groups, "exact", self.layout.points(p)
             )
             return self.layout.read_columns(columns)
-        if self._blocked(values):
+        if self.blocked(values):
             return self._read_blocks(values)
-        arrays = [np.asarray(v) for v in (values or {}).values()]
-        sizes = {a.shape[0] for a in arrays if a.ndim == 1}
-        if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
+        P = _cars(values)
+        if P is None:
             return self.read(self.simulate(values))
-        (P,) = sizes
         chunk = self.cars_per_chunk
         if P <= chunk:
             return self.read(self.simulate(values))
@@ -169,12 +176,8 @@ class Experiment:
                               sim.substeps or 1, self.layout.points(p))  # fmt: skip
 
     def blocked(self, values: Mapping[str, ArrayLike] | None = None) -> bool:
-        """Whether this record's batches are simulated in time blocks (`simulate_blocks`, by `outputs`)."""
-        return self._blocked(values)
-
-    def _blocked(self, values: Mapping[str, ArrayLike] | None) -> bool:
-        """Whether `outputs` runs the RK4 kernel in time blocks: a record of more than BLOCKED_FROM blocks of
-        BLOCK_SAMPLES on the kernel's RK4 path."""
+        """Whether `outputs` runs the RK4 kernel in time blocks (`simulate_blocks`): a record of more than
+        BLOCKED_FROM blocks of BLOCK_SAMPLES on the kernel's RK4 path."""
         sim = self.config.simulation
         if self.t.size <= BLOCKED_FROM * BLOCK_SAMPLES or sim.integrator != "rk4" or self.road.ndim != 2:
             return False
@@ -185,11 +188,10 @@ class Experiment:
         (`sim.nonlinear.effects_blocks`): only the channels are kept whole, never the cars' full trajectories (the
         same numbers: the kernel resumes each block where the one before ended, and the layout reads each sample
         alone)."""
-        arrays = [np.asarray(v) for v in (values or {}).values()]
-        sizes = {a.shape[0] for a in arrays if a.ndim == 1}
-        if len(sizes) != 1 or any(a.ndim > 1 for a in arrays):
+        P = _cars(values)
+        if P is None:
             return self._read_blocks_of(values)
-        (P,) = sizes  # a one-dimensional batch: its cars split over threads, each running its own blocks
+        # a one-dimensional batch: its cars split over threads, each running its own blocks
         n = self.t.size
         out = {f: np.empty((P, n, len(self.layout.names(f)))) for f in self.layout.families}
 
@@ -224,7 +226,7 @@ class Experiment:
         car (and an objective's error and residuals beside them): within CHUNK_BYTES of those three copies, and one
         car per core on a long record (more cars at once would only hold more: the blocks already split the cars
         over the cores)."""
-        if self._blocked(None):
+        if self.blocked(None):
             per_car = self.t.size * 3 * len(self.layout.sensors) * 8
             return max(1, min(CHUNK_BYTES // per_car, available_cores() if self._long else CHUNK_BYTES))
         per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
