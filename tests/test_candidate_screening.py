@@ -9,7 +9,6 @@ import pytest
 
 from vehid_cli.diagnose import attribution as A
 from vehid_cli.diagnose import starts as S
-from vehid_cli.diagnose.pool import run_all
 from vehid_cli.diagnose.score import fitted_basis
 from vehid_cli.optimizers import lsq
 from vehid_cli.optimizers.base import Problem, Search
@@ -128,7 +127,7 @@ def test_parallel_fits_come_back_in_the_candidates_order():
     ]  # fmt: skip
     assert max(cands, key=A.expected_seconds).effect == "slow"
     seen = []
-    got = run_all(lambda c: c.effect, cands, lambda c: -A.expected_seconds(c), seen.append)
+    got = A.run_all(lambda c: c.effect, cands, None, seen.append)
     assert got == [c.effect for c in cands] and sorted(seen) == [1, 2, 3, 4]
 
 

@@ -5,7 +5,6 @@ diagnosed cases a stopped effect's full fit would not have won the round nor cha
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ from tests.test_candidate_screening import counted
 from tests.test_diagnose_effects import DIAGNOSE, simulate
 from vehid_cli.config import load_config
 from vehid_cli.diagnose import attribution as A
-from vehid_cli.diagnose import pool, stops
+from vehid_cli.diagnose import stops
 from vehid_cli.diagnose.tails import chi2_isf
 from vehid_cli.optimizers.base import Problem
 from vehid_cli.systems.vehicle.diagnosis import diagnose
@@ -72,9 +71,8 @@ def test_a_stopped_fit_is_the_unstopped_fits_prefix():
 
 def test_the_stop_rule_compares_the_factored_lr_with_the_best_parameter():
     statistic = A.chi2_statistic(1000)
-    never = stops.cannot_win_after(2.0, statistic, lambda: (0.0, 10.0))  # no accepted parameter: never stopped
-    assert not never(1.0) and not never(2.0 - 1e-12)
-    stop = stops.cannot_win_after(2.0, statistic, lambda: (500.0, 10.0))
+    assert stops.cannot_win_after(2.0, statistic, 10.0, 0.0) is None  # no accepted parameter: never stopped
+    stop = stops.cannot_win_after(2.0, statistic, 10.0, 500.0)
     lr_edge = (500.0 - 10.0) / stops.STOP_FACTOR  # the LR at which STOP_FACTOR x LR + critical reaches the best
     assert stop(2.0 - 0.99 * lr_edge / 1000) and not stop(2.0 - 1.01 * lr_edge / 1000)
     assert not stop(2.5) and not stop(2.0)  # not yet below the base: no LR reached, the fit goes on
@@ -121,27 +119,3 @@ def test_a_stopped_fit_could_not_have_won(tmp_path, monkeypatch, case):
                 compared += 1
     if case != "backlash":  # a known parameter wins there: the library's effects far below it are stopped
         assert compared > 0
-
-
-@pytest.mark.parametrize("cores", [1, 2])
-def test_the_pool_tests_the_first_ones_first_and_adds_what_they_decide(monkeypatch, cores):
-    """Known parameters first; after_first sees their results, in order, and what it returns is tested too; an
-    effect's test that waits for that decision does not block the pool (serial and parallel alike)."""
-    decided = threading.Event()
-    order = []
-
-    def one(c):
-        if c.startswith("e"):
-            assert decided.wait(5.0)  # the decision comes while this test waits
-        order.append(c)
-        return c.upper()
-
-    def after_first(results):
-        assert results == ["P1", "P2"]
-        decided.set()
-        return ["late"]
-
-    monkeypatch.setattr(pool, "available_cores", lambda: cores)
-    got = pool.run_all(one, ["e1", "p1", "e2", "p2"], lambda c: 0.0, lambda n: None, lambda c: c[0] == "p", after_first)
-    assert got == ["E1", "P1", "E2", "P2", "LATE"]
-    assert set(order[:2]) == {"p1", "p2"} and order.index("late") > 1  # the effects wait for the decision

@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,9 +48,9 @@ from ..models.effects import LIBRARY, CandidateForm
 from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import gauss_newton, polish
-from .pool import run_all
+from ..sim.kernel import available_cores
 from .starts import screen_starts
-from .stops import STOP_STEPS, Decision, Stopped, cannot_win_after, stoppable
+from .stops import STOP_STEPS, Stopped, cannot_win_after, stoppable
 from .tails import chi2_isf, chi2_sf
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
@@ -417,8 +418,7 @@ def rank_candidates(
     tests: int | None = None,
     make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None = None,
     car: Callable[[], NDArray | None] | None = None,
-    stops: bool = False,
-    later: Callable[[list[Ranked]], list[Candidate]] | None = None,
+    beat: float = 0.0,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -433,14 +433,13 @@ def rank_candidates(
     `make_linear(names, candidate)`: the augmented problem on the exact integrator with its exact sensitivities, or
     None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`;
     `car()`: the residuals' derivatives (R, D) along `base`'s unknowns at `base` (all free), which the effects'
-    screenings steer by; `stops`: an effect no score screens has its fit stopped where it cannot beat the best
-    accepted known parameter among the candidates (stops.cannot_win_after); `later(tests)`: more candidates to test,
-    once the known parameters' `tests` are done (the screened effects that can still win, score.cannot_win). One pool
-    of threads for all, the known parameters first (pool.run_all)."""
+    screenings steer by; `beat`: the LR of the round's best accepted known parameter (0: none), which an effect's fit
+    stops at when it cannot win the round (`cannot_win_after`). Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation
-    decision = Decision(level)
+    k_max = max((len(c.unknowns) + len(c.shape) if c.df is None else c.df for c in candidates), default=1)
+    margin = float(chi2_isf(level, k_max))
 
     def one(cand: Candidate) -> Ranked:
         t0 = time.perf_counter()
@@ -453,7 +452,7 @@ def rank_candidates(
             own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
         fit = parameter_fit(problem, base, x_added, cand, budget, make_linear)
         at_base = cols if cand.kind == "effect" and names[: len(base.names)] == base.names else None
-        stop = cannot_win_after(base.J, statistic, decision.beat) if claim and stops and not_screened(cand) else None
+        stop = cannot_win_after(base.J, statistic, margin, beat) if claim and not_screened(cand) else None
         fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base, stop)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
@@ -468,10 +467,8 @@ def rank_candidates(
             kind=cand.kind, validation_per_file=per, fixed=fit.fixed, stopped=fit.stopped,
         )  # fmt: skip
 
-    effects = later is not None or any(c.kind == "effect" for c in candidates)
-    cols = car() if car is not None and not base.fixed and effects else None
-    out = run_all(one, candidates, lambda c: -expected_seconds(c, prior), on_done or (lambda _n: None),
-                  lambda c: c.kind == "parameter", lambda got: decision.after(got, later, candidates))  # fmt: skip
+    cols = car() if car is not None and not base.fixed and any(c.kind == "effect" for c in candidates) else None
+    out = run_all(one, candidates, prior, on_done or (lambda _n: None))
     out.sort(key=lambda r: -r.statistic)
     return out
 
@@ -480,6 +477,28 @@ def not_screened(cand: Candidate) -> bool:
     """An effect whose force is not proportional to its strengths (backlash, a damper's lag): no score statistic at
     zero strength screens it (score.screenable), so its fit may be stopped instead (`cannot_win_after`)."""
     return cand.kind == "effect" and not (cand.linear and cand.strength)
+
+
+def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], prior: dict[str, Ranked] | None,
+            done: Callable[[int], None]) -> list[Ranked]:  # fmt: skip
+    """one(c) for every candidate, in parallel threads where there are cores (the longest fits first, so that none
+    runs alone at the end: expected_seconds), in the candidates' order; done(n) after each."""
+    n = min(available_cores(), len(candidates))
+    if n > 1:
+        with ThreadPoolExecutor(n) as pool:  # the longest fits first, so that none runs alone at the end
+            order = sorted(range(len(candidates)), key=lambda i: -expected_seconds(candidates[i], prior))
+            futures = {pool.submit(one, candidates[i]): i for i in order}
+            results: list[Ranked | None] = [None] * len(candidates)
+            for k, future in enumerate(as_completed(futures), start=1):
+                results[futures[future]] = future.result()
+                done(k)
+            out = [r for r in results if r is not None]
+    else:
+        out = []
+        for c in candidates:
+            out.append(one(c))
+            done(len(out))
+    return out
 
 
 def expected_seconds(cand: Candidate, prior: dict[str, Ranked] | None = None) -> float:

@@ -241,6 +241,17 @@ class _Augmentation:
         def critical(k: int) -> float:
             return float(chi2_isf(self.level(tests), k))
 
+        def fit(cands: list[Candidate], before: int, beat: float = 0.0) -> list[Ranked]:
+            return rank_candidates(
+                cands, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
+                subject.validation_J, subject.residual_count,
+                self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
+                claim=self.claim, scale=subject.scale(current),
+                prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
+                on_done=lambda n: self.progress(stage, before + n, tests), tests=tests,
+                make_linear=lambda names, cand: self.make_linear(names, cand, subject), car=car, beat=beat,
+            ) if cands else []  # fmt: skip
+
         def car() -> NDArray | None:  # the current fit's Jacobian, once per round (the effects' screening)
             if "J" not in jacobian:
                 J, _ = forward_jacobian(subject.problem_for(current.names)[0], current.x)
@@ -248,38 +259,28 @@ class _Augmentation:
             return jacobian["J"]
 
         jacobian: dict[str, NDArray | None] = {}
-        beaten: list[Ranked] = []
-
-        def later(tested: list[Ranked]) -> list[Candidate]:  # the screened effects that can still win the round
-            keep, out = cannot_win(scored, scores, tested, current, current_v, critical, subject.residual_count)
-            beaten.extend(out)
-            if out:
-                self.note(
-                    f"round {len(self.rounds) + 1}: {', '.join(r.effect for r in out)} not fitted: twice the score "
-                    "statistic (reported as the LR) and the critical LR fall short of the best known parameter's LR, "
-                    "so they cannot win the round"
-                )
-            return keep
 
         stops = chi2 and self.claim  # the effects' fits stop where they cannot beat the best known parameter
-        scored = [c for c in todo if c.effect in scores]  # fitted once the known parameters' LRs are known
-        ranked = rank_candidates(
-            [c for c in todo if c not in scored], current, current_v,
-            lambda names, cand: self.make_problem(names, cand, subject), subject.validation_J, subject.residual_count,
-            self.alpha, self.candidate_budget, statistic=subject.statistic(current), min_gain=subject.min_gain,
-            claim=self.claim, scale=subject.scale(current),
-            prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
-            on_done=lambda n: self.progress(stage, len(skipped) + len(beaten) + n, tests), tests=tests,
-            make_linear=lambda names, cand: self.make_linear(names, cand, subject), car=car, stops=stops,
-            later=later if scored else None,
-        )  # fmt: skip
-        if any(r.stopped for r in ranked):
+        first = [c for c in todo if c.kind == "parameter"] if scores or stops else todo  # the known parameters first
+        ranked = fit(first, len(skipped))
+        rest = [c for c in todo if c not in first]
+        rest, beaten = cannot_win(rest, scores, ranked, current, current_v, critical, subject.residual_count)
+        if beaten:
             self.note(
-                f"round {len(self.rounds) + 1}: the fits of {', '.join(r.effect for r in ranked if r.stopped)} "
-                f"stopped after {STOP_STEPS} steps: {STOP_FACTOR:g} x the LR reached (reported, a lower bound) and "
-                "the critical LR fall short of the best known parameter's LR, so they cannot win the round"
+                f"round {len(self.rounds) + 1}: {', '.join(r.effect for r in beaten)} not fitted: twice the score "
+                "statistic (reported as the LR) and the critical LR fall short of the best known parameter's LR, so "
+                "they cannot win the round"
             )
-        ranked = sorted(ranked + skipped + beaten, key=lambda r: -r.statistic)
+            self.progress(stage, len(skipped) + len(ranked) + len(beaten), tests)
+        best = max((r.statistic for r in ranked if r.accepted and r.kind == "parameter"), default=0.0)
+        rest = fit(rest, len(skipped) + len(first) + len(beaten), best if stops else 0.0)
+        if any(r.stopped for r in rest):
+            self.note(
+                f"round {len(self.rounds) + 1}: the fits of {', '.join(r.effect for r in rest if r.stopped)} stopped "
+                f"after {STOP_STEPS} steps: {STOP_FACTOR:g} x the LR reached (reported, a lower bound) and the "
+                "critical LR fall short of the best known parameter's LR, so they cannot win the round"
+            )
+        ranked = sorted(ranked + rest + skipped + beaten, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))
         self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
         return ranked

@@ -4,14 +4,12 @@ times STOP_FACTOR, with the critical LR, is compared with the round's best accep
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..optimizers.base import Problem
-from .tails import chi2_isf
 
 STOP_STEPS = 2  # trust-region steps of an effect's fit after which it is stopped when it cannot win the round
 STOP_FACTOR = 3.0  # ... when STOP_FACTOR x its LR then (+ the critical LR) is below the best known parameter's LR
@@ -49,13 +47,12 @@ def stoppable(problem: Problem, after: int, stop: Callable[[float], bool]) -> Pr
 
 
 def cannot_win_after(
-    J0: float, statistic: Callable[[float, float], float], beat: Callable[[], tuple[float, float]]
-) -> Callable[[float], bool]:  # fmt: skip
+    J0: float, statistic: Callable[[float, float], float], critical: float, beat: float
+) -> Callable[[float], bool] | None:  # fmt: skip
     """An effect's `stop` for candidate_fit: True when STOP_FACTOR x the LR its fit has reached after STOP_STEPS
-    steps (against the current fit's J0), plus the critical LR of the round's largest test, is below the LR of the
-    round's best accepted known parameter (0 when there is none: never stopped); `beat()` gives the two (waiting for
-    the known parameters' tests). Never while the fit is not yet below J0 (no LR reached: no ratio to bound its end
-    by).
+    steps (against the current fit's J0), plus `critical` (the critical LR of the round's largest test), is below
+    `beat`, the LR of the round's best accepted known parameter (None when there is none); never while the fit is
+    not yet below J0 (no LR reached: no ratio to bound its end by).
 
     Why it cannot win then: the LR of a fit only grows from there; the best accepted candidate is then that parameter
     or another candidate with an LR at least `beat`, which the stopped effect's LR falls short of by more than the
@@ -67,37 +64,6 @@ def cannot_win_after(
     play, which moves its contact events), most within 1.5 %; STOP_FACTOR = 3 leaves 1.8 x to spare. (A gas
     spring's fit reached 2.0 x; the effects a score statistic screens are left to score.cannot_win and fitted to
     the end.) tests/test_fit_stops.py checks on diagnosed cases that a stopped fit could not have won."""
-
-    def stop(J: float) -> bool:
-        if not J < J0:
-            return False
-        best, critical = beat()
-        return STOP_FACTOR * statistic(J0, J) + critical < best
-
-    return stop
-
-
-class Decision:
-    """What a round's known parameters' tests decide for the effects' fits: the best accepted parameter's LR and the
-    critical LR of the round's largest test (`after`, once they are done), which each stop waits for (`beat`)."""
-
-    def __init__(self, level: float):
-        self.level, self.best, self.critical = level, 0.0, 0.0
-        self._done = threading.Event()
-
-    def beat(self) -> tuple[float, float]:
-        """The best accepted known parameter's LR (0: none) and the critical LR, once decided."""
-        self._done.wait()
-        return self.best, self.critical
-
-    def after(self, tested: list, later: Callable[[list], list] | None, candidates: list) -> list:
-        """Decide from the known parameters' `tests`; the candidates `later(tested)` adds (tested after them), whose
-        tests count with the `candidates` for the largest number of degrees of freedom. Decided also when it fails."""
-        try:
-            more = later(tested) if later else []
-            k = max((len(c.unknowns) + len(c.shape) if c.df is None else c.df for c in candidates + more), default=1)
-            self.best = max((r.statistic for r in tested if r.accepted and r.kind == "parameter"), default=0.0)
-            self.critical = float(chi2_isf(self.level, k))
-            return more
-        finally:
-            self._done.set()
+    if beat <= 0:
+        return None
+    return lambda J: J < J0 and STOP_FACTOR * statistic(J0, J) + critical < beat
