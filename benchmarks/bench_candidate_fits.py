@@ -33,13 +33,13 @@ import vehid_cli.sim.kernel as K
 import vehid_cli.diagnose.loop as L
 run, sims, by = K._run_rk4, [0], collections.Counter()
 NAMES = ("screen_starts", "fisher_ci", "fit_free", "linear_fit", "effect_score", "score_statistics", "validation_J")
-def counted(b, dt, force, out):
+def counted(b, dt, force, out, *rest):
     sims[0] += b.P
     f = sys._getframe(1)
     while f is not None and f.f_code.co_name not in NAMES:
         f = f.f_back
     by[f.f_code.co_name if f is not None else "other"] += b.P
-    return run(b, dt, force, out)
+    return run(b, dt, force, out, *rest)
 K._run_rk4 = counted
 rank, rounds = L._Augmentation.rank, [0.0]
 def timed_rank(self, todo):

@@ -50,6 +50,7 @@ from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import gauss_newton, polish
 from ..sim.kernel import available_cores
 from .starts import screen_starts
+from .stops import STOP_STEPS, Stopped, cannot_win_after, stoppable
 from .tails import chi2_isf, chi2_sf
 
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
@@ -160,6 +161,7 @@ class Fit:
     J: float
     evaluations: int
     fixed: tuple[str, ...] = ()  # unknowns held at their value in this fit (shapes the data cannot tell)
+    stopped: bool = False  # stopped after STOP_STEPS steps: the best point then, not a converged fit (`stoppable`)
 
 
 def lsq_fit(problem: Problem, x0: NDArray, budget: int, seed: int = 0, tol: float = 1e-12) -> Fit:
@@ -301,11 +303,14 @@ def identifiable(names: Sequence[str], x: NDArray, ci: NDArray, shape: Sequence[
 
 def candidate_fit(
     problem: Problem, base: Fit, x_added: NDArray, cand: Candidate, budget: int, scale: float,
-    prior: dict[str, float] | None = None, car: NDArray | None = None,
+    prior: dict[str, float] | None = None, car: NDArray | None = None, stop: Callable[[float], bool] | None = None,
 ) -> Fit:  # fmt: skip
     """A candidate's fit: the best of its starts (and of `prior`, its own estimates from an earlier round),
     its identifiable shape parameters freed, least squares to SCREEN_TOL; `car`: the residuals' derivatives along
-    `base`'s unknowns at `base` (R, D), which the screening of the starts steers by (screen_starts)."""
+    `base`'s unknowns at `base` (R, D), which the screening of the starts steers by (screen_starts). `stop(J)`:
+    asked once after STOP_STEPS trust-region steps (1 + STOP_STEPS (d + 1) evaluations of the fit over d free
+    unknowns) with the best J so far; True ends the fit there (the Fit `stopped`, at that point). Until then the fit
+    is the same as without `stop`, and after it too when it is not stopped."""
     x0 = np.concatenate([base.x, x_added])
     x0 = np.clip(x0, problem.lower, problem.upper)
     extra = (prior,) if prior else ()
@@ -316,7 +321,14 @@ def candidate_fit(
     shapes = [n for n in cand.shape if n in problem.names]
     if shapes:
         free = identifiable(problem.names, x0, fisher_ci(problem, x0, scale), shapes)
-    return fit_free(problem, x0, free, budget, tol=SCREEN_TOL)
+    if stop is None:
+        return fit_free(problem, x0, free, budget, tol=SCREEN_TOL)
+    try:
+        return fit_free(stoppable(problem, 1 + STOP_STEPS * (int(free.sum()) + 1), stop), x0, free, budget,
+                        tol=SCREEN_TOL)  # fmt: skip
+    except Stopped as s:  # (the wrapped problem is the full one: s.x covers every unknown)
+        fixed = tuple(n for n, f in zip(problem.names, free, strict=True) if not f)
+        return Fit(tuple(problem.names), s.x, s.J, s.evaluations, fixed, stopped=True)
 
 
 def parameter_fit(
@@ -350,6 +362,7 @@ class Ranked(Result):
     validation_per_file: dict[str, float] | None = None
     fixed: tuple[str, ...] = ()  # shape parameters the data could not tell (held at their start value)
     screened: bool = False  # not fitted: its score statistic stands for its LR (loop's prescreen, score.py)
+    stopped: bool = False  # its fit stopped after STOP_STEPS steps (it cannot win the round): LR reached, a lower bound
 
     def to_json(self) -> dict:
         out = {
@@ -365,6 +378,7 @@ class Ranked(Result):
             "estimates": dict(zip(self.fit.names, map(float, self.fit.x), strict=True)),
             "shape_fixed": list(self.fixed),
             "fitted": not self.screened,
+            "stopped": self.stopped,
         }
         if self.validation_per_file:
             out["validation_J_per_file"] = dict(self.validation_per_file)
@@ -404,6 +418,7 @@ def rank_candidates(
     tests: int | None = None,
     make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None = None,
     car: Callable[[], NDArray | None] | None = None,
+    beat: float = 0.0,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -418,10 +433,13 @@ def rank_candidates(
     `make_linear(names, candidate)`: the augmented problem on the exact integrator with its exact sensitivities, or
     None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`;
     `car()`: the residuals' derivatives (R, D) along `base`'s unknowns at `base` (all free), which the effects'
-    screenings steer by. Candidate fits run in parallel threads."""
+    screenings steer by; `beat`: the LR of the round's best accepted known parameter (0: none), which an effect's fit
+    stops at when it cannot win the round (`cannot_win_after`). Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation
+    k_max = max((len(c.unknowns) + len(c.shape) if c.df is None else c.df for c in candidates), default=1)
+    margin = float(chi2_isf(level, k_max))
 
     def one(cand: Candidate) -> Ranked:
         t0 = time.perf_counter()
@@ -434,7 +452,8 @@ def rank_candidates(
             own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
         fit = parameter_fit(problem, base, x_added, cand, budget, make_linear)
         at_base = cols if cand.kind == "effect" and names[: len(base.names)] == base.names else None
-        fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base)
+        stop = cannot_win_after(base.J, statistic, margin, beat) if claim and not_screened(cand) else None
+        fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base, stop)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)
         k = cand.df if cand.df is not None else len(added) - len(fit.fixed)
@@ -445,13 +464,19 @@ def rank_candidates(
             effect=cand.effect, added=added, k=k, J=J, statistic=lr, p_value=p,
             bic_margin=lr - k * math.log(residual_count), validation_J=vJ,
             accepted=bool(claim and p < level and better), fit=fit, seconds=time.perf_counter() - t0,
-            kind=cand.kind, validation_per_file=per, fixed=fit.fixed,
+            kind=cand.kind, validation_per_file=per, fixed=fit.fixed, stopped=fit.stopped,
         )  # fmt: skip
 
     cols = car() if car is not None and not base.fixed and any(c.kind == "effect" for c in candidates) else None
     out = run_all(one, candidates, prior, on_done or (lambda _n: None))
     out.sort(key=lambda r: -r.statistic)
     return out
+
+
+def not_screened(cand: Candidate) -> bool:
+    """An effect whose force is not proportional to its strengths (backlash, a damper's lag): no score statistic at
+    zero strength screens it (score.screenable), so its fit may be stopped instead (`cannot_win_after`)."""
+    return cand.kind == "effect" and not (cand.linear and cand.strength)
 
 
 def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], prior: dict[str, Ranked] | None,

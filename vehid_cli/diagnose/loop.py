@@ -49,6 +49,7 @@ from .attribution import (
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
 from .score import Scores, cannot_win, fitted_basis, screen_effects, screenable
+from .stops import STOP_FACTOR, STOP_STEPS
 from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports
 from .unexplained import Unexplained
@@ -240,7 +241,7 @@ class _Augmentation:
         def critical(k: int) -> float:
             return float(chi2_isf(self.level(tests), k))
 
-        def fit(cands: list[Candidate], before: int) -> list[Ranked]:
+        def fit(cands: list[Candidate], before: int, beat: float = 0.0) -> list[Ranked]:
             return rank_candidates(
                 cands, current, current_v, lambda names, cand: self.make_problem(names, cand, subject),
                 subject.validation_J, subject.residual_count,
@@ -248,7 +249,7 @@ class _Augmentation:
                 claim=self.claim, scale=subject.scale(current),
                 prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
                 on_done=lambda n: self.progress(stage, before + n, tests), tests=tests,
-                make_linear=lambda names, cand: self.make_linear(names, cand, subject), car=car,
+                make_linear=lambda names, cand: self.make_linear(names, cand, subject), car=car, beat=beat,
             ) if cands else []  # fmt: skip
 
         def car() -> NDArray | None:  # the current fit's Jacobian, once per round (the effects' screening)
@@ -259,7 +260,8 @@ class _Augmentation:
 
         jacobian: dict[str, NDArray | None] = {}
 
-        first = [c for c in todo if c.kind == "parameter"] if scores else todo  # the known parameters first: cheap
+        stops = chi2 and self.claim  # the effects' fits stop where they cannot beat the best known parameter
+        first = [c for c in todo if c.kind == "parameter"] if scores or stops else todo  # the known parameters first
         ranked = fit(first, len(skipped))
         rest = [c for c in todo if c not in first]
         rest, beaten = cannot_win(rest, scores, ranked, current, current_v, critical, subject.residual_count)
@@ -270,8 +272,15 @@ class _Augmentation:
                 "they cannot win the round"
             )
             self.progress(stage, len(skipped) + len(ranked) + len(beaten), tests)
-        ranked = fit(rest, len(skipped) + len(first) + len(beaten)) + ranked
-        ranked = sorted(ranked + skipped + beaten, key=lambda r: -r.statistic)
+        best = max((r.statistic for r in ranked if r.accepted and r.kind == "parameter"), default=0.0)
+        rest = fit(rest, len(skipped) + len(first) + len(beaten), best if stops else 0.0)
+        if any(r.stopped for r in rest):
+            self.note(
+                f"round {len(self.rounds) + 1}: the fits of {', '.join(r.effect for r in rest if r.stopped)} stopped "
+                f"after {STOP_STEPS} steps: {STOP_FACTOR:g} x the LR reached (reported, a lower bound) and the "
+                "critical LR fall short of the best known parameter's LR, so they cannot win the round"
+            )
+        ranked = sorted(ranked + rest + skipped + beaten, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))
         self.say("candidates: " + ", ".join(f"{r.effect} LR={r.statistic:.3g}" for r in ranked))
         return ranked

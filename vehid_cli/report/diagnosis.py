@@ -23,12 +23,14 @@ def diagnosis_tables(result):
     table = Table(
         title=f"candidates, round 1 (alpha = {result.alpha:g}, Bonferroni)", box=box.SIMPLE_HEAD,
         caption="accepted: significant (p < alpha / candidates) and lowers the " + vname
-        + "; claimed: in the final model; screened: not fitted, its LR is its score statistic",
+        + "; claimed: in the final model; screened: not fitted, its LR is its score statistic; stopped: its fit "
+        "stopped after two steps, it cannot win the round (its LR a lower bound)",
     )  # fmt: skip
     for col in ("candidate", "k", "LR", "p", "J", vname, "status"):
         table.add_column(col, no_wrap=True, justify="left" if col in ("candidate", "status") else "right")
     for r in result.rounds[0] if result.rounds else ():
-        status = "claimed" if r.effect in claimed else ("accepted" if r.accepted else "screened" if r.screened else "-")
+        status = "claimed" if r.effect in claimed else "stopped" if r.stopped else "screened" if r.screened else "-"
+        status = "accepted" if status == "-" and r.accepted else status
         table.add_row(
             r.effect, str(r.k), f"{r.statistic:.3g}", f"{r.p_value:.2g}", f"{r.J:.4g}", f"{r.validation_J:.4g}", status
         )  # fmt: skip
