@@ -54,7 +54,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core.allocator import release_if_handing_back
 from ..core.result import Result
 from ..identify.objectives import Objective
 from ..identify.task import Task
@@ -591,12 +590,9 @@ def estimate_unexplained(
     axles = _axle_estimates(end.fit, names, test.sigma2, grid_points)
     p = end.fit.p
     dx_ci = Z95 * np.sqrt(np.maximum(np.diag(test.sigma2 * end.fit.sol.cov)[:p], 0.0))
-    found = Unexplained(
+    return Unexplained(
         front=axles[0], rear=axles[1], chi2_before=float(np.mean(rk0**2)), chi2_after=test.rss1 / R,
         edf=float(test.edf_force), edf_total=float(end.fit.sol.edf), df_test=float(test.df_test), F=float(test.F),
         p_value=test.p_value, sigma2=float(test.sigma2), samples=R, iterations=end.corrections, dx=end.dx, names=names,
         x=x, dx_ci=dx_ci,
     )  # fmt: skip
-    del fitted, lin, end, rk0, keep
-    release_if_handing_back()  # a long record's: the columns' and fits' freed memory back (core/allocator.py)
-    return found

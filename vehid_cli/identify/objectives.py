@@ -139,11 +139,10 @@ class Objective:
         num, den = self._eq8_parts(outputs)
         return num / den
 
-    def residuals(self, outputs: Mapping[str, NDArray]) -> NDArray:
+    def residuals(self, outputs: Mapping[str, NDArray], out: NDArray | None = None) -> NDArray:
         """Weighted residuals (ref - sim) / sigma of all observed channel samples, flattened (..., R), each family's
         written straight into its columns (no list of parts concatenated: a long record's residuals are tens of MB
-        per copy)."""
-        out = None
+        per copy); into `out` (..., R) when given (a batch's rows, `task.chunked_residuals`), which is returned."""
         first = 0
         for family in self.reference:
             r = self.error(family, outputs[family])

@@ -194,7 +194,7 @@ class Task:
             return objective.costs(simulate(X))
 
         def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
-            return chunked_residuals(objective.costs_and_residuals, simulate, X, self.experiment.cars_per_chunk)
+            return chunked_residuals(objective, simulate, X, self.experiment.cars_per_chunk)
 
         def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
             with np.errstate(all="ignore"):
@@ -322,31 +322,34 @@ def information_by_parameter(
 
 
 def chunked_residuals(
-    costs_and_residuals: Callable[[dict[str, NDArray]], tuple[NDArray, NDArray]],
+    objective: Objective,
     simulate: Callable[[NDArray], dict[str, NDArray]],
     X: NDArray,
     chunk: int,
 ) -> tuple[NDArray, NDArray]:
-    """Costs (P,) and weighted residuals (P, R) of the candidates X (P, D), simulated `chunk` cars at a time into one
-    array: a long record's channels (and the error beside them) are held for one chunk of cars only, never for the
-    whole batch (a Jacobian's nine cars at 60 s and 1 kHz: 70 MB of channels, as much again of errors). Each car's
-    numbers are the same either way: no chunk holds a single car, whose cost NumPy sums in another order than a
-    row of a batch's."""
+    """Costs (P,) and weighted residuals (P, R) of `objective` for the candidates X (P, D), simulated `chunk` cars at
+    a time into one array: a long record's channels (and the error beside them) are held for one chunk of cars only,
+    never for the whole batch (a Jacobian's nine cars at 60 s and 1 kHz: 70 MB of channels, as much again of
+    errors); each chunk's residuals are written straight into their rows, and its channels let go before its costs
+    are squared (a chunk of two cars of a 60 s record: 8 MB per copy). Each car's numbers are the same either way:
+    no chunk holds a single car, whose cost NumPy sums in another order than a row of a batch's."""
     P = len(X)
     chunk = max(2, chunk)
     if P <= chunk:
-        return costs_and_residuals(simulate(X))
+        return objective.costs_and_residuals(simulate(X))
     starts = list(range(0, P, chunk))
     if P - starts[-1] == 1:  # the last car joins the chunk before it
         starts.pop()
     costs = np.empty(P)
-    residuals = None
+    residuals = np.empty((P, objective.size))
     for start, stop in zip(starts, [*starts[1:], P], strict=True):
-        part_costs, part = costs_and_residuals(simulate(X[start:stop]))
-        if residuals is None:
-            residuals = np.empty((P, part.shape[-1]))
-        costs[start:stop] = part_costs
-        residuals[start:stop] = part
+        outputs = simulate(X[start:stop])
+        rows = objective.residuals(outputs, out=residuals[start:stop])
+        if objective.name == "wls":
+            del outputs  # the chunk's channels, before the square of its residuals
+            costs[start:stop] = np.mean(rows**2, axis=-1)
+        else:
+            costs[start:stop] = objective.costs(outputs)
     return costs, residuals
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...config import Config, config_from_dict
+from ...core.allocator import release_if_handing_back
 from ...core.progress import ProgressHook
 from ...core.streams import run_streams
 from ...diagnose.attribution import (
@@ -296,6 +297,7 @@ def unexplained_force(
     first, first_ref = (task.tasks[0], ref[0]) if joint else (task, ref)
     first_keep = None if keep is None else keep[: first.residual_samples]
     missing = estimate_unexplained(first, first_ref, fit.names, fit.x, keep=first_keep)
+    release_if_handing_back()  # a long record's: the estimate's freed heap (~30 MiB) back (core/allocator.py)
     order = tuple(candidate_order(missing, tuple(specs)))
     notes = (f"the unexplained strut force is estimated from the first run ({files[0]}) alone",) if joint else ()
     return missing, order, notes
