@@ -467,6 +467,7 @@ def _iterate(
         moved = float(np.max(np.abs(shift_d)) / np.ptp(d)) > 1e-4 or float(np.max(np.abs(shift_v)) / np.ptp(v)) > 1e-4
         if fit.p and moved:  # a Gauss-Newton step of the unknowns: re-simulate there
             x_cur = np.clip(x_cur + dx, fitted.lo, fitted.hi)
+            fit = lin = None  # this fit's columns and the last linearisation freed before the car is simulated again
             lin = fitted.linearise(x_cur)
     return _Converged(fit, np.clip(x_cur + fit.dx, fitted.lo, fitted.hi) - x, done)
 
