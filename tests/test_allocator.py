@@ -70,3 +70,18 @@ def test_a_long_record_hands_freed_memory_back():
                               capture_output=True, text=True, env=env, check=True).stdout.split()[-1])  # fmt: skip
     assert kept < default / 10, (kept, default)  # 64 MiB kept: the 10-20 MB blocks are reused
     assert handed > default / 2, (handed, default)  # handed back: faulted in again like glibc's defaults
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc_trim")
+def test_a_phase_hands_its_freed_pages_back_only_once_a_long_record_is_loaded():
+    """release_if_handing_back trims glibc's heaps (malloc_trim) only after hand_back_freed_memory (a long record
+    loaded): a short record's freed memory stays for reuse. Run in a fresh process: the thresholds are the process's."""
+    script = (
+        "from vehid_cli.core import allocator as a\n"
+        "before = a.release_if_handing_back()\n"
+        "a.hand_back_freed_memory()\n"
+        "print(before, a.release_if_handing_back())\n"
+    )
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, env=env)
+    assert out.stdout.split() == ["False", "True"]

@@ -44,3 +44,27 @@ def test_a_test_length_record_is_not_windowed():
     cfg = prepare_config(load_config(HYSTERESIS, ["identify.objective=wls"]))
     task = build_task(cfg)
     assert task.experiment.t.size <= LONG_RECORD and not is_long(task)
+
+
+def test_the_windows_cars_are_simulated_a_few_at_a_time_with_the_same_numbers():
+    """The window simulates at most WINDOW_CHUNK_BYTES of cars' full responses at once (a candidate fit's Jacobian
+    batch of 13 cars in chunks of 4, two fits in threads at a time): each car's costs and residuals equal those of
+    the whole batch simulated at once, bit for bit."""
+    import dataclasses
+
+    from vehid_cli.diagnose.window import WINDOW_CHUNK_BYTES
+
+    seconds = 1.2 * LONG_RECORD / 1000.0
+    cfg = prepare_config(load_config(HYSTERESIS, [*LONG, f"simulation.duration={seconds}"]))
+    task = build_task(cfg)
+    head = window_task(task)
+    exp = head.experiment
+    assert exp.chunk_bytes == WINDOW_CHUNK_BYTES and 2 <= exp.cars_per_chunk < 13
+    whole = dataclasses.replace(head, experiment=dataclasses.replace(exp, chunk_bytes=2**40))
+    assert whole.experiment.cars_per_chunk >= 13
+    wref = {f: v[:SCREEN_SAMPLES] for f, v in task.reference(0).items()}
+    rng = np.random.default_rng(8)
+    X = task.nominal * rng.uniform(0.95, 1.05, size=(13, task.dim))
+    costs, r = head.problem(wref).residuals(X)
+    costs_whole, r_whole = whole.problem(wref).residuals(X)
+    assert np.array_equal(r, r_whole) and np.array_equal(costs, costs_whole)

@@ -41,3 +41,36 @@ def test_masked_problem_residuals(monkeypatch):
     costs, r = masked(problem, keep).residuals(X)
     np.testing.assert_array_equal(r, cr(X)[1][:, keep])
     np.testing.assert_allclose(costs, np.mean(cr(X)[1][:, keep] ** 2, axis=1), rtol=1e-13, atol=0)
+
+
+@pytest.mark.parametrize("offsets", [False, True])
+def test_a_long_records_batch_is_made_at_its_kept_entries_only_with_the_same_numbers(monkeypatch, offsets):
+    """A task's problem masked by the held-out blocks: a batch above IN_PLACE_BYTES (a long record's) is simulated
+    and weighted at the kept entries only (`Problem.kept`, task.kept_residuals; no (P, R) array), with the costs and
+    residuals of the whole vectors' kept entries bit for bit, chunked or not, observed masks and offsets included."""
+    import dataclasses
+
+    from tests.conftest import BASE_CONFIG
+    from vehid_cli.config import load_config
+    from vehid_cli.identify.experiment import Experiment
+    from vehid_cli.identify.task import build_task
+
+    sets = ["identify.objective=wls", "noise.level=0.03", "simulation.duration=1", "identify.truth=config"]
+    task = dataclasses.replace(build_task(load_config(BASE_CONFIG, sets)), offsets=offsets)
+    ref = task.reference(0)
+    if offsets:  # a channel sampled every other row: observed masks, the objective's own entries
+        observed = {f: np.ones(v.shape, dtype=bool) for f, v in ref.items()}
+        observed["acc"][1::2, 2] = False
+        task = dataclasses.replace(task, observed=observed)
+    problem = task.problem(ref)
+    assert problem.kept is not None
+    R = problem.residuals(task.nominal[None, :])[1].shape[1]
+    keep = ~np.resize(holdout_blocks(R // 2), R)
+    X = task.nominal * np.random.default_rng(6).uniform(0.97, 1.03, size=(5, task.dim))
+    monkeypatch.setattr(holdout, "IN_PLACE_BYTES", 0)
+    for chunk in (2, 8):
+        monkeypatch.setattr(Experiment, "cars_per_chunk", property(lambda self, c=chunk: c))
+        new = masked(problem, keep).residuals(X)
+        old = masked(dataclasses.replace(problem, kept=None), keep).residuals(X)
+        assert new[1].flags.c_contiguous and new[1].shape == (5, keep.sum())
+        assert np.array_equal(new[1], old[1]) and np.array_equal(new[0], old[0])

@@ -51,3 +51,30 @@ def test_welch_equals_scipy_signal() -> None:
             assert np.array_equal(f0, f1) and np.array_equal(g0, g1)
             np.testing.assert_allclose(p1, p0, rtol=1e-10, atol=0)
             np.testing.assert_allclose(q1, q0, rtol=1e-10, atol=0)
+
+
+def test_a_long_residuals_spectrum_is_taken_channel_by_channel_to_round_off() -> None:
+    """diagnose.residuals.spectrum above SPECTRUM_BATCH_BYTES (a long record's residual) takes one channel's Welch
+    segments at a time: the PSD equals the all-channels-at-once welch to round-off (NaN columns on their own grid
+    as before); below it, the batched one bit for bit."""
+    from vehid_cli.diagnose import residuals
+    from vehid_cli.diagnose.residuals import spectrum, welch
+
+    rng = np.random.default_rng(11)
+    dt = 1e-3
+    for n in (3000, 60000):
+        x = rng.normal(size=(n, 8)) * rng.uniform(0.1, 10.0, 8) + 2.0
+        x[1::2, 5] = np.nan  # a slow channel on the faster grid
+        long = 2 * x.nbytes > residuals.SPECTRUM_BATCH_BYTES
+        assert long == (n == 60000)
+        f, out = spectrum(x, dt)
+        g, p = welch(np.nan_to_num(x), 1.0 / dt, 256, axis=0)
+        assert np.array_equal(f, g)
+        whole = np.delete(np.arange(8), 5)
+        if long:
+            np.testing.assert_allclose(out[whole], p.T[whole] / (2 * dt), rtol=1e-12, atol=0)
+        else:
+            assert np.array_equal(out[whole], p.T[whole] / (2 * dt))
+        _, p5 = welch(x[::2, 5], 0.5 / dt, 256)
+        expected = np.where(f <= 250.0, np.interp(f, np.fft.rfftfreq(256, 2 * dt), p5 / (4 * dt)), np.nan)
+        np.testing.assert_array_equal(out[5], expected)

@@ -220,3 +220,23 @@ def test_a_record_simulated_in_time_blocks_gives_the_same_estimate(monkeypatch):
     whole = estimate_unexplained(task, ref, task.names, task.nominal, iterations=2)
     assert blocked.p_value < 1e-6  # the hysteresis is seen
     assert json.dumps(blocked.to_json()) == json.dumps(whole.to_json())
+
+
+@pytest.mark.parametrize("offsets", [False, True])
+def test_the_kept_response_columns_are_written_without_the_whole_matrix_bit_for_bit(damping, offsets):
+    """response_columns with `keep` (the missing force's fit matrix [J | S[keep]]): the kept rows of the whole (R, K)
+    responses, bit for bit, in the columns after the caller's; written block by block without the whole matrix when
+    no offsets are profiled, made whole and copied when they are (each channel's mean over every sample first)."""
+    from vehid_cli.diagnose.linear_response import response_columns
+
+    task = dataclasses.replace(damping[0], offsets=offsets)
+    exp = task.experiment
+    objective = task.objective(damping[1])
+    car = car_at(exp, {}, exp.dt)
+    rng = np.random.default_rng(4)
+    U = rng.standard_normal((exp.t.size, 4, 6)) * 100.0
+    whole = response_columns(objective, car, U, task.sigma)
+    keep = rng.random(whole.shape[0]) < 0.7
+    A = response_columns(objective, car, U, task.sigma, keep, 3)
+    assert A.shape == (keep.sum(), 9)
+    np.testing.assert_array_equal(A[:, 3:], whole[keep])

@@ -39,9 +39,21 @@ def keep_freed_memory() -> bool:
     return _thresholds(MMAP_THRESHOLD, TRIM_THRESHOLD)
 
 
+_STATE = {"handing_back": False}  # set once a long record is loaded (`hand_back_freed_memory`)
+
+
 def hand_back_freed_memory() -> bool:
     """Lower glibc's thresholds and arena count for a long record (see the module docstring); True when set."""
+    _STATE["handing_back"] = True
     return _thresholds(LONG_MMAP_THRESHOLD, LONG_TRIM_THRESHOLD, LONG_ARENA_MAX)
+
+
+def release_if_handing_back() -> bool:
+    """`release_free_pages` once a long record has been loaded (`hand_back_freed_memory`), else nothing (a short
+    record's freed memory is kept for reuse, by design): a phase of a long record's work that is not itself blocked
+    over the record (the missing force's estimate on its screening window: 30 MiB freed inside the heap) hands its
+    freed pages back before the next one. True when they were released."""
+    return _STATE["handing_back"] and release_free_pages()
 
 
 def _thresholds(mmap_bytes: int, trim_bytes: int, arenas: int | None = None) -> bool:

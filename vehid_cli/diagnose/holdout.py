@@ -31,6 +31,9 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
 
     def cr(X):
         with np.errstate(all="ignore"):
+            if rows is not None and problem.kept is not None and len(X) > 1 and len(X) * keep.size * 8 > IN_PLACE_BYTES:
+                r = problem.kept(X, rows)  # a long record's batch: its kept entries only, no (P, R) array
+                return mean_squares(r), r
             _, r = problem.residuals(X)
             if r.nbytes <= IN_PLACE_BYTES:
                 r = r if keep is None else r[:, keep]

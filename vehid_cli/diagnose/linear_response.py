@@ -80,16 +80,44 @@ def car_at(exp, values: dict[str, float], dt: float) -> LinearCar:
     return linear_car(exp.matrices(values), dt, layout, layout.points(exp.parameters(values)))
 
 
-def response_columns(objective, car: LinearCar, U: NDArray, sigma: dict[str, NDArray]) -> NDArray:
+def response_columns(
+    objective, car: LinearCar, U: NDArray, sigma: dict[str, NDArray], keep: NDArray | None = None, first: int = 0
+) -> NDArray:
     """The weighted residual entries (the objective's layout: family by family, time-major, observed entries only)
     that the K input histories U (n, 4, K) explain, (R, K): each family's channels' responses over its `sigma`,
     without what the profiled offsets absorb. The states are made a block of time at a time (`responses_blocks`)
-    and each family's rows written straight into the result: a long window's states (n, 14, K) are not held."""
+    and each family's rows written straight into the result: a long window's states (n, 14, K) are not held.
+
+    With `keep` (R,) bool: only the kept rows, in columns first: of a new (keep.sum(), first + K) array whose first
+    `first` columns are the caller's to fill (the missing force's fit matrix [J | S[keep]]); written block by block
+    without the (R, K) array when no offsets are profiled and every family's entries are whole (else that array is
+    made and its kept rows copied). The same numbers either way."""
     n, K = U.shape[0], U.shape[2]
+    direct = keep is not None and not objective.offsets and all(objective.entries(f) is None for f in sigma)
+    if keep is not None and not direct:
+        S = response_columns(objective, car, U, sigma)
+        A = np.empty((int(np.count_nonzero(keep)), first + K))
+        rows = np.flatnonzero(keep)
+        for start in range(0, rows.size, COPY_ROWS):
+            A[start : start + COPY_ROWS, first:] = S[rows[start : start + COPY_ROWS]]
+        return A
     sizes = {}
     for f in sigma:
         rows = objective.entries(f)
         sizes[f] = n * car.out_s[f].shape[0] if rows is None else rows.size
+    if direct:
+        A = np.empty((int(np.count_nonzero(keep)), first + K))
+        at = np.cumsum(keep) - 1  # the row of A of each kept entry
+        offsets = dict(zip(sigma, np.cumsum([0, *sizes.values()])[:-1], strict=True))
+        for k0, s in responses_blocks(car, U):
+            b = s.shape[0]
+            for f, sg in sigma.items():
+                k = car.out_s[f].shape[0]
+                lo = offsets[f] + k0 * k
+                kept = keep[lo : lo + b * k]
+                Y = ((car.out_s[f] @ s + car.out_u[f] @ U[k0 : k0 + b]) / sg[None, :, None]).reshape(-1, K)
+                A[at[lo : lo + b * k][kept], first:] = Y[kept]
+        return A
     S = np.empty((sum(sizes.values()), K))
     Ys, first = {}, 0
     for f in sigma:  # each family's (n, k, K) responses: a view of its rows of S when every entry is kept
@@ -126,6 +154,7 @@ def responses(car: LinearCar, U: NDArray) -> NDArray:
     return s
 
 
+COPY_ROWS = 8192  # rows of the responses copied into the fit's matrix at a time (`response_columns` with keep)
 RESPONSE_BLOCK = 256  # samples of states `responses_blocks` makes at a time: 256 x 14 x 50 inputs, 1.4 MB
 
 

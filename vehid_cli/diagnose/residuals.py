@@ -26,6 +26,9 @@ from .tails import chi2_sf
 
 BAND_Z = 1.959963984540054  # two-sided 95 %
 WELCH_SEGMENT_S = 1.0  # residual_spectrum's Welch segment [s] (shorter for records under 8 s: 8 segments)
+SPECTRUM_BATCH_BYTES = 4 * 2**20  # `spectrum` takes the channels' segments (twice the residual) at once below this,
+# one channel at a time above (a long record's: 18 MiB of segments, windows and transforms at 60 s, 8 channels, 1 kHz,
+# 2 MiB per channel; the same PSD to round-off, NumPy reducing a lone column in another order: issue 26)
 
 
 @dataclass(frozen=True)
@@ -177,8 +180,15 @@ def spectrum(residual: NDArray, dt: float) -> tuple[NDArray, NDArray]:
     A column that is NaN between its own samples (a slow channel on a faster grid) is taken at its own samples
     and rate, and its PSD interpolated onto the grid's frequencies (NaN above its own Nyquist frequency)."""
     n = residual.shape[0]
-    f, p = welch(np.nan_to_num(residual), 1.0 / dt, min(256, n), axis=0)
-    out = (p / (2.0 * dt)).T
+    clean = np.nan_to_num(residual)
+    if 2 * clean.nbytes <= SPECTRUM_BATCH_BYTES:
+        f, p = welch(clean, 1.0 / dt, min(256, n), axis=0)
+        out = (p / (2.0 * dt)).T
+    else:  # a long record's: one channel's segments at a time (SPECTRUM_BATCH_BYTES)
+        parts = [welch(clean[:, j], 1.0 / dt, min(256, n)) for j in range(clean.shape[1])]
+        f = parts[0][0]
+        out = np.stack([p / (2.0 * dt) for _, p in parts])
+    del clean
     for j in np.flatnonzero(~np.all(np.isfinite(residual), axis=0)):
         at = np.flatnonzero(np.isfinite(residual[:, j]))
         if at.size < 2:

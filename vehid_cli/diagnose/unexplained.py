@@ -73,7 +73,6 @@ VARIABLES = ("deflection", "velocity")
 UNITS = {"deflection": "m", "velocity": "m/s"}
 SIGNIFICANCE = 1e-3  # the F test's level for "the residual holds a strut force" (the loop's alpha)
 SIGNIFICANT_Z = 3.0  # a curve is significant where |force| exceeds 3 standard errors somewhere on its grid
-COPY_ROWS = 8192  # rows of the force's columns copied into the fit's matrix at a time
 
 
 # ------------------------------------------------------------------------------------------ results
@@ -345,23 +344,23 @@ class _FittedCar:
         car = car_at(exp, {m: at[j] for j, m in enumerate(self.names)}, exp.dt)
         return _Linearisation(res[0], Jm, d_all[0], v_all[0], dd, dv, car)
 
-    def force_columns(self, car: LinearCar, d: NDArray, v: NDArray, n_knots: int):
+    def force_columns(
+        self, car: LinearCar, d: NDArray, v: NDArray, n_knots: int, keep: NDArray | None = None, first: int = 0
+    ):
         """The basis of each function (front g, front h, rear g, rear h) on the trajectory d, v (n, 4), its columns
         applied as input forces at the corners of its axle: the bases, the input histories U (n, 4, K) and their
         weighted responses laid out like the residual (R_all, K). (The car's states driven by U, (n, 14, K), are
-        made a block of time at a time and not kept: `trajectory_shift` makes them again.)"""
+        made a block of time at a time and not kept: `trajectory_shift` makes them again.) With `keep`, the kept
+        rows only, after `first` columns left to the caller (`response_columns`)."""
         n = self.task.experiment.t.size
-        bases, cols = [], []
-        for _axle, corners in AXLES:
-            for traj in (d, v):
-                b = basis(traj[:, corners], n_knots)
-                bases.append(b)
-                U = np.zeros((n, N_CORNERS, b.size))
-                for c in corners:
-                    U[:, c, :] = b(traj[:, c])
-                cols.append(U)
-        U = np.concatenate(cols, axis=2)  # (n, 4, K)
-        return tuple(bases), U, response_columns(self.objective, car, U, self.sigma)
+        each = [(basis(traj[:, corners], n_knots), traj, corners) for _axle, corners in AXLES for traj in (d, v)]
+        U = np.zeros((n, N_CORNERS, sum(b.size for b, _, _ in each)))  # (n, 4, K), each basis into its columns
+        k0 = 0
+        for b, traj, corners in each:
+            for c in corners:
+                U[:, c, k0 : k0 + b.size] = b(traj[:, c])
+            k0 += b.size
+        return tuple(b for b, _, _ in each), U, response_columns(self.objective, car, U, self.sigma, keep, first)
 
 
 def trajectory_shift(car: LinearCar, U: NDArray, theta: NDArray) -> tuple[NDArray, NDArray]:
@@ -422,13 +421,8 @@ def _fit_force(
     one smoothing parameter per function (REML or GCV)."""
     rk, Jk = lin.r[keep], lin.Jm[keep]
     p = Jk.shape[1]
-    bases, U, S = fitted.force_columns(lin.car, d, v, n_knots)
-    A = np.empty((rk.size, p + S.shape[1]))  # [Jk | S[keep]] written in place: no copy of S's kept rows beside it
+    bases, U, A = fitted.force_columns(lin.car, d, v, n_knots, keep, p)  # [Jk | S[keep]], S's kept rows only
     A[:, :p] = Jk
-    rows = np.flatnonzero(keep)
-    for start in range(0, rows.size, COPY_ROWS):
-        A[start : start + COPY_ROWS, p:] = S[rows[start : start + COPY_ROWS]]
-    del S
     blocks, k0 = [], p
     for b in bases:
         blocks.append((slice(k0, k0 + b.size), b.P))
@@ -473,6 +467,7 @@ def _iterate(
         moved = float(np.max(np.abs(shift_d)) / np.ptp(d)) > 1e-4 or float(np.max(np.abs(shift_v)) / np.ptp(v)) > 1e-4
         if fit.p and moved:  # a Gauss-Newton step of the unknowns: re-simulate there
             x_cur = np.clip(x_cur + dx, fitted.lo, fitted.hi)
+            fit = lin = None  # this fit's columns and the last linearisation freed before the car is simulated again
             lin = fitted.linearise(x_cur)
     return _Converged(fit, np.clip(x_cur + fit.dx, fitted.lo, fitted.hi) - x, done)
 

@@ -25,6 +25,9 @@ from ..identify.task import JointTask, Task
 
 SCREEN_SAMPLES = 5000  # samples of each run the screening uses (5 s at 1 kHz)
 LONG_RECORD = 2 * SCREEN_SAMPLES  # a run longer than this (samples) is screened on its window
+WINDOW_CHUNK_BYTES = 8 * 2**20  # the window's cars simulated at once, at most (their full responses; 4 cars of 5000
+# samples): the candidates' fits run two at a time in threads, each whole batch of a forward-difference Jacobian (13
+# cars, 23 MB) beside the other's put the 60 s diagnosis's round of candidates 50-60 MiB above its floor (issue 26)
 
 
 def _head(arrays: dict | None, n: int) -> dict | None:
@@ -41,7 +44,7 @@ def window_task(task: Task | JointTask, n: int = SCREEN_SAMPLES) -> Task | Joint
     if task.corrections:
         raise ValueError("a task with measurement-chain corrections among its unknowns has no screening window")
     exp = task.experiment
-    head = Experiment(exp.config, exp.t[:n], exp.road[:n], exp.road_source)
+    head = Experiment(exp.config, exp.t[:n], exp.road[:n], exp.road_source, chunk_bytes=WINDOW_CHUNK_BYTES)
     return dataclasses.replace(
         task, experiment=head, clean=_head(task.clean, n), measured=_head(task.measured, n),
         observed=_head(task.observed, n), raw=_head(task.raw, n),

@@ -60,6 +60,7 @@ class Experiment:
     t: NDArray  # (n,) [s]
     road: NDArray  # (n, 4) [m]
     road_source: str  # "config" or the measurement file the road came from
+    chunk_bytes: int = CHUNK_BYTES  # the full responses of the cars `outputs` simulates at once, at most
 
     def __post_init__(self) -> None:
         """A long record (more than LONG_BLOCKS blocks of BLOCK_SAMPLES, simulated or measured) has the process hand
@@ -222,15 +223,16 @@ class Experiment:
     @property
     def cars_per_chunk(self) -> int:
         """How many cars `outputs` simulates at once: their full response (about 45 columns per sample) within
-        CHUNK_BYTES, at least one car. A record simulated in time blocks holds only the layout's channels of each
-        car (and an objective's error and residuals beside them): within CHUNK_BYTES of those three copies, and one
-        car per core on a long record (more cars at once would only hold more: the blocks already split the cars
-        over the cores)."""
+        `chunk_bytes` (CHUNK_BYTES unless the experiment was made with less: a long record's screening window), at
+        least one car. A record simulated in time blocks holds only the layout's channels of each car (and an
+        objective's error and residuals beside them): within `chunk_bytes` of those three copies, and one car per
+        core on a long record (more cars at once would only hold more: the blocks already split the cars over the
+        cores)."""
         if self.blocked(None):
             per_car = self.t.size * 3 * len(self.layout.sensors) * 8
-            return max(1, min(CHUNK_BYTES // per_car, available_cores() if self._long else CHUNK_BYTES))
+            return max(1, min(self.chunk_bytes // per_car, available_cores() if self._long else self.chunk_bytes))
         per_car = self.t.size * (3 * N_DOF + 2 * len(self.layout.sensors) + 8) * 8
-        return max(1, CHUNK_BYTES // per_car)
+        return max(1, self.chunk_bytes // per_car)
 
     def exact_sensitivities(
         self, names: tuple[str, ...] | list[str], values: ArrayLike, sink: BlockSink | None = None

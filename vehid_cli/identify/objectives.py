@@ -139,25 +139,33 @@ class Objective:
         num, den = self._eq8_parts(outputs)
         return num / den
 
-    def residuals(self, outputs: Mapping[str, NDArray]) -> NDArray:
+    def residuals(
+        self, outputs: Mapping[str, NDArray], out: NDArray | None = None, entries: NDArray | None = None
+    ) -> NDArray:
         """Weighted residuals (ref - sim) / sigma of all observed channel samples, flattened (..., R), each family's
         written straight into its columns (no list of parts concatenated: a long record's residuals are tens of MB
-        per copy)."""
-        out = None
-        first = 0
+        per copy); into `out` (..., R) when given (a batch's rows, `task.chunked_residuals`), which is returned.
+        With `entries` (increasing indices into the R entries), only those, (..., entries.size): a long record's
+        batch on its kept entries (`task.kept_residuals`), the same numbers as the whole vector's."""
+        first = at = 0
         for family in self.reference:
             r = self.error(family, outputs[family])
             r /= self.sigma[family]  # in place
             r = r.reshape(r.shape[:-2] + (-1,))
-            if out is None:
-                out = np.empty(r.shape[:-1] + (self.size,))
             keep = self._keep.get(family)
             size = r.shape[-1] if keep is None else keep.size
+            if entries is not None:  # this family's share of the entries, as indices into its own
+                local = entries[np.searchsorted(entries, first) : np.searchsorted(entries, first + size)] - first
+                keep = local if keep is None else keep[local]
+            width = size if keep is None else keep.size
+            if out is None:
+                out = np.empty(r.shape[:-1] + (self.size if entries is None else entries.size,))
             if keep is None:
-                out[..., first : first + size] = r
+                out[..., at : at + width] = r
             else:
-                np.take(r, keep, axis=-1, out=out[..., first : first + size])
+                np.take(r, keep, axis=-1, out=out[..., at : at + width])
             first += size
+            at += width
         return out if out is not None else np.zeros(0)
 
     def residual_jacobian(self, sens: Mapping[str, NDArray]) -> NDArray:

@@ -194,7 +194,10 @@ class Task:
             return objective.costs(simulate(X))
 
         def cost_and_residuals(X: NDArray) -> tuple[NDArray, NDArray]:
-            return chunked_residuals(objective.costs_and_residuals, simulate, X, self.experiment.cars_per_chunk)
+            return chunked_residuals(objective, simulate, X, self.experiment.cars_per_chunk)
+
+        def kept(X: NDArray, entries: NDArray) -> NDArray:
+            return kept_residuals(objective, simulate, X, self.experiment.cars_per_chunk, entries)
 
         def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
             with np.errstate(all="ignore"):
@@ -218,6 +221,7 @@ class Task:
         return Problem(
             self.lower, self.upper, cost, cost_and_residuals, names=names,
             linearised=linearised if exact and not long else None, normal=normal if exact and long else None,
+            kept=kept,
         )  # fmt: skip
 
     def outputs(self, values: Mapping[str, NDArray]) -> dict[str, NDArray]:
@@ -322,32 +326,52 @@ def information_by_parameter(
 
 
 def chunked_residuals(
-    costs_and_residuals: Callable[[dict[str, NDArray]], tuple[NDArray, NDArray]],
+    objective: Objective,
     simulate: Callable[[NDArray], dict[str, NDArray]],
     X: NDArray,
     chunk: int,
 ) -> tuple[NDArray, NDArray]:
-    """Costs (P,) and weighted residuals (P, R) of the candidates X (P, D), simulated `chunk` cars at a time into one
-    array: a long record's channels (and the error beside them) are held for one chunk of cars only, never for the
-    whole batch (a Jacobian's nine cars at 60 s and 1 kHz: 70 MB of channels, as much again of errors). Each car's
-    numbers are the same either way: no chunk holds a single car, whose cost NumPy sums in another order than a
-    row of a batch's."""
+    """Costs (P,) and weighted residuals (P, R) of `objective` for the candidates X (P, D), simulated `chunk` cars at
+    a time into one array: a long record's channels (and the error beside them) are held for one chunk of cars only,
+    never for the whole batch (a Jacobian's nine cars at 60 s and 1 kHz: 70 MB of channels, as much again of
+    errors); each chunk's residuals are written straight into their rows, and its channels let go before its costs
+    are squared (a chunk of two cars of a 60 s record: 8 MB per copy). Each car's numbers are the same either way:
+    no chunk holds a single car, whose cost NumPy sums in another order than a row of a batch's."""
     P = len(X)
     chunk = max(2, chunk)
     if P <= chunk:
-        return costs_and_residuals(simulate(X))
+        return objective.costs_and_residuals(simulate(X))
     starts = list(range(0, P, chunk))
     if P - starts[-1] == 1:  # the last car joins the chunk before it
         starts.pop()
     costs = np.empty(P)
-    residuals = None
+    residuals = np.empty((P, objective.size))
     for start, stop in zip(starts, [*starts[1:], P], strict=True):
-        part_costs, part = costs_and_residuals(simulate(X[start:stop]))
-        if residuals is None:
-            residuals = np.empty((P, part.shape[-1]))
-        costs[start:stop] = part_costs
-        residuals[start:stop] = part
+        outputs = simulate(X[start:stop])
+        rows = objective.residuals(outputs, out=residuals[start:stop])
+        if objective.name == "wls":
+            del outputs  # the chunk's channels, before the square of its residuals
+            costs[start:stop] = np.mean(rows**2, axis=-1)
+        else:
+            costs[start:stop] = objective.costs(outputs)
     return costs, residuals
+
+
+def kept_residuals(
+    objective: Objective, simulate: Callable[[NDArray], dict[str, NDArray]], X: NDArray, chunk: int, entries: NDArray
+) -> NDArray:
+    """The weighted residuals (P, entries.size) of the candidates X (P, D) at the `entries` only (increasing indices
+    into the objective's R), simulated in chunks as `chunked_residuals`: a long record's batch of held-in entries
+    without the (P, R) array (a forward-difference Jacobian's ten cars at 60 s: 38 MB, 29 of them kept). The same
+    numbers as the whole vectors' entries."""
+    P = len(X)
+    starts = list(range(0, P, max(2, chunk)))
+    if len(starts) > 1 and P - starts[-1] == 1:  # the last car joins the chunk before it
+        starts.pop()
+    out = np.empty((P, entries.size))
+    for start, stop in zip(starts, [*starts[1:], P], strict=True):
+        objective.residuals(simulate(X[start:stop]), out=out[start:stop], entries=entries)
+    return out
 
 
 def is_effect_unknown(name: str) -> bool:

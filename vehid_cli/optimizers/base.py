@@ -24,6 +24,7 @@ CostAndResiduals = Callable[[NDArray], tuple[NDArray, NDArray]]  # (P, D) -> cos
 Linearised = Callable[[NDArray], "tuple[float, NDArray, NDArray] | None"]
 # x (D,) -> cost, residuals (R,), J'J (D, D) and J'r (D,) of that Jacobian, summed over a long record without it
 NormalEquations = Callable[[NDArray], "tuple[float, NDArray, NDArray, NDArray] | None"]
+KeptResiduals = Callable[[NDArray, NDArray], NDArray]  # (P, D), entries (k,) -> residuals (P, k) at those entries
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,7 @@ class Problem:
     names: tuple[str, ...] = ()
     linearised: Linearised | None = None  # cost, residuals and their exact Jacobian at one point (None: not known)
     normal: NormalEquations | None = None  # the same as normal equations (a long record: no (R, D) Jacobian made)
+    kept: KeptResiduals | None = None  # `residuals` at some entries only, the same numbers (diagnose/holdout.py)
 
     @property
     def dim(self) -> int:
