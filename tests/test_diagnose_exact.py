@@ -21,9 +21,10 @@ from vehid_cli.diagnose.attribution import (
     fit_intervals,
     linear_fit,
     lsq_fit,
+    screenable,
 )
 from vehid_cli.diagnose.holdout import masked
-from vehid_cli.diagnose.score import cannot_win, effect_score, fitted_basis, screenable
+from vehid_cli.diagnose.score import cannot_win, effect_score, fitted_basis
 from vehid_cli.identify.task import build_task
 from vehid_cli.sim.sensitivity import central_points
 from vehid_cli.systems.vehicle.diagnosis import exact_twin, holdout_mask, prepare_config

@@ -473,10 +473,16 @@ def rank_candidates(
     return out
 
 
+def screenable(cand: Candidate) -> bool:
+    """An effect whose force is proportional to its strengths: its score statistic at zero strength applies
+    (score.screen_effects)."""
+    return cand.kind == "effect" and cand.linear and bool(cand.strength)
+
+
 def not_screened(cand: Candidate) -> bool:
     """An effect whose force is not proportional to its strengths (backlash, a damper's lag): no score statistic at
-    zero strength screens it (score.screenable), so its fit may be stopped instead (`cannot_win_after`)."""
-    return cand.kind == "effect" and not (cand.linear and cand.strength)
+    zero strength screens it (`screenable`), so its fit may be stopped instead (`cannot_win_after`)."""
+    return cand.kind == "effect" and not screenable(cand)
 
 
 def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], prior: dict[str, Ranked] | None,

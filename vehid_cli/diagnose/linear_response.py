@@ -115,7 +115,7 @@ def response_columns(
                 k = car.out_s[f].shape[0]
                 lo = offsets[f] + k0 * k
                 kept = keep[lo : lo + b * k]
-                Y = ((car.out_s[f] @ s + car.out_u[f] @ U[k0 : k0 + b]) / sg[None, :, None]).reshape(-1, K)
+                Y = _weighted(car, f, s, U[k0 : k0 + b], sg).reshape(-1, K)
                 A[at[lo : lo + b * k][kept], first:] = Y[kept]
         return A
     S = np.empty((sum(sizes.values()), K))
@@ -128,7 +128,7 @@ def response_columns(
     for k0, s in responses_blocks(car, U):
         b = s.shape[0]
         for f, sg in sigma.items():
-            Ys[f][k0 : k0 + b] = (car.out_s[f] @ s + car.out_u[f] @ U[k0 : k0 + b]) / sg[None, :, None]
+            Ys[f][k0 : k0 + b] = _weighted(car, f, s, U[k0 : k0 + b], sg)
     first = 0
     for f in sigma:
         Y = Ys.pop(f)
@@ -139,6 +139,12 @@ def response_columns(
             S[first : first + sizes[f]] = Y.reshape(-1, K)[rows]
         first += sizes[f]
     return S
+
+
+def _weighted(car: LinearCar, family: str, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
+    """A block's responses (b, k, K) of a family's channels over their sigma, from its states s (b, 14, K) and input
+    histories U (b, 4, K) (one expression for both of `response_columns`' paths: the same numbers)."""
+    return (car.out_s[family] @ s + car.out_u[family] @ U) / sigma[None, :, None]
 
 
 def responses(car: LinearCar, U: NDArray) -> NDArray:

@@ -44,11 +44,12 @@ from .attribution import (
     parsimonious,
     rank_candidates,
     score_statistics,
+    screenable,
     undistinguished,
 )
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
-from .score import Scores, cannot_win, fitted_basis, screen_effects, screenable
+from .score import Scores, cannot_win, fitted_basis, screen_effects
 from .stops import STOP_FACTOR, STOP_STEPS
 from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..optimizers.base import Problem
-from .attribution import SCORE_SKIP, Candidate, Fit, Ranked, forward_jacobian, restricted
+from .attribution import SCORE_SKIP, Candidate, Fit, Ranked, forward_jacobian, restricted, screenable
 from .tails import chi2_sf
 
 Scores = dict[str, tuple[float, tuple[str, ...]]]  # effect -> its score statistic and the unknowns it adds
@@ -89,11 +89,6 @@ def effect_score(problem: Problem, x0: NDArray, cand: Candidate, basis: NDArray)
                 if np.all((sign[m] == 0) | (sign[m] * s_m >= 0)):
                     best = max(best, float(-g[m] @ s_m))
     return best if tried else float("nan")
-
-
-def screenable(cand: Candidate) -> bool:
-    """An effect whose force is proportional to its strengths: its score statistic at zero strength applies."""
-    return cand.kind == "effect" and cand.linear and bool(cand.strength)
 
 
 def score_ranked(cand: Candidate, S: float, added: tuple[str, ...], current: Fit, current_v: tuple, R: int,
