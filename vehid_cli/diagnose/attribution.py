@@ -43,12 +43,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.allocator import release_if_handing_back
 from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm
 from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import gauss_newton, polish
 from ..sim.kernel import available_cores
+from .jacobians import forward_jacobian, forward_normal, restricted
 from .starts import screen_starts
 from .stops import STOP_STEPS, Stopped, cannot_win_after, stoppable
 from .tails import chi2_isf, chi2_sf
@@ -201,22 +203,6 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
     return Fit(tuple(problem.names), run.best_x, J, run.evaluations + 1)
 
 
-def restricted(problem: Problem, x: NDArray, free: NDArray) -> Problem:
-    """The problem over the unknowns where `free` is True, the others held at their value in x."""
-    x = np.asarray(x, dtype=float)
-    free = np.asarray(free, dtype=bool)
-
-    def full(X: NDArray) -> NDArray:
-        out = np.repeat(x[None, :], len(X), axis=0)
-        out[:, free] = X
-        return out
-
-    cr = None if problem.residuals is None else (lambda X: problem.residuals(full(X)))
-    names = tuple(n for n, f in zip(problem.names, free, strict=True) if f)
-    return Problem(problem.lower[free], problem.upper[free], lambda X: problem.cost(full(X)), cr, problem.penalty,
-                   names)  # fmt: skip
-
-
 def fit_free(problem: Problem, x0: NDArray, free: NDArray, budget: int, tol: float = 1e-12) -> Fit:
     """lsq_fit over the `free` unknowns only (the others held at x0); the Fit covers every unknown."""
     free = np.asarray(free, dtype=bool)
@@ -228,19 +214,6 @@ def fit_free(problem: Problem, x0: NDArray, free: NDArray, budget: int, tol: flo
     x[free] = sub.x
     fixed = tuple(n for n, f in zip(problem.names, free, strict=True) if not f)
     return Fit(tuple(problem.names), x, sub.J, sub.evaluations, fixed)
-
-
-def forward_jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
-    """The Jacobian (R, D) of the problem's residuals at x (forward differences, one batch) and the residual (R,)."""
-    width = problem.upper - problem.lower
-    h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
-    step = np.where(x + h <= problem.upper, h, -h)
-    X = np.vstack([x[None, :], x[None, :] + np.diag(step)])
-    _, R = problem.residuals(X)
-    with np.errstate(over="ignore", invalid="ignore"):  # a step into an unstable model: inf columns, not a warning
-        R[1:] -= R[0][None, :]  # in place: a long record's (D + 1, R) residuals are tens of MB per copy
-        R[1:] /= step[:, None]
-    return R[1:].T, R[0]
 
 
 def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArray:
@@ -271,11 +244,11 @@ def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArra
 def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
     """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
     differences, one batch) and `scale` the variance of one residual entry (NaN where singular)."""
-    Jac, _ = forward_jacobian(problem, x)
-    if not np.all(np.isfinite(Jac)):
+    H = forward_normal(problem, x)
+    if not np.all(np.isfinite(H)):
         return np.full(x.size, np.nan)
     try:
-        cov = np.linalg.inv(Jac.T @ Jac) * max(scale, 1e-300)
+        cov = np.linalg.inv(H) * max(scale, 1e-300)
     except np.linalg.LinAlgError:
         return np.full(x.size, np.nan)
     d = np.diag(cov)
@@ -499,6 +472,7 @@ def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], pri
                 results[futures[future]] = future.result()
                 done(k)
             out = [r for r in results if r is not None]
+        release_if_handing_back()  # the threads' arenas keep what their fits freed (a long record's: ~30 MiB)
     else:
         out = []
         for c in candidates:

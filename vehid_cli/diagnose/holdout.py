@@ -51,8 +51,13 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
         with np.errstate(all="ignore"):
             return float(np.mean(r**2)), r, jac
 
+    def gram(X: NDArray, scale: NDArray, entries: NDArray | None = None) -> NDArray | None:
+        at = rows if entries is None else (entries if rows is None else rows[entries])
+        return problem.gram(X, scale, at)
+
     lin = None if problem.linearised is None else linearised
-    return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names, lin)
+    return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names, lin,
+                   gram=None if problem.gram is None else gram)  # fmt: skip
 
 
 def kept_in_place(r: NDArray, rows: NDArray) -> NDArray:

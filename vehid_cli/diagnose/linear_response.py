@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +18,9 @@ from numpy.typing import NDArray
 from ..models.fullcar import N_CORNERS, N_DOF
 from ..sim.modal import foh_discretisation
 from ..sim.nonlinear import fullcar_struts
+
+if TYPE_CHECKING:  # the fit's types only (psplines imports scipy)
+    from .psplines import Basis, PenalisedFit
 
 
 @dataclass(frozen=True)
@@ -141,6 +145,41 @@ def response_columns(
     return S
 
 
+def response_gram(
+    objective, car: LinearCar, U: NDArray, sigma: dict[str, NDArray], keep: NDArray, J: NDArray, r: NDArray
+) -> tuple[NDArray, NDArray]:
+    """A'A (p + K, p + K) and A'r (p + K,) of the missing force's fit matrix A = [J | S[keep]] (`response_columns`
+    with `keep` and `first` = p, its first p columns J (keep.sum(), p)) and the kept residual r, without A: summed
+    block by block when `response_columns` writes it so (no offsets, every family's entries whole; else A is made
+    and reduced). A long window's A is 15 MB (30 400 kept entries x 61 columns); the same sums to round-off."""
+    p = J.shape[1]
+    direct = not objective.offsets and all(objective.entries(f) is None for f in sigma)
+    if not direct:
+        A = response_columns(objective, car, U, sigma, keep, p)
+        A[:, :p] = J
+        return A.T @ A, A.T @ r
+    n, K = U.shape[0], U.shape[2]
+    G, g = np.zeros((p + K, p + K)), np.zeros(p + K)
+    sizes = [n * car.out_s[f].shape[0] for f in sigma]
+    offsets = dict(zip(sigma, np.cumsum([0, *sizes])[:-1], strict=True))
+    at = np.cumsum(keep) - 1  # the row of A of each kept entry
+    for k0, s in responses_blocks(car, U):
+        b = s.shape[0]
+        for f, sg in sigma.items():
+            k = car.out_s[f].shape[0]
+            lo = offsets[f] + k0 * k
+            kept = keep[lo : lo + b * k]
+            if not kept.any():
+                continue
+            rows = at[lo : lo + b * k][kept]  # consecutive rows of A
+            a = np.empty((rows.size, p + K))
+            a[:, :p] = J[rows[0] : rows[-1] + 1]
+            a[:, p:] = _weighted(car, f, s, U[k0 : k0 + b], sg).reshape(-1, K)[kept]
+            G += a.T @ a
+            g += a.T @ r[rows[0] : rows[-1] + 1]
+    return G, g
+
+
 def _weighted(car: LinearCar, family: str, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
     """A block's responses (b, k, K) of a family's channels over their sigma, from its states s (b, 14, K) and input
     histories U (b, 4, K) (one expression for both of `response_columns`' paths: the same numbers)."""
@@ -186,3 +225,53 @@ def responses_blocks(car: LinearCar, U: NDArray, block: int = RESPONSE_BLOCK) ->
             s[k + 1] += Phi @ s[k]
         prev = s[-1]
         yield k0, s
+
+
+@dataclass(frozen=True)
+class ForceFit:
+    """The force and the unknowns' re-fit on one trajectory d, v (n, 4): the bases, their input histories U, the
+    normal equations of the kept columns A = [J | S] (the p nuisance columns first; A itself is not held: AtA, Atr
+    and the kept residual's rtr, over R entries) and the penalised solution."""
+
+    d: NDArray
+    v: NDArray
+    bases: tuple[Basis, ...]
+    U: NDArray
+    A: NDArray | None  # None when above FIT_GRAM_BYTES: summed, not held
+    AtA: NDArray
+    Atr: NDArray
+    rk: NDArray
+    sol: PenalisedFit
+    p: int
+
+    def rss(self, coef: NDArray) -> float:
+        """|r - A coef|² (from the normal equations when A is not held)."""
+        if self.A is not None:
+            return float(np.sum((self.rk - self.A @ coef) ** 2))
+        return max(float(self.rk @ self.rk) - 2.0 * float(coef @ self.Atr) + float(coef @ self.AtA @ coef), 0.0)
+
+    def explained(self, sl: slice, line: int | None) -> float:
+        """The mean square over the R entries of the curve's columns' share A[:, sl] coef[sl] of the residual,
+        less its projection on the unknown's column A[:, line] (when given, the part that unknown absorbs)."""
+        coef = self.sol.coef
+        if self.A is not None:
+            contrib = self.A[:, sl] @ coef[sl]
+            if line is not None:
+                own = self.A[:, line]
+                contrib = contrib - own * float(own @ contrib) / max(float(own @ own), 1e-300)
+            return float(np.mean(contrib**2))
+        G = self.AtA
+        square = float(coef[sl] @ G[sl, sl] @ coef[sl])
+        if line is not None:
+            square -= float(G[line, sl] @ coef[sl]) ** 2 / max(float(G[line, line]), 1e-300)
+        return max(square, 0.0) / self.rk.size
+
+    @property
+    def theta(self) -> NDArray:
+        """The basis coefficients of the force."""
+        return self.sol.coef[self.p :]
+
+    @property
+    def dx(self) -> NDArray:
+        """The unknowns' re-fit."""
+        return self.sol.coef[: self.p]

@@ -246,6 +246,10 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
     with np.errstate(all="ignore"):
         resp = exp.simulate(values)
     sim = exp.read(resp)
+    G = exp.matrices(values).G
+    defl = resp.q[:, :3] @ G.T - resp.q[:, 3:]
+    vel = resp.qd[:, :3] @ G.T - resp.qd[:, 3:]
+    del resp  # the car's whole trajectories (a long record's: 20 MB) are not needed past here
     if task.corrections:
         batch = corrected(task.corrections, {f: v[None] for f, v in sim.items()}, every)
         sim = {f: v[0] for f, v in batch.items()}
@@ -261,6 +265,7 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
         channels += list(exp.layout.names(family))
         units += [UNIT[family]] * r.shape[1]
     residual = np.concatenate(parts, axis=1)
+    del parts, sim, r, y  # copies beside the residual (a long record's: several MB each)
     n = residual.shape[0]
     full = bool(np.all(np.isfinite(residual)))
     own = [np.isfinite(residual[:, j]) for j in range(residual.shape[1])]
@@ -270,10 +275,6 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
         [[np.max(np.abs(cross_correlation(residual[ok, j], road_v[ok, i], lags))) for i in range(4)]
          for j, ok in enumerate(own)]
     )  # fmt: skip
-    G = exp.matrices(values).G
-    q, qd = resp.q, resp.qd
-    defl = q[:, :3] @ G.T - q[:, 3:]
-    vel = qd[:, :3] @ G.T - qd[:, 3:]
     p = {k: float(np.asarray(v)) for k, v in exp.parameters(values).items()}
     picks = fingerprint_channels(exp.layout, p, tuple(channels))
     fingerprint = tuple(
@@ -283,12 +284,18 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
         )
         for i, j in enumerate(picks)
     )
+    del defl, vel
     square = residual**2
+    chi2_per_sample = float(np.mean(square) if full else np.nanmean(square))
+    chi2_channel = np.mean(square, axis=0) if full else np.nanmean(square, axis=0)
+    del square
+    measured = np.concatenate(data, axis=1)
+    del data  # before the spectrum's segments: a long record's copies are several MB each
     return ResidualAnalysis(
         channels=tuple(channels),
         residual=residual,
-        chi2_per_sample=float(np.mean(square) if full else np.nanmean(square)),
-        chi2_channel=np.mean(square, axis=0) if full else np.nanmean(square, axis=0),
+        chi2_per_sample=chi2_per_sample,
+        chi2_channel=chi2_channel,
         whiteness=white,
         road_xcorr_max=xc,
         band=float(BAND_Z / np.sqrt(n)),
@@ -296,7 +303,7 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
         freq=(spec := spectrum(residual, exp.dt))[0],
         psd=spec[1],
         dt=float(exp.dt),
-        measured=np.concatenate(data, axis=1),
+        measured=measured,
         sigma=np.concatenate([np.asarray(task.sigma[f], dtype=float) for f in reference]),
         units=tuple(units),
     )

@@ -58,8 +58,8 @@ from ..core.result import Result
 from ..identify.objectives import Objective
 from ..identify.task import Task
 from ..models.fullcar import N_CORNERS, N_DOF
-from .linear_response import LinearCar, car_at, response_columns, responses_blocks
-from .psplines import Basis, PenalisedFit, basis, penalised_fit
+from .linear_response import ForceFit, LinearCar, car_at, response_columns, response_gram, responses_blocks
+from .psplines import Basis, basis, penalised_fit
 from .shapes import Resemblance, resemblance
 from .tails import f_sf
 
@@ -344,14 +344,11 @@ class _FittedCar:
         car = car_at(exp, {m: at[j] for j, m in enumerate(self.names)}, exp.dt)
         return _Linearisation(res[0], Jm, d_all[0], v_all[0], dd, dv, car)
 
-    def force_columns(
-        self, car: LinearCar, d: NDArray, v: NDArray, n_knots: int, keep: NDArray | None = None, first: int = 0
-    ):
+    def force_columns(self, d: NDArray, v: NDArray, n_knots: int) -> tuple[tuple[Basis, ...], NDArray]:
         """The basis of each function (front g, front h, rear g, rear h) on the trajectory d, v (n, 4), its columns
-        applied as input forces at the corners of its axle: the bases, the input histories U (n, 4, K) and their
-        weighted responses laid out like the residual (R_all, K). (The car's states driven by U, (n, 14, K), are
-        made a block of time at a time and not kept: `trajectory_shift` makes them again.) With `keep`, the kept
-        rows only, after `first` columns left to the caller (`response_columns`)."""
+        applied as input forces at the corners of its axle: the bases and the input histories U (n, 4, K). (Their
+        weighted responses, laid out like the residual, are summed into the fit's normal equations without being
+        held, `response_gram`; the car's states driven by U are made a block of time at a time and not kept.)"""
         n = self.task.experiment.t.size
         each = [(basis(traj[:, corners], n_knots), traj, corners) for _axle, corners in AXLES for traj in (d, v)]
         U = np.zeros((n, N_CORNERS, sum(b.size for b, _, _ in each)))  # (n, 4, K), each basis into its columns
@@ -360,7 +357,7 @@ class _FittedCar:
             for c in corners:
                 U[:, c, k0 : k0 + b.size] = b(traj[:, c])
             k0 += b.size
-        return tuple(b for b, _, _ in each), U, response_columns(self.objective, car, U, self.sigma, keep, first)
+        return tuple(b for b, _, _ in each), U
 
 
 def trajectory_shift(car: LinearCar, U: NDArray, theta: NDArray) -> tuple[NDArray, NDArray]:
@@ -389,53 +386,39 @@ def _fit_without_force(Jk: NDArray, rk0: NDArray) -> tuple[float, float]:
     return rss0, edf0
 
 
-@dataclass(frozen=True)
-class _ForceFit:
-    """The force and the unknowns' re-fit on one trajectory d, v (n, 4): the bases, their input histories U,
-    the kept columns A = [J | S] (the p nuisance columns first), the kept residual and the penalised solution."""
-
-    d: NDArray
-    v: NDArray
-    bases: tuple[Basis, ...]
-    U: NDArray
-    A: NDArray
-    rk: NDArray
-    sol: PenalisedFit
-    p: int
-
-    @property
-    def theta(self) -> NDArray:
-        """The basis coefficients of the force."""
-        return self.sol.coef[self.p :]
-
-    @property
-    def dx(self) -> NDArray:
-        """The unknowns' re-fit."""
-        return self.sol.coef[: self.p]
-
-
 def _fit_force(
     fitted: _FittedCar, lin: _Linearisation, d: NDArray, v: NDArray, keep: NDArray, n_knots: int, criterion: str
-) -> _ForceFit:
+) -> ForceFit:
     """The force on the trajectory d, v jointly with the unknowns' linear re-fit, over the kept residual entries,
     one smoothing parameter per function (REML or GCV)."""
     rk, Jk = lin.r[keep], lin.Jm[keep]
     p = Jk.shape[1]
-    bases, U, A = fitted.force_columns(lin.car, d, v, n_knots, keep, p)  # [Jk | S[keep]], S's kept rows only
-    A[:, :p] = Jk
+    bases, U = fitted.force_columns(d, v, n_knots)
+    obj, car, sigma = fitted.objective, lin.car, fitted.sigma
+    if rk.size * (p + U.shape[2]) * 8 > FIT_GRAM_BYTES:  # A = [Jk | S[keep]] summed, not held
+        A, (AtA, Atr) = None, response_gram(obj, car, U, sigma, keep, Jk, rk)
+    else:
+        A = response_columns(obj, car, U, sigma, keep, p)  # [Jk | S[keep]], S's kept rows only
+        A[:, :p] = Jk
+        AtA, Atr = A.T @ A, A.T @ rk
     blocks, k0 = [], p
     for b in bases:
         blocks.append((slice(k0, k0 + b.size), b.P))
         k0 += b.size
-    sol = penalised_fit(A.T @ A, A.T @ rk, float(rk @ rk), int(keep.sum()), blocks, criterion)
-    return _ForceFit(d, v, bases, U, A, rk, sol, p)
+    sol = penalised_fit(AtA, Atr, float(rk @ rk), int(keep.sum()), blocks, criterion)
+    return ForceFit(d, v, bases, U, A, AtA, Atr, rk, sol, p)
+
+
+FIT_GRAM_BYTES = 12 * 2**20  # a fit matrix A above this (a long record's window: 15 MB at 5000 samples) is reduced
+# to A'A, A'r as it is made (linear_response.response_gram); smaller ones are held, their numbers as before: the
+# smoothing parameters' REML optimum moves with the sums' round-off (by up to 1e-3 of its edf)
 
 
 @dataclass(frozen=True)
 class _Converged:
     """The fixed-point iteration's end: the last fit, the unknowns' total re-fit from x, the corrections made."""
 
-    fit: _ForceFit
+    fit: ForceFit
     dx: NDArray
     corrections: int
 
@@ -484,10 +467,10 @@ class _FTest:
     p_value: float
 
 
-def _f_test(fit: _ForceFit, rss0: float, edf0: float, R: int) -> _FTest:
+def _f_test(fit: ForceFit, rss0: float, edf0: float, R: int) -> _FTest:
     """The F test of the force against the fit without it (RSS rss0 over edf0 degrees of freedom), on R entries."""
     sol = fit.sol
-    rss1 = float(np.sum((fit.rk - fit.A @ sol.coef) ** 2))
+    rss1 = fit.rss(sol.coef)
     edf_force = max(sol.edf - edf0, 1e-9)
     df_test = max(sol.edf2 - edf0, edf_force)
     dof = max(R - sol.edf, 1.0)
@@ -498,36 +481,32 @@ def _f_test(fit: _ForceFit, rss0: float, edf0: float, R: int) -> _FTest:
 
 
 def _curve(
-    variable: str, grid: NDArray, Bg: NDArray, sl: slice, line: int | None, fit: _ForceFit, V: NDArray, lam: float
+    variable: str, grid: NDArray, Bg: NDArray, sl: slice, line: int | None, fit: ForceFit, V: NDArray, lam: float
 ) -> Curve:
     """One function's curve over `grid` (Bg its basis there, sl its columns) with its 95 % band (covariance V) and
     resemblance; `line`: the column of the unknown whose re-fit is the curve's line through 0 (the curve is then
     reported modulo lines), None when that unknown is not fitted."""
-    A, coef = fit.A, fit.sol.coef
+    coef = fit.sol.coef
     if line is not None:  # its line and the unknown's re-fit are one: the curve modulo lines
         rows = np.zeros((grid.size, coef.size))
         rows[:, sl], rows[:, line] = Bg, grid
         rows -= np.outer(grid, grid @ rows) / float(grid @ grid)
         f = rows @ coef
         se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, V, rows), 0.0))
-        own = A[:, line]  # its response, and the part of the curve's the unknown absorbs
-        contrib = A[:, sl] @ coef[sl]
-        contrib = contrib - own * float(own @ contrib) / max(float(own @ own), 1e-300)
     else:
         f = Bg @ coef[sl]
         se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Bg, V[sl, sl], Bg), 0.0))
-        contrib = A[:, sl] @ coef[sl]
     i_peak = int(np.argmax(np.abs(f)))
     z = np.abs(f) / np.maximum(se, 1e-300)
     return Curve(
         variable=variable, grid=grid, force=f, band=np.vstack([f - Z95 * se, f + Z95 * se]),
         peak_force=float(abs(f[i_peak])), peak_at=float(grid[i_peak]),
-        z_max=float(np.max(np.where(se > 0, z, 0.0))), chi2_explained=float(np.mean(contrib**2)),
+        z_max=float(np.max(np.where(se > 0, z, 0.0))), chi2_explained=fit.explained(sl, line),
         lam=float(lam), resembles=resemblance(variable, grid, f, se, free_line=line is not None),
     )  # fmt: skip
 
 
-def _axle_estimates(fit: _ForceFit, names: tuple[str, ...], sigma2: float, grid_points: int) -> list[AxleEstimate]:
+def _axle_estimates(fit: ForceFit, names: tuple[str, ...], sigma2: float, grid_points: int) -> list[AxleEstimate]:
     """Each axle's curves over the observed range of its trajectory, bands from the posterior covariance."""
     V = sigma2 * fit.sol.cov
     axles = []

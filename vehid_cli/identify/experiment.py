@@ -74,6 +74,11 @@ class Experiment:
         """A long record: more than LONG_BLOCKS blocks of BLOCK_SAMPLES."""
         return self.t.size > LONG_BLOCKS * BLOCK_SAMPLES
 
+    @property
+    def long(self) -> bool:
+        """A long record: more than LONG_BLOCKS blocks of BLOCK_SAMPLES (forward differences summed in blocks)."""
+        return self._long
+
     @cached_property
     def layout(self) -> Layout:
         """The sensors (config.layout, or the paper's four corners), built once: every simulation reads them."""

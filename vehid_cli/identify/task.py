@@ -26,6 +26,7 @@ from ..optimizers.base import Problem
 from .corrections import SensorCorrection, corrected, is_sensor_unknown, split_sensor
 from .crlb import CramerRao, bound_from_information, cramer_rao, information, summed_information, weighted_sensitivities
 from .experiment import Experiment, build_experiment, measurement_noise
+from .forward import forward_gram
 from .measured import experiment_of, read_run
 from .objectives import Objective, objective_families
 
@@ -199,6 +200,13 @@ class Task:
         def kept(X: NDArray, entries: NDArray) -> NDArray:
             return kept_residuals(objective, simulate, X, self.experiment.cars_per_chunk, entries)
 
+        def gram(X: NDArray, scale: NDArray, entries: NDArray | None = None) -> NDArray | None:
+            values = {n: X[:, j] for j, n in enumerate(names)}
+            if self.corrections or not self.experiment.long or not self.experiment.blocked(values):
+                return None  # a short record's Jacobian is held (today's path); corrections act on whole channels
+            with np.errstate(all="ignore"):
+                return forward_gram(self.experiment, objective, values, scale, entries)
+
         def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
             with np.errstate(all="ignore"):
                 got = self.experiment.exact_sensitivities(names, x)
@@ -221,7 +229,7 @@ class Task:
         return Problem(
             self.lower, self.upper, cost, cost_and_residuals, names=names,
             linearised=linearised if exact and not long else None, normal=normal if exact and long else None,
-            kept=kept,
+            kept=kept, gram=gram,
         )  # fmt: skip
 
     def outputs(self, values: Mapping[str, NDArray]) -> dict[str, NDArray]:

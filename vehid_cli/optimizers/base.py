@@ -25,6 +25,10 @@ Linearised = Callable[[NDArray], "tuple[float, NDArray, NDArray] | None"]
 # x (D,) -> cost, residuals (R,), J'J (D, D) and J'r (D,) of that Jacobian, summed over a long record without it
 NormalEquations = Callable[[NDArray], "tuple[float, NDArray, NDArray, NDArray] | None"]
 KeptResiduals = Callable[[NDArray, NDArray], NDArray]  # (P, D), entries (k,) -> residuals (P, k) at those entries
+# points X (m + 1, D) (a centre, then m others), divisors (m,), entries (k,) or None -> the Gram matrix (m + 1, m + 1)
+# of [J r] at those entries (r the centre's residuals, J's column j (r_{j+1} - r_0) / divisor_j), summed over a long
+# record without the (m, R) differences (identify/forward.py); None where it does not apply
+ForwardGram = Callable[[NDArray, NDArray, "NDArray | None"], "NDArray | None"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +50,7 @@ class Problem:
     linearised: Linearised | None = None  # cost, residuals and their exact Jacobian at one point (None: not known)
     normal: NormalEquations | None = None  # the same as normal equations (a long record: no (R, D) Jacobian made)
     kept: KeptResiduals | None = None  # `residuals` at some entries only, the same numbers (diagnose/holdout.py)
+    gram: ForwardGram | None = None  # a forward-difference Jacobian's J'J, J'r, r'r without it (a long record)
 
     @property
     def dim(self) -> int:
@@ -151,6 +156,25 @@ class Search:
         self.history_evals.append(self.evaluations)
         self.history_cost.append(self.best_cost)
         return ok
+
+    def evaluate_gram(self, X: NDArray, scale: NDArray) -> NDArray | None:
+        """The problem's `gram` of the points X (m + 1, D) (clipped into the box): the centre X[0] (already evaluated
+        by the caller) and m others, counted as m evaluations; None (nothing counted) when the problem has none, it
+        does not apply or its sums are not finite (the caller then evaluates the others' residuals). Their costs
+        are not tracked: a forward difference's points are not candidates for the best. Raises BudgetExhausted
+        (evaluating nothing) when the m do not fit the budget."""
+        if self.problem.gram is None:
+            return None
+        X = np.clip(np.atleast_2d(np.asarray(X, dtype=float)), self.problem.lower, self.problem.upper)
+        if len(X) - 1 > self.remaining:
+            raise BudgetExhausted
+        G = self.problem.gram(X, np.asarray(scale, dtype=float), None)
+        if G is None or not np.all(np.isfinite(G)):
+            return None
+        self.evaluations += len(X) - 1
+        self.history_evals.append(self.evaluations)
+        self.history_cost.append(self.best_cost)
+        return G
 
     def evaluate_residuals(self, X: NDArray, keep: bool = False) -> NDArray:
         """Residual vectors (P, R) of a population, counted and tracked like ``evaluate``; with `keep` a new best

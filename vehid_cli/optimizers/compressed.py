@@ -58,6 +58,21 @@ def compress(jt: NDArray, r: NDArray, block: int = BLOCK_ROWS) -> tuple[NDArray,
     return top[:D, :D], top[:D, D], float(abs(top[D, D]))
 
 
+def compress_gram(G: NDArray) -> tuple[NDArray, NDArray, float] | None:
+    """`compress` from the Gram matrix G = A'A (D + 1, D + 1) of A = [J r] summed without A (identify/forward.py):
+    its Cholesky factor, A's columns scaled to unit norm first. One pass: J'J, J'r and r'r are G's to round-off, but
+    the factor's accuracy is the Gram's (the square of A's scaled condition), where `compress`'s second pass restores
+    a QR's. None where G is not positive definite (the caller then forms the Jacobian)."""
+    D = G.shape[0] - 1
+    scale = np.sqrt(np.diag(G))
+    scale[~(scale > 0)] = 1.0
+    try:
+        top = np.linalg.cholesky(G / scale[:, None] / scale[None, :]).T * scale[None, :]
+    except np.linalg.LinAlgError:
+        return None
+    return top[:D, :D], top[:D, D], float(abs(top[D, D]))
+
+
 def _block(jt: NDArray, r: NDArray, start: int, stop: int) -> NDArray:
     """Rows start:stop of A = [J r] (stop - start, D + 1)."""
     a = np.empty((stop - start, jt.shape[0] + 1))
@@ -85,13 +100,16 @@ def trf_compressed(
     tol: float,
     max_nfev: int | None = None,
     stops: Callable[..., bool] | None = None,
+    gram: Callable[[NDArray], NDArray | None] | None = None,
 ) -> NDArray:
     """scipy's trust-region reflective least squares (`least_squares(method='trf', x_scale=x_scale, xtol=ftol=gtol=
     tol)`) of `residual` (x -> (R,)) from x0 inside [lower, upper], its Jacobian given transposed by
     `jacobian_rows` (x -> (D, R), may be overwritten) and compressed (`compress`); returns the final point.
     x0 must be strictly inside the box (scipy's `make_strictly_feasible`). `stops(xp, rp, J, x, r, lower, upper,
     x_scale, tol)` (lsq.trf_stops): True where trf will stop at x without using its Jacobian there; it is then given
-    the last one again (D simulations saved), judged on the compressed pair, which gives J'J, J'r and r'r exactly."""
+    the last one again (D simulations saved), judged on the compressed pair, which gives J'J, J'r and r'r exactly.
+    `gram(x)` (optional): the Gram matrix of [J r] at x summed without J (`compress_gram`), or None: then
+    `jacobian_rows`."""
     from scipy.optimize._lsq.trf import trf_bounds  # private: the loop least_squares runs (see the module's doc)
 
     D = x0.size
@@ -112,7 +130,9 @@ def trf_compressed(
         if before is not None and stops is not None:
             if stops(last["xJ"], last["fJ"], before, x, f, lower, upper, x_scale, tol):
                 return before  # f keeps the residual's norm: trf stops without forming a gradient from it
-        rj, z, rho = compress(jacobian_rows(x), residual(x))
+        got = None if gram is None else gram(x)
+        pair = None if got is None else compress_gram(got)
+        rj, z, rho = compress(jacobian_rows(x), residual(x)) if pair is None else pair
         f[:D] = z  # in place: the very array scipy holds as the residual at x
         f[D] = rho
         J = np.vstack([rj, np.zeros((1, D))])

@@ -52,6 +52,12 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         R /= step[:, None]
         return R
 
+    def jacobian_gram(x: NDArray) -> NDArray | None:
+        """The Gram matrix of [J r] at x, jacobian_rows' J summed without it (Problem.gram), or None."""
+        h = JACOBIAN_STEP * width
+        step = np.where(x + h <= hi, h, -h)
+        return run.evaluate_gram(np.vstack([x[None, :], x[None, :] + np.diag(step)]), step)
+
     last: dict[str, NDArray] = {}  # the point, residual and Jacobian trf was last given
 
     def jacobian(x: NDArray) -> NDArray:
@@ -68,7 +74,8 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
     x0 = make_strictly_feasible(x0, lo, hi)
     if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES:  # a long record: the same steps on D + 1 rows
-        return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev, stops=trf_stops)
+        gram = jacobian_gram if run.problem.gram is not None else None
+        return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev, stops=trf_stops, gram=gram)
     result = least_squares(
         residual, x0, jac=jacobian, bounds=(lo, hi), method="trf", x_scale=width,
         xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
