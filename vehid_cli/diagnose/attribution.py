@@ -392,6 +392,7 @@ def rank_candidates(
     make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None = None,
     car: Callable[[], NDArray | None] | None = None,
     beat: float = 0.0,
+    threads: int | None = None,
 ) -> list[Ranked]:
     """Test every candidate against the current fit `base`; best (largest LR) first.
 
@@ -407,7 +408,8 @@ def rank_candidates(
     None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`;
     `car()`: the residuals' derivatives (R, D) along `base`'s unknowns at `base` (all free), which the effects'
     screenings steer by; `beat`: the LR of the round's best accepted known parameter (0: none), which an effect's fit
-    stops at when it cannot win the round (`cannot_win_after`). Candidate fits run in parallel threads."""
+    stops at when it cannot win the round (`cannot_win_after`); `threads`: how many candidates are fitted at once (None:
+    one per core). Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation
@@ -441,7 +443,7 @@ def rank_candidates(
         )  # fmt: skip
 
     cols = car() if car is not None and not base.fixed and any(c.kind == "effect" for c in candidates) else None
-    out = run_all(one, candidates, prior, on_done or (lambda _n: None))
+    out = run_all(one, candidates, prior, on_done or (lambda _n: None), threads)
     out.sort(key=lambda r: -r.statistic)
     return out
 
@@ -459,10 +461,10 @@ def not_screened(cand: Candidate) -> bool:
 
 
 def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], prior: dict[str, Ranked] | None,
-            done: Callable[[int], None]) -> list[Ranked]:  # fmt: skip
-    """one(c) for every candidate, in parallel threads where there are cores (the longest fits first, so that none
-    runs alone at the end: expected_seconds), in the candidates' order; done(n) after each."""
-    n = min(available_cores(), len(candidates))
+            done: Callable[[int], None], threads: int | None = None) -> list[Ranked]:  # fmt: skip
+    """one(c) for every candidate, in parallel threads where there are cores (at most `threads`; the longest fits
+    first, so that none runs alone at the end: expected_seconds), in the candidates' order; done(n) after each."""
+    n = min(available_cores() if threads is None else max(1, threads), len(candidates))
     if n > 1:
         with ThreadPoolExecutor(n) as pool:  # the longest fits first, so that none runs alone at the end
             order = sorted(range(len(candidates)), key=lambda i: -expected_seconds(candidates[i], prior))

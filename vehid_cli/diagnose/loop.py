@@ -222,7 +222,11 @@ class _Augmentation:
         """The candidates `todo` ranked against the current fit (the round recorded and said); a long record's on its
         screening window (the current fit's J and validation J there)."""
         subject, current, current_v = self.subject, self.current, self.current_v
-        if subject.screen is not None:  # the current model re-fitted on the window first: the LR is what each adds
+        # A long record's candidates are fitted one at a time: two fits at once on its window (their working sets and
+        # the threads' malloc arenas) set the 60 s diagnosis's peak memory, 15-20 MiB above one; each fit's batches of
+        # cars still run on every core in the kernel (issue 26: +0.5-1.5 s of 12 s).
+        windowed = subject.screen is not None
+        if windowed:  # the current model re-fitted on the window first: the LR is what each adds
             subject = subject.screen
             free = np.array([n not in current.fixed for n in current.names])
             problem = subject.problem_for(current.names)[0]
@@ -251,6 +255,7 @@ class _Augmentation:
                 prior={r.effect: r for r in self.rounds[-1]} if self.rounds else None,
                 on_done=lambda n: self.progress(stage, before + n, tests), tests=tests,
                 make_linear=lambda names, cand: self.make_linear(names, cand, subject), car=car, beat=beat,
+                threads=1 if windowed else None,
             ) if cands else []  # fmt: skip
 
         def car() -> NDArray | None:  # the current fit's Jacobian, once per round (the effects' screening)
