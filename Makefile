@@ -40,7 +40,7 @@ browser:
 test: $(STAMP) browser
 	$(BIN)/ruff check vehid_cli tests benchmarks examples
 	$(BIN)/python -m compileall -q vehid_cli  # bytecode as an installed package has it: the suite's CLI processes
-	$(BIN)/python -m pytest -q -m "not slow"  # would each compile vehid_cli anew where PYTHONDONTWRITEBYTECODE is set
+	$(BIN)/python -m pytest -q -m "not slow" -n 2 --dist loadfile  # would each compile vehid_cli anew where PYTHONDONTWRITEBYTECODE is set
 
 ## test-all: the whole suite, long checks included
 test-all: $(STAMP) browser
