@@ -131,6 +131,27 @@ def test_parallel_fits_come_back_in_the_candidates_order():
     assert got == [c.effect for c in cands] and sorted(seen) == [1, 2, 3, 4]
 
 
+def test_threads_1_fits_the_candidates_one_at_a_time_on_the_calling_thread(monkeypatch):
+    """A long record's window fits its candidates one at a time (`threads=1`, the loop's choice: two fits at once were
+    the 60 s diagnosis's peak memory): every fit runs on the caller's thread, in the candidates' order; with cores to
+    spare and no limit they go to a pool."""
+    import threading
+
+    monkeypatch.setattr(A, "available_cores", lambda: 2)
+    cands = [A.parameter_candidate(n, 1.0) for n in ("kf", "kr", "cf")]
+    calls = []
+
+    def one(c):
+        calls.append((c.effect, threading.get_ident()))
+        return c.effect
+
+    assert A.run_all(one, cands, None, lambda _n: None, threads=1) == [c.effect for c in cands]
+    assert calls == [(c.effect, threading.get_ident()) for c in cands]
+    calls.clear()
+    assert A.run_all(one, cands, None, lambda _n: None) == [c.effect for c in cands]
+    assert all(ident != threading.get_ident() for _, ident in calls)
+
+
 def test_fitted_basis_without_exact_sensitivities_falls_back_to_differences():
     """A linear twin whose problem has no `linearised` (a long record's has normal equations only; the four-post
     rig's README example raised TypeError here): the basis from forward differences, as with no twin."""
