@@ -111,16 +111,8 @@ def response_columns(
         sizes[f] = n * car.out_s[f].shape[0] if rows is None else rows.size
     if direct:
         A = np.empty((int(np.count_nonzero(keep)), first + K))
-        at = np.cumsum(keep) - 1  # the row of A of each kept entry
-        offsets = dict(zip(sigma, np.cumsum([0, *sizes.values()])[:-1], strict=True))
-        for k0, s in responses_blocks(car, U):
-            b = s.shape[0]
-            for f, sg in sigma.items():
-                k = car.out_s[f].shape[0]
-                lo = offsets[f] + k0 * k
-                kept = keep[lo : lo + b * k]
-                Y = _weighted(car, f, s, U[k0 : k0 + b], sg).reshape(-1, K)
-                A[at[lo : lo + b * k][kept], first:] = Y[kept]
+        for rows, Y in _kept_rows(car, U, sigma, keep):
+            A[rows, first:] = Y
         return A
     S = np.empty((sum(sizes.values()), K))
     Ys, first = {}, 0
@@ -158,26 +150,35 @@ def response_gram(
         A = response_columns(objective, car, U, sigma, keep, p)
         A[:, :p] = J
         return A.T @ A, A.T @ r
-    n, K = U.shape[0], U.shape[2]
+    K = U.shape[2]
     G, g = np.zeros((p + K, p + K)), np.zeros(p + K)
+    for rows, Y in _kept_rows(car, U, sigma, keep):  # rows: consecutive rows of A
+        a = np.empty((rows.size, p + K))
+        a[:, :p] = J[rows[0] : rows[-1] + 1]
+        a[:, p:] = Y
+        G += a.T @ a
+        g += a.T @ r[rows[0] : rows[-1] + 1]
+    return G, g
+
+
+def _kept_rows(
+    car: LinearCar, U: NDArray, sigma: dict[str, NDArray], keep: NDArray
+) -> Iterator[tuple[NDArray, NDArray]]:
+    """The kept entries' weighted responses of the fit matrix, a block of samples and a family at a time, where every
+    family's entries are whole and no offset is profiled: (the rows of the fit matrix they fill (m,), responses
+    (m, K)); blocks with no kept entry are skipped. What `response_columns` writes and `response_gram` sums."""
+    n, K = U.shape[0], U.shape[2]
     sizes = [n * car.out_s[f].shape[0] for f in sigma]
     offsets = dict(zip(sigma, np.cumsum([0, *sizes])[:-1], strict=True))
-    at = np.cumsum(keep) - 1  # the row of A of each kept entry
+    at = np.cumsum(keep) - 1  # the row of the fit matrix of each kept entry
     for k0, s in responses_blocks(car, U):
         b = s.shape[0]
         for f, sg in sigma.items():
             k = car.out_s[f].shape[0]
             lo = offsets[f] + k0 * k
             kept = keep[lo : lo + b * k]
-            if not kept.any():
-                continue
-            rows = at[lo : lo + b * k][kept]  # consecutive rows of A
-            a = np.empty((rows.size, p + K))
-            a[:, :p] = J[rows[0] : rows[-1] + 1]
-            a[:, p:] = _weighted(car, f, s, U[k0 : k0 + b], sg).reshape(-1, K)[kept]
-            G += a.T @ a
-            g += a.T @ r[rows[0] : rows[-1] + 1]
-    return G, g
+            if kept.any():
+                yield at[lo : lo + b * k][kept], _weighted(car, f, s, U[k0 : k0 + b], sg).reshape(-1, K)[kept]
 
 
 def _weighted(car: LinearCar, family: str, s: NDArray, U: NDArray, sigma: NDArray) -> NDArray:
