@@ -3,13 +3,11 @@ ForceFit from the normal equations): the same sums and statistics as from A, to 
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
-from tests.test_unexplained import damping  # noqa: F401  (a fixture)
-from vehid_cli.diagnose.linear_response import ForceFit, car_at, response_columns, response_gram
+from tests.test_unexplained import damping, force_inputs  # noqa: F401  (damping: a fixture)
+from vehid_cli.diagnose.linear_response import ForceFit, response_columns, response_gram
 from vehid_cli.diagnose.psplines import penalised_fit
 
 
@@ -18,12 +16,7 @@ def test_the_fit_matrix_sums_equal_the_held_ones(damping, offsets):  # noqa: F81
     """response_gram's A'A and A'r equal those of response_columns' A = [J | S[keep]] to 1e-12 of each entry's scale
     (summed block by block without offsets, from A with them); the fit's RSS and each curve's explained share from
     them equal the ones from A to 1e-10."""
-    task = dataclasses.replace(damping[0], offsets=offsets)
-    exp = task.experiment
-    objective = task.objective(damping[1])
-    car = car_at(exp, {}, exp.dt)
-    rng = np.random.default_rng(5)
-    U = rng.standard_normal((exp.t.size, 4, 6)) * 100.0
+    task, objective, car, U, rng = force_inputs(damping, offsets, seed=5)
     keep = rng.random(objective.size) < 0.7
     J = rng.standard_normal((int(keep.sum()), 3))
     r = rng.standard_normal(int(keep.sum())) + J @ np.array([0.5, -1.0, 2.0])

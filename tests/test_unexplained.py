@@ -50,6 +50,16 @@ def damping():
     return task, ref, estimate_unexplained(task, ref, task.names, task.nominal)
 
 
+def force_inputs(damping, offsets: bool, seed: int):
+    """The damping case's fitting task (offsets profiled or not), its objective, its linear car and six random input
+    histories U (n, 4, 6) of ~100 N, with the generator that drew them (for the kept entries' draw after)."""
+    task = dataclasses.replace(damping[0], offsets=offsets)
+    exp = task.experiment
+    rng = np.random.default_rng(seed)
+    U = rng.standard_normal((exp.t.size, 4, 6)) * 100.0
+    return task, task.objective(damping[1]), car_at(exp, {}, exp.dt), U, rng
+
+
 @pytest.fixture(scope="module")
 def spring():
     truth = build_task(load_config(ROOT / "configs" / "effects" / "progressive_spring.yaml", NOISE))
@@ -229,12 +239,7 @@ def test_the_kept_response_columns_are_written_without_the_whole_matrix_bit_for_
     no offsets are profiled, made whole and copied when they are (each channel's mean over every sample first)."""
     from vehid_cli.diagnose.linear_response import response_columns
 
-    task = dataclasses.replace(damping[0], offsets=offsets)
-    exp = task.experiment
-    objective = task.objective(damping[1])
-    car = car_at(exp, {}, exp.dt)
-    rng = np.random.default_rng(4)
-    U = rng.standard_normal((exp.t.size, 4, 6)) * 100.0
+    task, objective, car, U, rng = force_inputs(damping, offsets, seed=4)
     whole = response_columns(objective, car, U, task.sigma)
     keep = rng.random(whole.shape[0]) < 0.7
     A = response_columns(objective, car, U, task.sigma, keep, 3)

@@ -137,6 +137,15 @@ def response_columns(
     return S
 
 
+def fit_matrix(objective, car: LinearCar, U: NDArray, sigma: dict[str, NDArray], keep: NDArray, J: NDArray) -> NDArray:
+    """The missing force's fit matrix A = [J | S[keep]] (keep.sum(), p + K): the caller's p columns J (keep.sum(), p)
+    first, then the kept rows of the responses (`response_columns` with `keep`)."""
+    p = J.shape[1]
+    A = response_columns(objective, car, U, sigma, keep, p)
+    A[:, :p] = J
+    return A
+
+
 def response_gram(
     objective, car: LinearCar, U: NDArray, sigma: dict[str, NDArray], keep: NDArray, J: NDArray, r: NDArray
 ) -> tuple[NDArray, NDArray]:
@@ -147,8 +156,7 @@ def response_gram(
     p = J.shape[1]
     direct = not objective.offsets and all(objective.entries(f) is None for f in sigma)
     if not direct:
-        A = response_columns(objective, car, U, sigma, keep, p)
-        A[:, :p] = J
+        A = fit_matrix(objective, car, U, sigma, keep, J)
         return A.T @ A, A.T @ r
     K = U.shape[2]
     G, g = np.zeros((p + K, p + K)), np.zeros(p + K)
@@ -231,8 +239,8 @@ def responses_blocks(car: LinearCar, U: NDArray, block: int = RESPONSE_BLOCK) ->
 @dataclass(frozen=True)
 class ForceFit:
     """The force and the unknowns' re-fit on one trajectory d, v (n, 4): the bases, their input histories U, the
-    normal equations of the kept columns A = [J | S] (the p nuisance columns first; A itself is not held: AtA, Atr
-    and the kept residual's rtr, over R entries) and the penalised solution."""
+    kept columns A = [J | S] (the p nuisance columns first; None where the fit was made from their sums alone),
+    their normal equations AtA, Atr, the kept residual rk and the penalised solution."""
 
     d: NDArray
     v: NDArray

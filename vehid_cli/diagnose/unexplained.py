@@ -58,7 +58,7 @@ from ..core.result import Result
 from ..identify.objectives import Objective
 from ..identify.task import Task
 from ..models.fullcar import N_CORNERS, N_DOF
-from .linear_response import ForceFit, LinearCar, car_at, response_columns, response_gram, responses_blocks
+from .linear_response import ForceFit, LinearCar, car_at, fit_matrix, response_gram, responses_blocks
 from .psplines import Basis, basis, penalised_fit
 from .shapes import Resemblance, resemblance
 from .tails import f_sf
@@ -398,8 +398,7 @@ def _fit_force(
     if rk.size * (p + U.shape[2]) * 8 > FIT_GRAM_BYTES:  # A = [Jk | S[keep]] summed, not held
         A, (AtA, Atr) = None, response_gram(obj, car, U, sigma, keep, Jk, rk)
     else:
-        A = response_columns(obj, car, U, sigma, keep, p)  # [Jk | S[keep]], S's kept rows only
-        A[:, :p] = Jk
+        A = fit_matrix(obj, car, U, sigma, keep, Jk)  # [Jk | S[keep]], S's kept rows only
         AtA, Atr = A.T @ A, A.T @ rk
     blocks, k0 = [], p
     for b in bases:

@@ -346,15 +346,11 @@ def chunked_residuals(
     are squared (a chunk of two cars of a 60 s record: 8 MB per copy). Each car's numbers are the same either way:
     no chunk holds a single car, whose cost NumPy sums in another order than a row of a batch's."""
     P = len(X)
-    chunk = max(2, chunk)
-    if P <= chunk:
+    if P <= max(2, chunk):
         return objective.costs_and_residuals(simulate(X))
-    starts = list(range(0, P, chunk))
-    if P - starts[-1] == 1:  # the last car joins the chunk before it
-        starts.pop()
     costs = np.empty(P)
     residuals = np.empty((P, objective.size))
-    for start, stop in zip(starts, [*starts[1:], P], strict=True):
+    for start, stop in _chunks(P, chunk):
         outputs = simulate(X[start:stop])
         rows = objective.residuals(outputs, out=residuals[start:stop])
         if objective.name == "wls":
@@ -372,14 +368,19 @@ def kept_residuals(
     into the objective's R), simulated in chunks as `chunked_residuals`: a long record's batch of held-in entries
     without the (P, R) array (a forward-difference Jacobian's ten cars at 60 s: 38 MB, 29 of them kept). The same
     numbers as the whole vectors' entries."""
-    P = len(X)
-    starts = list(range(0, P, max(2, chunk)))
-    if len(starts) > 1 and P - starts[-1] == 1:  # the last car joins the chunk before it
-        starts.pop()
-    out = np.empty((P, entries.size))
-    for start, stop in zip(starts, [*starts[1:], P], strict=True):
+    out = np.empty((len(X), entries.size))
+    for start, stop in _chunks(len(X), chunk):
         objective.residuals(simulate(X[start:stop]), out=out[start:stop], entries=entries)
     return out
+
+
+def _chunks(P: int, chunk: int) -> list[tuple[int, int]]:
+    """(start, stop) of the chunks of `chunk` cars (at least 2) a batch of P is simulated in; a last lone car joins the
+    chunk before it (a chunk of one car sums its cost in another order than a row of a batch)."""
+    starts = list(range(0, P, max(2, chunk)))
+    if len(starts) > 1 and P - starts[-1] == 1:
+        starts.pop()
+    return list(zip(starts, [*starts[1:], P], strict=True))
 
 
 def is_effect_unknown(name: str) -> bool:

@@ -41,10 +41,8 @@ def compress(jt: NDArray, r: NDArray, block: int = BLOCK_ROWS) -> tuple[NDArray,
     for start in range(0, R, block):
         a = _block(jt, r, start, min(start + block, R))
         gram += a.T @ a
-    scale = np.sqrt(np.diag(gram))
-    scale[~(scale > 0)] = 1.0
     try:
-        r1 = np.linalg.cholesky(gram / scale[:, None] / scale[None, :]).T * scale[None, :]
+        r1 = _scaled_cholesky(gram)
         inverse = np.linalg.inv(r1)
         second = np.zeros((D + 1, D + 1))
         for start in range(0, R, block):
@@ -64,13 +62,19 @@ def compress_gram(G: NDArray) -> tuple[NDArray, NDArray, float] | None:
     the factor's accuracy is the Gram's (the square of A's scaled condition), where `compress`'s second pass restores
     a QR's. None where G is not positive definite (the caller then forms the Jacobian)."""
     D = G.shape[0] - 1
-    scale = np.sqrt(np.diag(G))
-    scale[~(scale > 0)] = 1.0
     try:
-        top = np.linalg.cholesky(G / scale[:, None] / scale[None, :]).T * scale[None, :]
+        top = _scaled_cholesky(G)
     except np.linalg.LinAlgError:
         return None
     return top[:D, :D], top[:D, D], float(abs(top[D, D]))
+
+
+def _scaled_cholesky(G: NDArray) -> NDArray:
+    """The upper Cholesky factor R of a Gram matrix G = A'A (R'R = G), A's columns scaled to unit norm before the
+    factorisation and back after (a zero column left unscaled). Raises LinAlgError where G is not positive definite."""
+    scale = np.sqrt(np.diag(G))
+    scale[~(scale > 0)] = 1.0
+    return np.linalg.cholesky(G / scale[:, None] / scale[None, :]).T * scale[None, :]
 
 
 def _block(jt: NDArray, r: NDArray, start: int, stop: int) -> NDArray:

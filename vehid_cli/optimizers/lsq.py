@@ -41,11 +41,15 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
             cache[key] = run.evaluate_residuals(x[None, :])[0]
         return cache[key]
 
+    def steps(x: NDArray) -> NDArray:
+        """The forward differences' step along each unknown at x, inward at the upper bound."""
+        h = JACOBIAN_STEP * width
+        return np.where(x + h <= hi, h, -h)
+
     def jacobian_rows(x: NDArray) -> NDArray:
         """(D, R): row j the residual's forward difference by unknown j."""
         r0 = residual(x)
-        h = JACOBIAN_STEP * width
-        step = np.where(x + h <= hi, h, -h)  # step inward at the upper bound
+        step = steps(x)
         X = x[None, :] + np.diag(step)
         R = run.evaluate_residuals(X)
         R -= r0[None, :]  # in place: a long record's Jacobian is tens of MB per copy
@@ -54,8 +58,7 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
 
     def jacobian_gram(x: NDArray) -> NDArray | None:
         """The Gram matrix of [J r] at x, jacobian_rows' J summed without it (Problem.gram), or None."""
-        h = JACOBIAN_STEP * width
-        step = np.where(x + h <= hi, h, -h)
+        step = steps(x)
         return run.evaluate_gram(np.vstack([x[None, :], x[None, :] + np.diag(step)]), step)
 
     last: dict[str, NDArray] = {}  # the point, residual and Jacobian trf was last given
