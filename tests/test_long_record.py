@@ -7,12 +7,13 @@ must be the unchunked ones bit for bit.
 
 from __future__ import annotations
 
+import sys
 import tracemalloc
 
 import numpy as np
 import pytest
 import scipy.optimize  # noqa: F401 - imported before the traced fits: its import is not theirs
-import scipy.optimize._lsq.trf  # noqa: F401
+from scipy.optimize._lsq import trf
 
 from examples.make_rig_runs import write_rig_run
 from tests.conftest import ROOT
@@ -21,7 +22,7 @@ from vehid_cli.identify.crlb import information
 from vehid_cli.identify.experiment import Experiment
 from vehid_cli.identify.task import information_by_parameter
 from vehid_cli.models.faults import delay
-from vehid_cli.optimizers import get_optimizer, lsq
+from vehid_cli.optimizers import compressed, get_optimizer, lsq
 from vehid_cli.optimizers.base import Problem
 from vehid_cli.optimizers.compressed import compress
 from vehid_cli.systems import build_system
@@ -88,6 +89,27 @@ def test_the_compressed_fit_takes_scipys_steps(seed, monkeypatch):
     np.testing.assert_allclose(small.x, full.x, rtol=1e-9)
     np.testing.assert_allclose(small.cost, full.cost, rtol=1e-12)
     assert np.all(np.abs(full.x - truth) < 0.05 * np.abs(truth) + 0.01)  # and it is a fit, not two equal failures
+
+
+@pytest.mark.parametrize("scipy_has", ["no trf_bounds", "another trf_bounds"])
+def test_without_scipys_private_loop_the_long_fit_is_the_public_one(scipy_has, monkeypatch):
+    """On a scipy whose private trf_bounds is gone (or takes other arguments) a long record is still fitted: by the
+    public least_squares on the whole residual, to the estimate and evaluations of the full path."""
+    problem, _ = damped_sine(4000, 1)
+    full = fit(problem, 2**62, monkeypatch, 1)
+    if scipy_has == "no trf_bounds":
+        monkeypatch.setitem(sys.modules, "scipy.optimize._lsq.trf", None)  # `from ... import` raises ImportError
+    else:
+        moved = ("fun", "jac", "x0", "lb", "ub", "ftol", "xtol", "gtol", "max_nfev", "x_scale", "loss_function")
+        monkeypatch.setattr(compressed, "TRF_BOUNDS_PARAMETERS", moved)  # as if trf_bounds took these arguments
+    compressed.private_trf.cache_clear()
+    assert compressed.private_trf() is None
+    small = fit(problem, 0, monkeypatch, 1)
+    assert small.evaluations == full.evaluations
+    np.testing.assert_allclose(small.x, full.x, rtol=1e-12)
+    monkeypatch.undo()
+    compressed.private_trf.cache_clear()
+    assert compressed.private_trf() is trf.trf_bounds
 
 
 def traced_peak(problem: Problem, limit: int, monkeypatch) -> int:

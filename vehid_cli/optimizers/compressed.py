@@ -13,11 +13,14 @@ The compressed residual is tied to the basis Q of the Jacobian at the same point
 only after it accepted a step. So `fun` returns a vector that carries the residual's norm alone (all the cost and
 the step's acceptance need), and `jac` at that accepted point writes the residual's compressed coordinates into
 that same array before scipy forms the gradient from it. This calls scipy's own `trf_bounds`, the loop behind
-`least_squares(method='trf')` with bounds, directly (a private function of scipy: tested against the public one).
+`least_squares(method='trf')` with bounds, directly (a private function of scipy: tested against the public one;
+`private_trf` checks that it is there with the arguments it is called with, else lsq fits the whole residual).
 """
 
 from __future__ import annotations
 
+import functools
+import inspect
 from collections.abc import Callable
 
 import numpy as np
@@ -113,8 +116,10 @@ def trf_compressed(
     x_scale, tol)` (lsq.trf_stops): True where trf will stop at x without using its Jacobian there; it is then given
     the last one again (D simulations saved), judged on the compressed pair, which gives J'J, J'r and r'r exactly.
     `gram(x)` (optional): the Gram matrix of [J r] at x summed without J (`compress_gram`), or None: then
-    `jacobian_rows`."""
-    from scipy.optimize._lsq.trf import trf_bounds  # private: the loop least_squares runs (see the module's doc)
+    `jacobian_rows`. Only where `private_trf()` finds scipy's loop (the caller otherwise fits the whole residual)."""
+    trf_bounds = private_trf()
+    if trf_bounds is None:
+        raise RuntimeError("this scipy has no trf_bounds as trf_compressed calls it: check private_trf() first")
 
     D = x0.size
     last: dict[str, object] = {}
@@ -150,3 +155,27 @@ def trf_compressed(
         {}, 0,
     )  # fmt: skip
     return result.x
+
+
+TRF_BOUNDS_PARAMETERS = (  # scipy 1.x's trf_bounds, as trf_compressed calls it (later ones with defaults may follow)
+    "fun", "jac", "x0", "f0", "J0", "lb", "ub", "ftol", "xtol", "gtol", "max_nfev", "x_scale", "loss_function",
+    "tr_solver", "tr_options", "verbose",
+)  # fmt: skip
+
+
+@functools.cache
+def private_trf() -> Callable | None:
+    """scipy's private `trf_bounds` (the loop behind least_squares(method='trf') with bounds), or None where this
+    scipy has none, or one of another signature: a private function may move in any release (then a long record is
+    fitted on its whole residual, in the memory this module saves)."""
+    try:
+        from scipy.optimize._lsq.trf import trf_bounds
+    except ImportError:
+        return None
+    try:
+        params = list(inspect.signature(trf_bounds).parameters.values())
+    except (TypeError, ValueError):  # pragma: no cover - a compiled replacement without a signature
+        return None
+    n = len(TRF_BOUNDS_PARAMETERS)
+    known = tuple(p.name for p in params[:n]) == TRF_BOUNDS_PARAMETERS
+    return trf_bounds if known and all(p.default is not inspect.Parameter.empty for p in params[n:]) else None

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .base import BudgetExhausted, Optimizer, Search, register
-from .compressed import trf_compressed
+from .compressed import private_trf, trf_compressed
 
 JACOBIAN_STEP = 1e-7  # forward-difference step, as a fraction of each parameter's box width
 LONG_JACOBIAN_BYTES = 4 * 2**20  # a Jacobian larger than this is fitted compressed (optimizers/compressed.py), or
@@ -76,7 +76,8 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
 
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
     x0 = make_strictly_feasible(x0, lo, hi)
-    if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES:  # a long record: the same steps on D + 1 rows
+    if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES and private_trf() is not None:  # a long record: the same
+        # steps on D + 1 rows (on a scipy without the private loop, the whole residual below: more memory, same fit)
         gram = jacobian_gram if run.problem.gram is not None else None
         return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev, stops=trf_stops, gram=gram)
     result = least_squares(
