@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_CORNERS, N_DOF
-from ..sim.modal import foh_discretisation
+from ..sim.modal import foh_discretisation, propagate
 from ..sim.nonlinear import fullcar_struts
 
 if TYPE_CHECKING:  # the fit's types only (psplines imports scipy)
@@ -202,9 +202,7 @@ def responses(car: LinearCar, U: NDArray) -> NDArray:
     s[0] = 0.0
     np.matmul(car.G1, U[:-1], out=s[1:])
     s[1:] += car.G2 @ np.diff(U, axis=0)
-    Phi = car.Phi
-    for k in range(n - 1):
-        s[k + 1] += Phi @ s[k]
+    propagate(car.Phi, s)
     return s
 
 
@@ -229,9 +227,10 @@ def responses_blocks(car: LinearCar, U: NDArray, block: int = RESPONSE_BLOCK) ->
         else:
             np.matmul(car.G1, U[k0 - 1 : k1 - 1], out=s)
             s += car.G2 @ np.diff(U[k0 - 1 : k1], axis=0)
-            s[0] += Phi @ prev
-        for k in range(k1 - k0 - 1):
-            s[k + 1] += Phi @ s[k]
+            step = np.stack([prev, s[0]])
+            propagate(Phi, step)  # the step from the last block's last sample, as one recursion takes it
+            s[0] = step[1]
+        propagate(Phi, s)
         prev = s[-1]
         yield k0, s
 
