@@ -112,6 +112,20 @@ def test_without_scipys_private_loop_the_long_fit_is_the_public_one(scipy_has, m
     assert compressed.private_trf() is trf.trf_bounds
 
 
+def test_without_scipys_private_helpers_the_fit_is_the_same(monkeypatch):
+    """On a scipy without its private least-squares helpers (make_strictly_feasible, the trust region's scaling and
+    quadratic model) lsq still fits: x0 is used as it is (least_squares moves it inside itself) and every Jacobian
+    is computed (no stop is guessed): the same estimate, a few more evaluations at most."""
+    problem, _ = damped_sine(4000, 2)
+    full = fit(problem, 2**62, monkeypatch, 2)
+    monkeypatch.setitem(sys.modules, "scipy.optimize._lsq.common", None)
+    x = np.array([0.5, 2.0])
+    assert lsq.strictly_feasible(x, np.zeros(2), np.full(2, 2.0)) is x
+    bare = fit(problem, 2**62, monkeypatch, 2)
+    np.testing.assert_allclose(bare.x, full.x, rtol=1e-9)
+    assert full.evaluations <= bare.evaluations <= full.evaluations + 10
+
+
 def traced_peak(problem: Problem, limit: int, monkeypatch) -> int:
     tracemalloc.start()
     try:

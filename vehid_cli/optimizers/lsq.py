@@ -72,10 +72,9 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         return J
 
     from scipy.optimize import least_squares  # 0.3 s to import: not when a config naming lsq is only validated
-    from scipy.optimize._lsq.common import make_strictly_feasible  # what least_squares does to x0 (idempotent)
 
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
-    x0 = make_strictly_feasible(x0, lo, hi)
+    x0 = strictly_feasible(x0, lo, hi)
     if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES and private_trf() is not None:  # a long record: the same
         # steps on D + 1 rows (on a scipy without the private loop, the whole residual below: more memory, same fit)
         gram = jacobian_gram if run.problem.gram is not None else None
@@ -85,6 +84,18 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
     )  # fmt: skip
     return result.x
+
+
+def strictly_feasible(x: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
+    """x moved strictly inside the box as least_squares moves its x0 (scipy's private `make_strictly_feasible`,
+    idempotent: the compressed path, which calls scipy's loop directly, needs it done; the public path does it
+    again to no effect). On a scipy without it, x itself: only the compressed path needs it, and it is not taken
+    there (compressed.private_trf)."""
+    try:
+        from scipy.optimize._lsq.common import make_strictly_feasible
+    except ImportError:  # pragma: no cover - another scipy
+        return x
+    return make_strictly_feasible(x, lo, hi)
 
 
 STOP_MARGIN = 0.5  # trf_stops claims a stop only with this margin on scipy's own tests (else it differences)
