@@ -404,12 +404,11 @@ def screening(
         wsplit = ValidationSplit(split.task, split.reference, None, None, split.source)
     else:
         wsplit = validation_split(task.config, head, wref, files, None)
-    wcar = CarLoop(head, wref, wsplit, car.ranges, car.files, analyse_residuals=False, twin=exact_twin(head))
+    wcar = CarLoop(head, wref, wsplit, car.ranges, car.files, analyse_residuals=False)
     R = int(head.residual_samples if wsplit.keep is None else wsplit.keep.sum())
     subject = Subject(
         specs=specs, declared=frozenset(), problem_for=wcar.problem_for, validation_J=wcar.validation_J,
         residual_count=R, statistic=lambda _fit: chi2_statistic(R), scale=lambda f: f.J, noise_limit=chi2_limit(R),
-        linear_for=wcar.linear_for,
     )  # fmt: skip
     return subject, wcar
 
