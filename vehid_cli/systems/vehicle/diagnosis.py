@@ -356,6 +356,7 @@ def diagnose(
     search = None if screen is None else screen.problem_for(task.names)[0]
     linear = head.linear_for(task.names) if screen is None else exact_window(head, task.names)
     fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear)
+    del search, linear  # the first fit's problems (a long record's: its window's, and their exact twin) not held on
     before = car.report(fit, ())
     step("declared fit", 1, 1)
     quality = assess_vehicle(task, ref, before, pre)
