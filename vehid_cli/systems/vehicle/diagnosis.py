@@ -242,13 +242,6 @@ def exact_twin(task: Task | JointTask) -> Task | None:
     return twin if twin.experiment.exact_applies(task.names) else None
 
 
-def exact_window(head: CarLoop, names: tuple[str, ...]) -> Problem | None:
-    """A long record's window problem over `names` on the exact integrator with its exact sensitivities (the window's
-    `exact_twin`; None where that is not the linear car): the declared fit's Levenberg–Marquardt runs on it."""
-    twin = exact_twin(head.task)
-    return None if twin is None else dataclasses.replace(head, twin=twin).linear_for(names)
-
-
 def fit_declared(
     config: Config,
     task: Task | JointTask,
@@ -258,15 +251,23 @@ def fit_declared(
     say: Callable[[str], None],
     search: Problem | None = None,
     linear: Problem | None = None,
+    local: bool = False,
 ) -> Fit:
     """The declared model, by the configured algorithm (the campaign's run 0 streams) on `search` (a long record's
     screening window; default `problem`), then polished to the likelihood's minimum on `problem`; when the data
     failed the pre-check (no claim will be made) a local fit from the configured values, enough for the record.
-    `linear`: the same problem (a long record: its window's) on the exact integrator with its exact sensitivities
-    (`exact_twin`, the linear car): then Levenberg–Marquardt from the configured values on it replaces the global
-    search (a few evaluations instead of ~1000; the search only when it fails), and the polish on `problem` starts
-    from its minimum."""
+    `linear`: the same problem on the exact integrator with its exact sensitivities (`exact_twin`, the linear car):
+    then Levenberg–Marquardt from the configured values on it replaces the global search (a few evaluations instead
+    of ~1000; the search only when it fails), and the polish on `problem` starts from its minimum. `local` (a long
+    record's linear car): the same from the configured values by the trust region on the window instead (~100
+    window evaluations; the exact path's compiled kernels, a few MiB, are not loaded for it)."""
     ident = config.identify
+    if precheck_ok and search is not None and local:
+        on_window = lsq_fit(search, task.nominal, refit_budget)
+        if np.isfinite(on_window.J):  # else the global search
+            fit = lsq_fit(problem, on_window.x, refit_budget)
+            say(f"declared model: J = {fit.J:.4g} ({on_window.evaluations} + {fit.evaluations} evaluations)")
+            return fit
     if precheck_ok and linear is not None:
         run = Search(linear, run_streams(ident.seed, 0).optimizer, ident.budget or refit_budget)
         x = gauss_newton(run, task.nominal)
@@ -354,9 +355,10 @@ def diagnose(
     # 1. the declared model, by the configured algorithm (a long record: on its window), then polished
     step("declared fit", 0, 1)
     search = None if screen is None else screen.problem_for(task.names)[0]
-    linear = head.linear_for(task.names) if screen is None else exact_window(head, task.names)
-    fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear)
-    del search, linear  # the first fit's problems (a long record's: its window's, and their exact twin) not held on
+    linear = car.linear_for(task.names)
+    local = screen is not None and exact_twin(task) is not None
+    fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear, local)
+    del search, linear  # the first fit's problems not held on
     before = car.report(fit, ())
     step("declared fit", 1, 1)
     quality = assess_vehicle(task, ref, before, pre)
@@ -372,8 +374,8 @@ def diagnose(
         )
     if screen is not None:
         notes += (
-            f"a long record: the declared model's first fit (Levenberg–Marquardt on the exact integrator for the "
-            f"linear car, else the global search) and the candidates' screening ran on the first "
+            f"a long record: the declared model's first fit (a local fit from the configured values for the linear "
+            f"car, else the global search) and the candidates' screening ran on the first "
             f"{SCREEN_SAMPLES} samples of each run (their LR and validation J are the window's), and so did the "
             "estimate of the unexplained strut force; the polish, every re-fit, interval, removal test and claim on "
             "the whole record",
