@@ -124,6 +124,17 @@ def strength_excludes_null(cand: Candidate, fit: Fit, ci: NDArray) -> list[str]:
     return out
 
 
+@dataclass(frozen=True)
+class Removal:
+    """A removal test made (`_Augmentation.removal_p`): of `fit`, within `budget` evaluations, its p-value and the fit
+    without the candidate."""
+
+    fit: Fit
+    budget: int
+    p: float
+    without: Fit
+
+
 @dataclass
 class _Augmentation:
     """The loop's running state: the current fit and its validation J, what is claimed, dropped and noted so far,
@@ -144,7 +155,7 @@ class _Augmentation:
     notes: list[str] = field(default_factory=list)
     dropped: set[str] = field(default_factory=set)
     progress: ProgressHook = field(default=lambda _stage, _done, _total: None)  # the steps, for a bar or log lines
-    removals: dict[str, tuple[Fit, int, float, Fit]] = field(default_factory=dict)  # effect: its last removal test
+    removals: dict[str, Removal] = field(default_factory=dict)  # effect: its last removal test
 
     def note(self, text: str) -> None:
         """Record a note and say it."""
@@ -175,15 +186,16 @@ class _Augmentation:
         return subject.linear_for(names + tuple(n for n in cand.unknowns + cand.shape if n not in names))
 
     def removal_p(self, f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
-        """p-value of keeping `cand` in the fit f: a short fit without its own unknowns, the LR test. The same test of
-        the same fit f made before (the last claim, tested again at the end beside the others) is not fitted twice
-        when that fit stopped short of both budgets (a larger budget changes nothing then): a long record's takes
-        1-2 s."""
+        """p-value of keeping `cand` in the fit f: a short fit without its own unknowns, the LR test. The test of the
+        same fit f made before (the last claim, tested again at the end beside the others) is not fitted twice when
+        that fit stopped short of both budgets (a larger budget changes nothing then; a long record's first test
+        started from the fit before the claim, the fit without it converged already, where the repeat would start
+        from f's values: the same minimum). A long record's takes 1-2 s."""
         done = self.removals.get(cand.effect)
-        if done is not None and done[0] is f and done[3].evaluations + 1 < min(budget, done[1]):
-            return done[2], done[3]
+        if done is not None and done.fit is f and done.without.evaluations + 1 < min(budget, done.budget):
+            return done.p, done.without
         p, without = self._removal_p(f, cand, budget)
-        self.removals[cand.effect] = (f, budget, p, without)
+        self.removals[cand.effect] = Removal(f, budget, p, without)
         return p, without
 
     def _removal_p(self, f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:

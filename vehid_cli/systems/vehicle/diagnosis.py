@@ -268,7 +268,7 @@ def fit_declared(
             fit = lsq_fit(problem, on_window.x, refit_budget)
             say(f"declared model: J = {fit.J:.4g} ({on_window.evaluations} + {fit.evaluations} evaluations)")
             return fit
-    if precheck_ok and linear is not None:
+    if precheck_ok and linear is not None and search is None:
         run = Search(linear, run_streams(ident.seed, 0).optimizer, ident.budget or refit_budget)
         x = gauss_newton(run, task.nominal)
         if x is not None and np.isfinite(run.best_cost):
@@ -356,7 +356,7 @@ def diagnose(
     step("declared fit", 0, 1)
     search = None if screen is None else screen.problem_for(task.names)[0]
     linear = car.linear_for(task.names)
-    local = screen is not None and exact_twin(task) is not None
+    local = screen is not None and twin is not None  # a long record's linear car
     fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear, local)
     del search, linear  # the first fit's problems not held on
     before = car.report(fit, ())
