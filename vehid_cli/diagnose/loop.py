@@ -126,8 +126,7 @@ def strength_excludes_null(cand: Candidate, fit: Fit, ci: NDArray) -> list[str]:
 
 @dataclass(frozen=True)
 class Removal:
-    """A removal test made (`_Augmentation.removal_p`): of `fit`, within `budget` evaluations, its p-value and the fit
-    without the candidate."""
+    """A removal test (`removal_p`) of `fit` within `budget`: its p-value and the fit without the candidate."""
 
     fit: Fit
     budget: int
@@ -186,20 +185,11 @@ class _Augmentation:
         return subject.linear_for(names + tuple(n for n in cand.unknowns + cand.shape if n not in names))
 
     def removal_p(self, f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
-        """p-value of keeping `cand` in the fit f: a short fit without its own unknowns, the LR test. The test of the
-        same fit f made before (the last claim, tested again at the end beside the others) is not fitted twice when
-        that fit stopped short of both budgets (a larger budget changes nothing then; a long record's first test
-        started from the fit before the claim, the fit without it converged already, where the repeat would start
-        from f's values: the same minimum). A long record's takes 1-2 s."""
+        """p-value of keeping `cand` in f: a short fit without its own unknowns, the LR test. f's earlier test (the last
+        claim's, again at the end) is reused if it stopped short of both budgets (a long record's began nearer)."""
         done = self.removals.get(cand.effect)
         if done is not None and done.fit is f and done.without.evaluations + 1 < min(budget, done.budget):
             return done.p, done.without
-        p, without = self._removal_p(f, cand, budget)
-        self.removals[cand.effect] = Removal(f, budget, p, without)
-        return p, without
-
-    def _removal_p(self, f: Fit, cand: Candidate, budget: int) -> tuple[float, Fit]:
-        """`removal_p`'s test, fitted."""
         own = own_unknowns(cand, f.names)
         reduced = tuple(n for n in f.names if n not in own)
         problem_r, _ = self.subject.problem_for(reduced)
@@ -215,7 +205,9 @@ class _Augmentation:
         if without is None:
             without = fit_free(problem_r, start, free, budget)
         k = cand.df if cand.df is not None else len([n for n in own if n not in f.fixed])
-        return float(chi2_sf(self.subject.statistic(f)(without.J, f.J), max(k, 1))), without
+        p = float(chi2_sf(self.subject.statistic(f)(without.J, f.J), max(k, 1)))
+        self.removals[cand.effect] = Removal(f, budget, p, without)
+        return p, without
 
     def round(self) -> bool:
         """One round: rank the candidates against the current fit and try to add the best accepted one. False when
