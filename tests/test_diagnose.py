@@ -230,6 +230,25 @@ def test_misset_known_parameters_are_named_not_disguised_as_effects(tmp_path):
         assert "…" not in line
 
 
+@pytest.mark.slow
+def test_misset_known_parameters_on_a_long_record_are_not_left_to_an_effect_that_imitates_one(tmp_path):
+    """kf and cr mis-set on a 15 s random road (a long record, screened on its 5 s window): on the window a Bouc-Wen
+    element that never yields beats kf alone, and before the swap test (diagnose/claims.py) the loop claimed
+    "hysteresis, parameter:cr" with the residual at the noise. The swap test puts kf in its place at the end."""
+    data, out = tmp_path / "kfcr15.csv", tmp_path / "d.json"
+    road = ["--set", "road.bump=null", "--set", "road.random.iso_class=C", "--set", "simulation.duration=15"]
+    sim = ["simulate", str(BASE), "-o", str(data), *road, "--set", "vehicle.kf=54000", "--set", "vehicle.cr=2975"]
+    assert CliRunner().invoke(app, sim).exit_code == 0
+    result = CliRunner().invoke(app, ["diagnose", str(BASE), "--data", str(data), "--json", str(out), *road])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(out.read_text())
+    assert sorted(doc["selected"]) == ["parameter:cr", "parameter:kf"] and doc["verdict"].startswith("found")
+    assert any("hysteresis swapped for parameter:kf" in n for n in doc["notes"])
+    for name, truth in (("kf", 54000.0), ("cr", 2975.0)):
+        lo, hi = doc["after"]["ci95"][name]
+        assert lo - (hi - lo) < truth < hi + (hi - lo)  # the truth within about two intervals
+
+
 def test_hysteresis_shape_found_from_the_wrong_basin():
     """A Bouc-Wen loop yielding at 13 mm (default 5 mm): the multi-start candidate fit finds its shape."""
     from vehid_cli.diagnose import attribution as A

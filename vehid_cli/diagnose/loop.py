@@ -36,7 +36,6 @@ from .attribution import (
     Ranked,
     fisher_ci,
     fit_free,
-    fit_intervals,
     forward_jacobian,
     identifiable,
     linear_fit,
@@ -47,51 +46,18 @@ from .attribution import (
     screenable,
     undistinguished,
 )
+from .claims import Removal, own_unknowns, rival, strength_excludes_null, swap_test
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
 from .score import Scores, cannot_win, fitted_basis, screen_effects
 from .stops import STOP_FACTOR, STOP_STEPS
+from .subject import Subject
 from .tails import chi2_isf, chi2_sf
 from .uncertainty import compare_reports
 from .unexplained import Unexplained
 
 MAX_ROUNDS = 4
 REFIT_BUDGET = 600
-
-
-@dataclass(frozen=True)
-class Subject:
-    """What the loop needs of the system under diagnosis (the car or a damper on a bench).
-
-    problem_for(names): the training problem over the unknowns `names` (declared first, then candidates'
-    parameters) and a start value for each; validation_J(names, x): J on the validation data, and per file;
-    statistic(current): the LR function (J_before, J_with) -> statistic for tests against the fit `current`;
-    scale(fit): the variance of one training residual entry at a fit (for intervals).
-    """
-
-    specs: dict[str, Candidate]
-    declared: frozenset[str]
-    problem_for: Callable[[tuple[str, ...]], tuple[Problem, NDArray]]
-    validation_J: Callable[[tuple[str, ...], NDArray], tuple[float, dict[str, float] | None]]
-    residual_count: int
-    statistic: Callable[[Fit], Callable[[float, float], float]]
-    scale: Callable[[Fit], float]
-    min_gain: float = 0.0
-    noise_limit: float | None = None  # training J at or below which the residual is noise (None: J is not chi²)
-    screen: Subject | None = None  # a long record's screening window (window.py): the candidates are ranked on it
-    # the training problem over `names` on the exact integrator with its exact sensitivities, None where the model
-    # is not the linear car (known parameters' fits by Levenberg–Marquardt on it: attribution.linear_fit)
-    linear_for: Callable[[tuple[str, ...]], Problem | None] | None = None
-
-    def J_at(self, fit: Fit) -> Fit:
-        """`fit`'s point with its training J on this subject's data (the screening window's J of a whole-record
-        fit)."""
-        J = float(self.problem_for(fit.names)[0].cost(np.asarray(fit.x, dtype=float)[None, :])[0])
-        return Fit(fit.names, fit.x, J if np.isfinite(J) else float("inf"), 1, fit.fixed)
-
-    def intervals(self, fit: Fit) -> NDArray:
-        """95 % half-widths at a fit over its free unknowns (NaN for the fixed ones)."""
-        return fit_intervals(self.problem_for(fit.names)[0], fit, self.scale(fit))
 
 
 @dataclass(frozen=True)
@@ -103,35 +69,6 @@ class Loop:
     rounds: tuple[tuple[Ranked, ...], ...]
     steps: tuple[Step, ...]
     notes: tuple[str, ...] = ()
-
-
-def own_unknowns(cand: Candidate, names: tuple[str, ...]) -> list[str]:
-    """A claimed candidate's own unknowns among `names`: an effect's parameters (not the car's it also
-    freed), a known parameter itself."""
-    if cand.kind in ("parameter", "sensor"):
-        return [n for n in cand.unknowns if n in names]
-    return [n for n in names if n.partition(".")[0] == cand.effect]
-
-
-def strength_excludes_null(cand: Candidate, fit: Fit, ci: NDArray) -> list[str]:
-    """The candidate's strength unknowns whose 95 % interval at the fit excludes their null value."""
-    out = []
-    for n in cand.strength:
-        if n in fit.names:
-            j = fit.names.index(n)
-            if np.isfinite(ci[j]) and abs(fit.x[j] - cand.null.get(n, 0.0)) > ci[j]:
-                out.append(n)
-    return out
-
-
-@dataclass(frozen=True)
-class Removal:
-    """A removal test (`removal_p`) of `fit` within `budget`: its p-value and the fit without the candidate."""
-
-    fit: Fit
-    budget: int
-    p: float
-    without: Fit
 
 
 @dataclass
@@ -203,7 +140,7 @@ class _Augmentation:
         linear = self.subject.linear_for(reduced) if self.subject.linear_for is not None and free.all() else None
         without = None if linear is None else linear_fit(problem_r, linear, start, budget)
         if without is None:
-            without = fit_free(problem_r, start, free, budget)
+            without = fit_free(problem_r, start, free, budget, tol=SCREEN_TOL)  # the LR to about 1e-7 R
         k = cand.df if cand.df is not None else len([n for n in own if n not in f.fixed])
         p = float(chi2_sf(self.subject.statistic(f)(without.J, f.J), max(k, 1)))
         self.removals[cand.effect] = Removal(f, budget, p, without)
@@ -458,6 +395,27 @@ class _Augmentation:
                 self.note(f"{e} dropped at the end: with the later claims it is no longer needed (p = {p_keep:.2g})")
                 self.move_to(without)
 
+    def swap_claims(self) -> None:
+        """Each claimed effect a known parameter of its round nearly matched: that parameter in its place, claimed
+        instead, when it explains the record as well (claims.swap_test)."""
+        specs = self.subject.specs
+        for e in [e for e in self.claimed if specs[e].kind == "effect"]:
+            other = rival(self.rounds, e, self.current.names)
+            if other is None:
+                continue
+            swap = swap_test(
+                self.subject, self.current, specs[e], other,
+                lambda e=e: self.removal_p(self.current, specs[e], self.refit_budget)[1],
+                self.level(len(specs)), self.refit_budget,
+            )  # fmt: skip
+            if swap is None:
+                continue
+            v = self.subject.validation_J(swap.fit.names, swap.fit.x)
+            self.steps.append(Step(other.effect, self.current.J, swap.fit.J, self.current_v[0], v[0], v[1]))
+            self.claimed[self.claimed.index(e)] = other.effect
+            self.note(swap.describe(self.current.J))
+            self.current, self.current_v = swap.fit, v
+
     def polish(self) -> None:
         """The final model's joint least-squares polish of every free unknown from the loop's best point (kept when
         J falls): a re-fit that stopped short leaves the unknowns where a freed parameter's earlier value bent them."""
@@ -533,6 +491,8 @@ def augment(
     for _ in range(max_rounds if claim else min(max_rounds, 1)):
         if not run.round():
             break
+    if claim:  # first a known parameter in place of an effect that imitated it: the checks then on the simpler model
+        run.swap_claims()
     if claim and len(run.claimed) > 1:  # the final model: is every claim still needed beside the others?
         run.recheck_claims()
     run.settle_companions(len(fit.names))

@@ -30,9 +30,10 @@ from ..diagnose.attribution import (
     parameter_candidate,
 )
 from ..diagnose.holdout import HOLDOUT_EVERY, holdout_blocks, masked
-from ..diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Subject, close
+from ..diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, close
 from ..diagnose.quality import MAX_NOISE_RATIO, MIN_SAMPLES, Quality
 from ..diagnose.result import Diagnosis, ModelReport, chi2_limit
+from ..diagnose.subject import Subject
 from ..identify.source import DataSource
 from ..models.effects import LIBRARY
 from ..optimizers import get_optimizer

@@ -47,10 +47,11 @@ from ...diagnose.attribution import (
 )
 from ...diagnose.bench_law import BenchLaw, bench_law
 from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks
-from ...diagnose.loop import Subject, close
+from ...diagnose.loop import close
 from ...diagnose.quality import assess_bench
 from ...diagnose.residuals import analyse_bench, autocorrelation
 from ...diagnose.result import Diagnosis, ModelReport
+from ...diagnose.subject import Subject
 from ...models.bench import BenchHistory
 from ...models.effects import LIBRARY, BenchScale
 from ...optimizers import get_optimizer

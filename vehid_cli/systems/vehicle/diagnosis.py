@@ -36,11 +36,12 @@ from ...diagnose.attribution import (
 )
 from ...diagnose.checks import check_runs
 from ...diagnose.holdout import HOLDOUT_EVERY, block_size, holdout_blocks, masked
-from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, Subject, close
+from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, close
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
 from ...diagnose.residuals import ResidualAnalysis, analyse
 from ...diagnose.result import Diagnosis, ModelReport, chi2_limit
 from ...diagnose.shapes import candidate_order
+from ...diagnose.subject import Subject
 from ...diagnose.unexplained import Unexplained, estimate_unexplained
 from ...diagnose.window import SCREEN_SAMPLES, is_long, window_task
 from ...identify.source import as_paths
