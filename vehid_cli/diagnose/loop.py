@@ -324,7 +324,7 @@ class _Augmentation:
         x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
         shapes = [n for e in (*self.claimed, best.effect) for n in specs[e].shape]
         free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
-        refit = fit_free(problem, x0, free, self.refit_budget)
+        refit = fit_free(problem, x0, free, self.refit_budget, tol=SCREEN_TOL)  # the final polish goes to 1e-12
         best_J = best.fit.J
         if subject.screen is not None:  # the candidate was fitted on the screening window: its J on the whole record
             best_J = subject.J_at(Fit(names, x0, best_J, 0)).J
