@@ -74,3 +74,39 @@ def test_a_long_records_batch_is_made_at_its_kept_entries_only_with_the_same_num
         old = masked(dataclasses.replace(problem, kept=None), keep).residuals(X)
         assert new[1].flags.c_contiguous and new[1].shape == (5, keep.sum())
         assert np.array_equal(new[1], old[1]) and np.array_equal(new[0], old[0])
+
+
+@pytest.mark.parametrize("offsets", [False, True])
+def test_a_long_records_normal_equations_are_masked_to_the_kept_samples(monkeypatch, offsets):
+    """The masked problem's normal equations (a long record's, summed block by block over the kept samples) are
+    J'J and J'r of the exact Jacobian's kept rows and its cost their residuals' mean square; with profiled offsets
+    (means over every observed sample, not these sums) there are none, and the fit falls back to differences."""
+    import dataclasses
+
+    from tests.conftest import BASE_CONFIG
+    from vehid_cli.config import load_config
+    from vehid_cli.identify.task import build_task
+    from vehid_cli.optimizers import lsq
+
+    sets = ["identify.objective=wls", "noise.level=0.03", "simulation.duration=5", "simulation.integrator=exact",
+            "identify.truth=config"]  # fmt: skip
+    task = dataclasses.replace(build_task(load_config(BASE_CONFIG, sets)), offsets=offsets).with_unknowns(("kf", "cr"))
+    ref = task.reference(0)
+    x = task.nominal * np.random.default_rng(2).uniform(0.95, 1.05, task.dim)
+    _, r, jac = task.problem(ref).linearised(x)  # a short record's: the whole Jacobian
+    keep = ~np.resize(holdout_blocks(r.size // 4), r.size)
+    monkeypatch.setattr(lsq, "LONG_JACOBIAN_BYTES", 1024)  # the same record taken as long: its sums, no Jacobian
+    long = task.problem(ref)
+    assert long.linearised is None and long.normal is not None
+    got = masked(long, keep).normal(x)
+    if offsets:
+        assert got is None
+        return
+    cost, rk, H, g = got
+    J, rr = jac[keep], r[keep]
+    np.testing.assert_array_equal(rk, rr)
+    assert cost == pytest.approx(np.mean(rr**2), rel=1e-12)
+    scale = np.sqrt(np.diag(J.T @ J))
+    np.testing.assert_allclose(H / np.outer(scale, scale), (J.T @ J) / np.outer(scale, scale), atol=1e-10)
+    np.testing.assert_allclose(g / scale, (J.T @ rr) / scale, atol=1e-10 * np.linalg.norm(rr))
+    assert not np.allclose(H, jac.T @ jac, rtol=1e-3)  # the held-out rows are left out (the test can fail)

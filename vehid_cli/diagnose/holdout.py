@@ -25,7 +25,8 @@ def holdout_blocks(n: int) -> NDArray:
 def masked(problem: Problem, keep: NDArray | None) -> Problem:
     """The problem on the kept residuals only (cost: their chi² per sample); diverging candidates (NaN, inf)
     are the optimizer's to penalise, without floating-point warnings. The problem's exact linearisation (the linear
-    car's sensitivities), when it has one, is masked the same way (its rows of the kept entries)."""
+    car's sensitivities), when it has one, is masked the same way (its rows of the kept entries), and so are its normal
+    equations (a long record's: summed over the kept entries only)."""
 
     rows = None if keep is None else np.flatnonzero(keep)
 
@@ -51,12 +52,22 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
         with np.errstate(all="ignore"):
             return float(np.mean(r**2)), r, jac
 
+    def normal(x: NDArray) -> tuple[float, NDArray, NDArray, NDArray] | None:
+        got = problem.normal(x) if rows is None else problem.normal(x, rows)
+        if got is None:
+            return None
+        _, r, H, g = got
+        r = r if keep is None else r[keep]
+        with np.errstate(all="ignore"):
+            return float(np.mean(r**2)), r, H, g
+
     def gram(X: NDArray, scale: NDArray, entries: NDArray | None = None) -> NDArray | None:
         at = rows if entries is None else (entries if rows is None else rows[entries])
         return problem.gram(X, scale, at)
 
     lin = None if problem.linearised is None else linearised
     return Problem(problem.lower, problem.upper, lambda X: cr(X)[0], cr, problem.penalty, problem.names, lin,
+                   normal=None if problem.normal is None else normal,
                    gram=None if problem.gram is None else gram)  # fmt: skip
 
 

@@ -44,7 +44,7 @@ def forward_gram(
     running its own blocks) when called from the main thread."""
     cars = len(next(iter(values.values())))
     width = cars  # m differences and the residual
-    kept = _kept_masks(objective, entries)
+    kept = objective.kept_masks(entries)
     observed = objective.observed
     grams = {f: Gram(ref.shape[-1], width, objective.offsets) for f, ref in objective.reference.items()}
     sums = {f: np.zeros((ref.shape[-1], width)) for f, ref in objective.reference.items()} if objective.offsets else {}
@@ -115,28 +115,3 @@ def _rows(objective: Objective, family: str, k0: int, sim: NDArray, scale: NDArr
     d /= np.asarray(scale, dtype=float)[:, None, None]
     V[..., :-1] = d.transpose(1, 2, 0)
     return V
-
-
-def _kept_masks(objective: Objective, entries: NDArray | None) -> dict[str, NDArray] | None:
-    """family -> (n, k) bool: the entries summed (the observed samples, or `entries` of them); None: every sample.
-    Made of bool arrays only (no index array of the record's size beside the caller's `entries`)."""
-    if entries is None and objective.observed is None:
-        return None
-    chosen = None
-    if entries is not None:
-        chosen = np.zeros(objective.size, dtype=bool)
-        chosen[entries] = True
-    out, first = {}, 0
-    for family, ref in objective.reference.items():
-        n, k = ref.shape[-2:]
-        own = objective.entries(family)  # flat indices of the family's entries, or None: all n k
-        size = n * k if own is None else own.size
-        part = np.ones(size, dtype=bool) if chosen is None else chosen[first : first + size]
-        if own is None:
-            mask = part.copy()
-        else:
-            mask = np.zeros(n * k, dtype=bool)
-            mask[own] = part
-        out[family] = mask.reshape(n, k)
-        first += size
-    return out

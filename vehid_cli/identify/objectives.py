@@ -204,10 +204,39 @@ class Objective:
             first += size
         return out if out is not None else np.zeros((0, 0))
 
-    def normal_sums(self, dim: int) -> NormalSums:
+    def kept_masks(self, entries: NDArray | None = None) -> dict[str, NDArray] | None:
+        """family -> (n, k) bool: the entries summed (the observed samples, or `entries` of them, increasing indices
+        into the residual vector); None: every sample. Made of bool arrays only (no index array of the record's size
+        beside the caller's `entries`)."""
+        if entries is None and self.observed is None:
+            return None
+        chosen = None
+        if entries is not None:
+            chosen = np.zeros(self.size, dtype=bool)
+            chosen[entries] = True
+        out, first = {}, 0
+        for family, ref in self.reference.items():
+            n, k = ref.shape[-2:]
+            own = self.entries(family)  # flat indices of the family's entries, or None: all n k
+            size = n * k if own is None else own.size
+            part = np.ones(size, dtype=bool) if chosen is None else chosen[first : first + size]
+            if own is None:
+                mask = part.copy()
+            else:
+                mask = np.zeros(n * k, dtype=bool)
+                mask[own] = part
+            out[family] = mask.reshape(n, k)
+            first += size
+        return out
+
+    def normal_sums(self, dim: int, entries: NDArray | None = None) -> NormalSums | None:
         """An accumulator of `residual_jacobian`'s J'J and J'r over `dim` unknowns, a block of samples at a time (the
-        sink of `Experiment.exact_sensitivities`): a long record's normal equations without its (R, D) Jacobian."""
-        return NormalSums(self, dim)
+        sink of `Experiment.exact_sensitivities`): a long record's normal equations without its (R, D) Jacobian; over
+        the residual entries `entries` only (increasing; diagnose's kept samples) where given. None for `entries` with
+        profiled offsets (their means are over every observed sample: not these sums)."""
+        if entries is not None and self.offsets:
+            return None
+        return NormalSums(self, dim, self.kept_masks(entries) if entries is not None else None)
 
     def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Both from one simulation (the wls residuals computed once)."""
@@ -221,8 +250,9 @@ class NormalSums:
     J = -(d sim) / sigma (`Objective.residual_jacobian`), summed over the observed samples block by block; with
     profiled offsets both lose each channel's mean (centred sums, `optimizers.normal.Gram`), as r and J do."""
 
-    def __init__(self, objective: Objective, dim: int):
+    def __init__(self, objective: Objective, dim: int, kept: dict[str, NDArray] | None = None):
         self.objective = objective
+        self.kept = kept  # family -> (n, k) bool: the entries summed (None: the observed ones)
         self.grams = {f: Gram(ref.shape[-1], dim + 1, objective.offsets) for f, ref in objective.reference.items()}
 
     def __call__(self, k0: int, out: Mapping[str, NDArray], sens: Mapping[str, NDArray]) -> None:
@@ -236,7 +266,8 @@ class NormalSums:
             V = np.empty(s.shape[:2] + (s.shape[2] + 1,))  # [J row, r] per sample and channel
             np.divide(s, -sigma[:, None], out=V[..., :-1])
             np.divide(obj.reference[family][k0 : k0 + b] - out[family], sigma, out=V[..., -1])
-            gram.add(V, None if obj.observed is None else obj.observed[family][k0 : k0 + b])
+            mask = obj.observed if self.kept is None else self.kept
+            gram.add(V, None if mask is None else mask[family][k0 : k0 + b])
 
     def result(self) -> tuple[NDArray, NDArray]:
         """H = J'J (D, D) and g = J'r (D,) over every block given."""

@@ -215,9 +215,11 @@ class Task:
                 costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()})
                 return float(costs[0]), residuals[0], objective.residual_jacobian(got[1])
 
-        def normal(x: NDArray) -> tuple[float, NDArray, NDArray, NDArray] | None:
+        def normal(x: NDArray, entries: NDArray | None = None) -> tuple[float, NDArray, NDArray, NDArray] | None:
+            sums = objective.normal_sums(len(names), entries)
+            if sums is None:
+                return None
             with np.errstate(all="ignore"):
-                sums = objective.normal_sums(len(names))
                 got = self.experiment.exact_sensitivities(names, x, sink=sums)
                 if got is None:
                     return None

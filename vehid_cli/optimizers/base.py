@@ -22,8 +22,9 @@ BatchCost = Callable[[NDArray], NDArray]  # (P, D) -> (P,)
 CostAndResiduals = Callable[[NDArray], tuple[NDArray, NDArray]]  # (P, D) -> costs (P,), residuals (P, R)
 # x (D,) -> cost, residuals (R,) and their exact derivatives d r / dx (R, D) from one simulation; None where unavailable
 Linearised = Callable[[NDArray], "tuple[float, NDArray, NDArray] | None"]
-# x (D,) -> cost, residuals (R,), J'J (D, D) and J'r (D,) of that Jacobian, summed over a long record without it
-NormalEquations = Callable[[NDArray], "tuple[float, NDArray, NDArray, NDArray] | None"]
+# x (D,) -> cost, residuals (R,), J'J (D, D) and J'r (D,) of that Jacobian, summed over a long record without it;
+# an optional second argument, entries (k,) or None: the sums over those residual entries only (None where unavailable)
+NormalEquations = Callable[..., "tuple[float, NDArray, NDArray, NDArray] | None"]
 KeptResiduals = Callable[[NDArray, NDArray], NDArray]  # (P, D), entries (k,) -> residuals (P, k) at those entries
 # points X (m + 1, D) (a centre, then m others), divisors (m,), entries (k,) or None -> the Gram matrix (m + 1, m + 1)
 # of [J r] at those entries (r the centre's residuals, J's column j (r_{j+1} - r_0) / divisor_j), summed over a long

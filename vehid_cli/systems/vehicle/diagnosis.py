@@ -188,15 +188,16 @@ class CarLoop:
         return masked(problem, self.split.keep), t.nominal
 
     def linear_for(self, names: tuple[str, ...]) -> Problem | None:
-        """The training problem over `names` on the exact integrator with its exact sensitivities (`exact_twin`), or
-        None where that model is not the linear car (an effect's or a sensor's unknowns among `names`)."""
+        """The training problem over `names` on the exact integrator with its exact sensitivities (`exact_twin`; a
+        long record's as normal equations summed over the kept samples), or None where that model is not the linear
+        car (an effect's or a sensor's unknowns among `names`)."""
         if self.twin is None or not set(names) <= set(self.twin.config.vehicle.values()):
             return None
         t = self.augmented(self.twin, names)
         if t.corrections or not t.experiment.exact_applies(t.names):
             return None
         problem = self.problem_of(t, self.ref, self.split.keep)
-        return problem if problem.linearised is not None else None  # none where its Jacobian is too long to hold
+        return problem if problem.linearised is not None or problem.normal is not None else None
 
     def analyses(self, t: Task | JointTask, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
         """The residual analysis of each run (its file and its analysis)."""
