@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .attribution import PARSIMONY_SHARE, Candidate, Fit, Ranked, fit_free, linear_fit
+from .attribution import PARSIMONY_SHARE, Candidate, Fit, Ranked
 from .subject import Subject
 from .tails import chi2_isf
 
@@ -101,15 +101,11 @@ def swap_test(
     own = own_unknowns(effect, current.names)
     kept = tuple(n for n in current.names if n not in own)
     names = kept + parameter.added
-    problem, start = subject.problem_for(names)
+    start = subject.problem_for(names)[1]
     at = [parameter.fit.x[parameter.fit.names.index(n)] if n in parameter.fit.names else s
           for n, s in zip(parameter.added, start[len(kept) :], strict=True)]  # fmt: skip
     x0 = np.concatenate([current.x[[current.names.index(n) for n in kept]], at])
-    free = np.array([n not in current.fixed for n in names])
-    linear = subject.linear_for(names) if subject.linear_for is not None and free.all() else None
-    fit = None if linear is None else linear_fit(problem, linear, x0, budget)
-    if fit is None:
-        fit = fit_free(problem, x0, free, budget)
+    fit = subject.fit(names, x0, np.array([n not in current.fixed for n in names]), budget)
     lr = subject.statistic(current)
     k = effect.df if effect.df is not None else len([n for n in own if n not in current.fixed])
     gap, critical, share = lr(fit.J, current.J), float(chi2_isf(level, max(k, 1))), None

@@ -38,7 +38,6 @@ from .attribution import (
     fit_free,
     forward_jacobian,
     identifiable,
-    linear_fit,
     lowers_validation,
     parsimonious,
     rank_candidates,
@@ -129,7 +128,6 @@ class _Augmentation:
             return done.p, done.without
         own = own_unknowns(cand, f.names)
         reduced = tuple(n for n in f.names if n not in own)
-        problem_r, _ = self.subject.problem_for(reduced)
         idx = [f.names.index(n) for n in reduced]
         free = np.array([n not in f.fixed for n in reduced])
         start = f.x[idx]
@@ -137,10 +135,7 @@ class _Augmentation:
         same = now.names == reduced and set(now.fixed) == {n for n in f.fixed if n in reduced}
         if self.subject.screen is not None and now is not f and same:
             start = now.x  # a long record: the fit without the candidate is the current one, converged already
-        linear = self.subject.linear_for(reduced) if self.subject.linear_for is not None and free.all() else None
-        without = None if linear is None else linear_fit(problem_r, linear, start, budget)
-        if without is None:
-            without = fit_free(problem_r, start, free, budget, tol=SCREEN_TOL)  # the LR to about 1e-7 R
+        without = self.subject.fit(reduced, start, free, budget)
         k = cand.df if cand.df is not None else len([n for n in own if n not in f.fixed])
         p = float(chi2_sf(self.subject.statistic(f)(without.J, f.J), max(k, 1)))
         self.removals[cand.effect] = Removal(f, budget, p, without)

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..optimizers.base import Problem
-from .attribution import Candidate, Fit, fit_intervals
+from .attribution import SCREEN_TOL, Candidate, Fit, fit_free, fit_intervals, linear_fit
 
 
 @dataclass(frozen=True)
@@ -48,3 +48,13 @@ class Subject:
     def intervals(self, fit: Fit) -> NDArray:
         """95 % half-widths at a fit over its free unknowns (NaN for the fixed ones)."""
         return fit_intervals(self.problem_for(fit.names)[0], fit, self.scale(fit))
+
+    def fit(self, names: tuple[str, ...], x0: NDArray, free: NDArray, budget: int) -> Fit:
+        """The fit over `names` from x0 (the unknowns not `free` held): Levenberg–Marquardt on the exact linear car
+        where every unknown is free and it applies (`linear_for`), else the trust region, to SCREEN_TOL (the LR to
+        about 1e-7 R: a test's fit, not the final polish)."""
+        problem = self.problem_for(names)[0]
+        free = np.asarray(free, dtype=bool)
+        linear = self.linear_for(names) if self.linear_for is not None and free.all() else None
+        got = None if linear is None else linear_fit(problem, linear, x0, budget)
+        return got if got is not None else fit_free(problem, x0, free, budget, tol=SCREEN_TOL)
