@@ -305,13 +305,13 @@ def test_a_swap_of_a_look_alike_pair_is_named_by_its_difference(rear_pair, sets)
     also with the configured car 30 % off; the clean run raises no swap, and a flipped acc3 is a sign fault only."""
     wide = [*sets, "identify.bounds=[0.6,1.6]"]
 
-    def found(path):
+    def swaps(path):  # (a car that far off may also leave a scale warning: a gain or the car, diagnose tells)
         system = build_system(load_config(BASE, wide), path)
-        return {(f.channel, f.check, f.fault) for f in check_task(system.task).problems if f.check != "noise"}
+        return {(f.channel, f.fault) for f in check_task(system.task).problems if f.check == "swap"}
 
-    assert found(rear_pair["swap"]) == {("acc3", "swap", "swap:acc4"), ("acc4", "swap", "swap:acc3")}
-    assert found(rear_pair["clean"]) == set()
-    assert {f for f in found(rear_pair["sign"]) if f[1] == "swap"} == set()
+    assert swaps(rear_pair["swap"]) == {("acc3", "swap:acc4"), ("acc4", "swap:acc3")}
+    assert swaps(rear_pair["clean"]) == set()
+    assert swaps(rear_pair["sign"]) == set()
 
 
 @pytest.mark.slow
@@ -324,3 +324,43 @@ def test_diagnose_names_the_look_alike_swap_and_lands_on_the_car(rear_pair, tmp_
     doc = json.loads(out.read_text())
     assert set(doc["selected"]) == {"sensor:acc3:swap:acc4", "parameter:kr"} and doc["verdict"].startswith("found")
     assert doc["after"]["estimates"]["kr"] == pytest.approx(68000, rel=0.02)
+
+
+def scaled(header, row):
+    i = header.index("acc2")
+    row[i] = repr(1.5 * float(row[i]))
+
+
+def test_a_gain_within_the_checks_tolerance_is_a_warning_and_diagnose_names_it(rear_pair, tmp_path):
+    """acc2 recorded 1.5 x (a calibration error, inside the factor 2 a car 30 % off may move a channel's spread): a
+    scale warning pointing to a gain, not a stop; diagnose tests it against the car and names sensor:acc2:gain
+    (about 1.5, kr beside it). The same run unscaled raises no scale warning."""
+    path = tmp_path / "gain.csv"
+    rewrite(rear_pair["clean"], path, scaled)
+
+    def scale_findings(p):
+        found = check_task(build_system(load_config(BASE), p).task)
+        return [f for f in found.problems if f.check == "scale"], found.stopping
+
+    (hit,), stopping = scale_findings(path)
+    assert (hit.channel, hit.status, hit.fault) == ("acc2", "warning", "gain") and not stopping
+    assert hit.value == pytest.approx(1.5, rel=0.05)
+    clean_scale, clean_stopping = scale_findings(rear_pair["clean"])
+    assert clean_scale == [] and not clean_stopping
+    out = tmp_path / "d.json"
+    res = CliRunner().invoke(app, ["diagnose", str(BASE), "--data", str(path), "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert "sensor:acc2:gain" in doc["selected"] and doc["verdict"].startswith("found")
+    assert doc["after"]["estimates"]["sensor:acc2:gain"] == pytest.approx(1.5, rel=0.01)
+
+
+@pytest.mark.parametrize("truth", [["vehicle.m=1690"], ["vehicle.Ix=650"], ["vehicle.kf=31500"], ["vehicle.kR=0"]])
+def test_a_car_30_percent_off_raises_no_gain_warning(tmp_path, truth):
+    """The truth 30 % off the configured car in one parameter (the configured model checked against it): every
+    channel's spread within the warning's factor of 1.25, so no channel is suspected of a gain."""
+    run = tmp_path / "run.csv"
+    sim = ["simulate", str(BASE), "-o", str(run), "--seed", "6", *[a for t in truth for a in ("--set", t)]]
+    assert CliRunner().invoke(app, sim).exit_code == 0
+    found = check_task(build_system(load_config(BASE), run).task)
+    assert not [f for f in found.problems if f.check == "scale"]

@@ -17,6 +17,7 @@ FACTORS = (9.80665, 1000.0, 100.0, 25.4, 10.0)  # the unit slips worth naming (a
 FAMILY_QUANTITY = {"acc": "acceleration", "disp": "displacement"}
 NEAR = 1.6  # a ratio within this factor of a classic one is that unit slip (a 30 % off car moves it less)
 FINE, MEANINGLESS = 2.0, 5.0  # within FINE: as expected; beyond MEANINGLESS: no fit can mean anything
+HINT = 1.25  # a spread off by more than this (within FINE) is a possible gain: the closed loop tests it (a warning)
 
 
 def ratio(ch: Channel) -> float:
@@ -46,8 +47,15 @@ def check(ch: Channel, channels: tuple[Channel, ...]) -> Finding | None:
     r = ratio(ch)
     if not np.isfinite(r) or r <= 0:
         return None
-    if 1.0 / FINE <= r <= FINE:
+    if 1.0 / HINT <= r <= HINT:
         return Finding(ch.name, "scale", OK, r, f"spread {r:.2f} x the prediction's")
+    if 1.0 / FINE <= r <= FINE:  # a car off the configured one moves it too: the closed loop tells the two apart
+        return Finding(
+            ch.name, "scale", WARNING, r,
+            f"{ch.name}'s spread is {r:.2f} x the prediction's: a gain in the chain (calibration), or the car off the "
+            "configured one (`vehid diagnose` tests both)",
+            fault="gain", start={"gain": r}, fix=f"check the calibration of {ch.name}",
+        )  # fmt: skip
     slip = _unit_slip(r)
     declared = ch.unit or "SI"
     if slip is not None:
