@@ -358,7 +358,7 @@ def test_a_gain_within_the_checks_tolerance_is_a_warning_and_diagnose_names_it(r
 @pytest.mark.parametrize("truth", [["vehicle.m=1690"], ["vehicle.Ix=650"], ["vehicle.kf=31500"], ["vehicle.kR=0"]])
 def test_a_car_30_percent_off_raises_no_gain_or_delay_warning(tmp_path, truth):
     """The truth 30 % off the configured car in one parameter (the configured model checked against it): every
-    channel's spread within the warning's factor of 1.25 and its lag within 6 ms of the others', so no channel is
+    channel's spread within 1.25 x the others' and its lag within 6 ms of the others', so no channel is
     suspected of a gain or a delay."""
     run = tmp_path / "run.csv"
     sim = ["simulate", str(BASE), "-o", str(run), "--seed", "6", *[a for t in truth for a in ("--set", t)]]
