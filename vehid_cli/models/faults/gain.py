@@ -63,12 +63,14 @@ def check(ch: Channel, channels: tuple[Channel, ...]) -> Finding | None:
             fault="gain", start={"gain": r}, fix=fix,
         )  # fmt: skip
     status = FAIL if not 1.0 / MEANINGLESS <= r <= MEANINGLESS else WARNING
-    return Finding(
-        ch.name, "scale", status, r,
-        f"{ch.name} is {r:.3g} x the configured model's prediction (expected within {1 / FINE:g}-{FINE:g}): a gain "
-        "in the chain (amplifier, calibration) or a model far off",
-        fault="gain", start={"gain": r}, fix=f"check the calibration of {ch.name}",
-    )  # fmt: skip
+    why = f"(expected within {1 / FINE:g}-{FINE:g}): a gain in the chain (amplifier, calibration) or a model far off"
+    return _gain(ch, status, r, f"{ch.name} is {r:.3g} x the configured model's prediction {why}", r)
+
+
+def _gain(ch: Channel, status: str, r: float, message: str, start: float) -> Finding:
+    """A finding that points to a gain of `start` in the channel's chain (its spread r x the prediction's)."""
+    return Finding(ch.name, "scale", status, r, message, fault="gain", start={"gain": start},
+                   fix=f"check the calibration of {ch.name}")  # fmt: skip
 
 
 def _within(ch: Channel, channels: tuple[Channel, ...], r: float) -> Finding:
@@ -80,11 +82,11 @@ def _within(ch: Channel, channels: tuple[Channel, ...], r: float) -> Finding:
     relative = r / typical if typical > 0 else 1.0
     if 1.0 / HINT <= relative <= HINT:
         return Finding(ch.name, "scale", OK, r, f"spread {r:.2f} x the prediction's")
-    return Finding(
-        ch.name, "scale", WARNING, r,
+    return _gain(
+        ch, WARNING, r,
         f"{ch.name}'s spread is {r:.2f} x the prediction's where the other {ch.family} channels' is {typical:.2f} x: "
         "a gain in the chain (calibration), or the car off the configured one (`vehid diagnose` tests both)",
-        fault="gain", start={"gain": relative}, fix=f"check the calibration of {ch.name}",
+        relative,
     )  # fmt: skip
 
 
