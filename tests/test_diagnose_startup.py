@@ -70,10 +70,12 @@ def test_the_validation_j_from_a_fits_own_point_equals_the_one_simulated_again()
     assert got != plain.validation_J(names, task.nominal)[0]
 
 
-def test_linear_for_is_none_where_the_twins_problem_holds_no_exact_linearisation(monkeypatch):
-    """An objective whose Jacobian is too long to hold carries its normal sums, no linearisation: the loop must not
-    be handed it as the linear car's problem (score.fitted_basis called its linearised: the README's four-post rig
-    crashed)."""
+def test_linear_for_gives_normal_equations_where_the_twins_jacobian_is_too_long(monkeypatch):
+    """An objective whose Jacobian is too long to hold carries its normal sums, no linearisation: linear_for offers
+    them (Levenberg–Marquardt runs on them), and the score screening's basis, which needs the Jacobian itself, falls
+    back to differences instead of calling the missing linearisation (score.fitted_basis called it once: the README's
+    four-post rig crashed)."""
+    from vehid_cli.diagnose.score import fitted_basis
     from vehid_cli.optimizers import lsq
     from vehid_cli.systems.vehicle.diagnosis import exact_twin
 
@@ -84,7 +86,12 @@ def test_linear_for_is_none_where_the_twins_problem_holds_no_exact_linearisation
     linear = car.linear_for(task.names)
     assert linear is not None and linear.linearised is not None
     monkeypatch.setattr(lsq, "LONG_JACOBIAN_BYTES", 1)  # every Jacobian "too long": normal sums only
-    assert car.linear_for(task.names) is None
+    linear = car.linear_for(task.names)
+    assert linear is not None and linear.linearised is None and linear.normal is not None
+    problem = car.problem_for(task.names)[0]
+    free = np.ones(task.dim, dtype=bool)
+    basis = fitted_basis(problem, task.nominal, free, linear)
+    assert basis is not None and np.all(np.isfinite(basis))
 
 
 def test_the_command_line_freezes_what_is_alive_on_its_way_out_and_still_writes_its_outputs(tmp_path):
