@@ -81,11 +81,12 @@ class Swap:
 def rival(rounds: Sequence[Sequence[Ranked]], effect: str, names: tuple[str, ...]) -> Ranked | None:
     """The strongest accepted known parameter of the round that chose `effect` (the last that ranked it), not in the
     model `names` yet, whose LR there reached SWAP_SHARE of the effect's; None if none."""
-    rnd = next((rnd for rnd in reversed(rounds) if any(r.effect == effect for r in rnd)), ())
-    mine = next((r for r in rnd if r.effect == effect), None)
+    rnd, mine = next(((rnd, r) for rnd in reversed(rounds) for r in rnd if r.effect == effect), ((), None))
+    if mine is None:
+        return None
     rivals = [
-        r for r in rnd if mine is not None and r.kind == "parameter" and r.accepted
-        and not set(r.added) & set(names) and r.statistic >= SWAP_SHARE * mine.statistic
+        r for r in rnd if r.kind == "parameter" and r.accepted and not set(r.added) & set(names)
+        and r.statistic >= SWAP_SHARE * mine.statistic
     ]  # fmt: skip
     return max(rivals, key=lambda r: r.statistic, default=None)
 

@@ -357,7 +357,7 @@ def diagnose(
     # 1. the declared model, by the configured algorithm (a long record: on its window), then polished
     step("declared fit", 0, 1)
     search = None if screen is None else screen.problem_for(task.names)[0]
-    linear = car.linear_for(task.names)
+    linear = car.linear_for(task.names) if screen is None else None  # a long record's first fit: on its window
     local = screen is not None and twin is not None  # a long record's linear car
     fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear, local)
     del search, linear  # the first fit's problems not held on
