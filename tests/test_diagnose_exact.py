@@ -86,6 +86,28 @@ def test_linear_fit_gives_way_on_a_search_bound():
     assert linear_fit(problem, linear, t.nominal, 100) is None
 
 
+def test_intervals_from_exact_sensitivities_are_the_central_differences_ones():
+    """fit_intervals with the linear car's exact-integrator twin (J'J from one simulation with sensitivities) against
+    the rk4 problem's central-difference Jacobian (the truth to ~1e-7 here): the same to 1e-4, closer than the
+    forward differences it replaces; an unknown held fixed still has none."""
+    task, ref, keep = case("vehicle.kf=54000", "vehicle.cr=2975")
+    t = task.with_unknowns(["kf"])
+    problem = masked(t.problem(ref), keep)
+    linear = masked(exact_twin(t).problem(ref), keep)
+    fit = lsq_fit(problem, t.nominal, 600)
+    h = 1e-5 * np.abs(fit.x)
+    _, R = problem.residuals(central_points(fit.x, h))
+    D = fit.x.size
+    J = ((R[:D] - R[D:]) / (2 * h[:, None])).T
+    truth = Z95 * np.sqrt(np.diag(np.linalg.inv(J.T @ J)) * fit.J)
+    exact = fit_intervals(problem, fit, fit.J, linear)
+    forward = fit_intervals(problem, fit, fit.J)
+    np.testing.assert_allclose(exact, truth, rtol=1e-4)
+    assert np.max(np.abs(exact / truth - 1)) < np.max(np.abs(forward / truth - 1))
+    held = dataclasses.replace(fit, fixed=("kf",))
+    assert np.isnan(fit_intervals(problem, held, fit.J, linear)[-1])
+
+
 @pytest.mark.parametrize(("effect", "truth"), [
     ("tyre_damping", ("vehicle.effects.tyre_damping.ct_f=300", "vehicle.effects.tyre_damping.ct_r=300")),
     ("coulomb_friction", ("vehicle.kf=54000",)),

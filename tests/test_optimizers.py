@@ -378,6 +378,27 @@ def test_lsq_respects_the_box_when_the_minimum_lies_outside():
     np.testing.assert_allclose(r.x, [1.0, -1.0], atol=1e-8)
 
 
+def test_gauss_newton_interior_gives_up_on_reaching_a_bound():
+    """With `interior` (a caller that discards a fit ending on its search bound) Levenberg–Marquardt stops at its
+    first accepted point on a bound instead of converging along it; without, it ends there as the trust region does.
+    The decay problem with its decay rate's true value (1.3) beyond the box."""
+    import dataclasses
+
+    from vehid_cli.optimizers.base import Search
+    from vehid_cli.optimizers.lsq import gauss_newton
+
+    problem, truth, _ = decay_problem(0)
+    problem = dataclasses.replace(problem, upper=truth * np.array([1.5, 0.8, 1.5]))
+    x0 = truth * np.array([0.8, 0.6, 1.2])
+    run = Search(problem, np.random.default_rng(0), 100)
+    x = gauss_newton(run, x0)
+    assert x is not None and x[1] == pytest.approx(problem.upper[1], rel=1e-9)
+    early = Search(problem, np.random.default_rng(0), 100)
+    assert gauss_newton(early, x0, interior=True) is None
+    assert early.evaluations < run.evaluations
+    assert early.best_x[1] == pytest.approx(problem.upper[1], rel=1e-9)
+
+
 def decay_problem(seed: int) -> tuple[Problem, np.ndarray, float]:
     """A small nonlinear least squares with its exact linearisation: y = a exp(-b t) + c t, 200 samples, noise 0.01.
     The problem (residuals in units of the noise), the model's true values and the noise level."""

@@ -48,7 +48,7 @@ from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm
 from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
-from ..optimizers.lsq import gauss_newton, polish
+from ..optimizers.lsq import BOUND_SHARE, gauss_newton, polish
 from ..sim.kernel import available_cores
 from .jacobians import forward_jacobian, forward_normal, restricted
 from .starts import screen_starts
@@ -188,13 +188,13 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
     there): the caller fits on `problem` instead, by the trust region that handles the bounds."""
     run = Search(linear, np.random.default_rng(0), budget)
     try:
-        x = gauss_newton(run, np.clip(np.asarray(x0, dtype=float), linear.lower, linear.upper))
+        x = gauss_newton(run, np.clip(np.asarray(x0, dtype=float), linear.lower, linear.upper), interior=True)
     except BudgetExhausted:
         x = run.best_x
     if x is None or run.best_x is None:
         return None
     x, lo, hi = run.best_x, linear.lower, linear.upper
-    if np.any(np.minimum(x - lo, hi - x) <= 1e-9 * (hi - lo)):
+    if np.any(np.minimum(x - lo, hi - x) <= BOUND_SHARE * (hi - lo)):
         return None
     with np.errstate(all="ignore"):
         J = float(problem.cost(run.best_x[None, :])[0])
@@ -241,10 +241,12 @@ def misfit_ci(problem: Problem, fit: Fit, blocks: int = MISFIT_BLOCKS) -> NDArra
     return out
 
 
-def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
+def fisher_ci(problem: Problem, x: NDArray, scale: float, linear: Problem | None = None) -> NDArray:
     """95 % half-widths from (J'J)^-1 scale at x, J the Jacobian of the problem's residuals (forward
-    differences, one batch) and `scale` the variance of one residual entry (NaN where singular)."""
-    H = forward_normal(problem, x)
+    differences, one batch; or `linear`'s exact sensitivities, `exact_normal`) and `scale` the variance of one
+    residual entry (NaN where singular)."""
+    H = exact_normal(linear, x) if linear is not None else None
+    H = forward_normal(problem, x) if H is None else H
     if not np.all(np.isfinite(H)):
         return np.full(x.size, np.nan)
     try:
@@ -255,11 +257,26 @@ def fisher_ci(problem: Problem, x: NDArray, scale: float) -> NDArray:
     return np.where(d >= 0, Z95 * np.sqrt(np.abs(d)), np.nan)
 
 
-def fit_intervals(problem: Problem, fit: Fit, scale: float) -> NDArray:
-    """95 % half-widths at a fit over its free unknowns (NaN for those it held fixed); `problem` over fit.names."""
+def exact_normal(linear: Problem, x: NDArray) -> NDArray | None:
+    """J'J (D, D) at x from the problem's exact sensitivities (one simulation of the response and its derivatives,
+    where forward differences take D + 1; a long record's summed without J); None where it has none there."""
+    with np.errstate(all="ignore"):
+        if linear.normal is not None:
+            got = linear.normal(np.asarray(x, dtype=float))
+            return None if got is None else np.asarray(got[2])
+        got = linear.linearised(np.asarray(x, dtype=float)) if linear.linearised is not None else None
+        return None if got is None else got[2].T @ got[2]
+
+
+def fit_intervals(problem: Problem, fit: Fit, scale: float, linear: Problem | None = None) -> NDArray:
+    """95 % half-widths at a fit over its free unknowns (NaN for those it held fixed); `problem` over fit.names;
+    `linear`: the same problem on the linear car's exact integrator (`Subject.linear_for`), whose exact
+    sensitivities give J'J when every unknown is free (the time-stepping integrator's differ from them by its own
+    error, ~(w dt)^4, far below the forward differences' ~1e-4)."""
     free = np.array([n not in fit.fixed for n in fit.names])
     out = np.full(len(fit.names), np.nan)
-    out[free] = fisher_ci(restricted(problem, fit.x, free), fit.x[free], scale)
+    exact = linear if linear is not None and free.all() else None
+    out[free] = fisher_ci(restricted(problem, fit.x, free), fit.x[free], scale, exact)
     return out
 
 

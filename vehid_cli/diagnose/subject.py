@@ -46,8 +46,10 @@ class Subject:
         return Fit(fit.names, fit.x, J if np.isfinite(J) else float("inf"), 1, fit.fixed)
 
     def intervals(self, fit: Fit) -> NDArray:
-        """95 % half-widths at a fit over its free unknowns (NaN for the fixed ones)."""
-        return fit_intervals(self.problem_for(fit.names)[0], fit, self.scale(fit))
+        """95 % half-widths at a fit over its free unknowns (NaN for the fixed ones): from the exact sensitivities of
+        the linear car where that is the model (`linear_for`)."""
+        linear = self.linear_for(fit.names) if self.linear_for is not None and not fit.fixed else None
+        return fit_intervals(self.problem_for(fit.names)[0], fit, self.scale(fit), linear)
 
     def fit(self, names: tuple[str, ...], x0: NDArray, free: NDArray, budget: int) -> Fit:
         """The fit over `names` from x0 (the unknowns not `free` held): Levenberg–Marquardt on the exact linear car

@@ -132,12 +132,15 @@ def trf_stops(
 STEP_SD = 1e-2  # gauss_newton stops when its step is below this many of the estimate's standard deviations
 LAST_SD = 5e-2  # ... or takes its step unlinearised and stops when the next one is predicted below this many
 MAX_STEPS = 200  # gauss_newton's steps (accepted or not) at most
+BOUND_SHARE = 1e-9  # an unknown within this share of its range from a bound is on it (gauss_newton's `interior`)
 MU_GIVE_UP = 1e12  # damping beyond which a rejected step means no step helps (its length is ~1e-12 of Newton's)
 
 
-def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
+def gauss_newton(run: Search, x0: NDArray, interior: bool = False) -> NDArray | None:
     """Levenberg–Marquardt from x0 on the problem's exact linearisation, inside the box; the final point, or None
-    when the problem has no linearisation at x0 (the caller falls back to `polish`).
+    when the problem has no linearisation at x0 (the caller falls back to `polish`), or with `interior` as soon as
+    an accepted point has an unknown on its bound (a caller that discards such a fit: a mis-set known parameter's
+    fit beside a faulty channel walks to its bound in up to MAX_STEPS steps, each a simulation with sensitivities).
 
     Each step solves (H + mu diag H) s = -g with H = J'J, g = J'r in box-width units and evaluates the residuals and
     Jacobian at the (clipped) new point together (a long record's H and g summed over its samples by the problem's
@@ -185,6 +188,8 @@ def gauss_newton(run: Search, x0: NDArray) -> NDArray | None:
         ssq_new = float(got[0] @ got[0]) if got is not None else np.inf
         if ssq_new < ssq:
             x, (r, H, g), ssq = x_new, got, ssq_new
+            if interior and np.any(np.minimum(x - lo, hi - x) <= BOUND_SHARE * width):
+                return None
             q_prev = q if mu == 0.0 else 0.0
             mu = mu / 4 if mu > 1e-6 else 0.0
         else:

@@ -213,7 +213,7 @@ class CarLoop:
         task = self.task
         t = self.augmented(task, f.names)
         problem = self.problem_of(t, self.ref, self.split.keep)
-        ci = fit_intervals(problem, f, f.J)
+        ci = fit_intervals(problem, f, f.J, None if f.fixed else self.linear_for(f.names))
         kept = task.residual_samples if self.split.keep is None else int(self.split.keep.sum())
         misfit = misfit_ci(problem, f) if f.J > chi2_limit(kept) else None  # the model is wrong: say how wide
         nre = bound = None
@@ -253,24 +253,16 @@ def fit_declared(
     say: Callable[[str], None],
     search: Problem | None = None,
     linear: Problem | None = None,
-    local: bool = False,
 ) -> Fit:
     """The declared model, by the configured algorithm (the campaign's run 0 streams) on `search` (a long record's
     screening window; default `problem`), then polished to the likelihood's minimum on `problem`; when the data
     failed the pre-check (no claim will be made) a local fit from the configured values, enough for the record.
-    `linear`: the same problem on the exact integrator with its exact sensitivities (`exact_twin`, the linear car):
-    then Levenberg–Marquardt from the configured values on it replaces the global search (a few evaluations instead
-    of ~1000; the search only when it fails), and the polish on `problem` starts from its minimum. `local` (a long
-    record's linear car): the same from the configured values by the trust region on the window instead (~100
-    window evaluations; the exact path's compiled kernels, a few MiB, are not loaded for it)."""
+    `linear`: the same problem on the exact integrator with its exact sensitivities (`exact_twin`, the linear car; a
+    long record's as normal equations summed over its blocks, no Jacobian held): then Levenberg–Marquardt from the
+    configured values on it replaces the global search (a few evaluations instead of ~1000; the search only when it
+    fails), and the polish on `problem` starts from its minimum."""
     ident = config.identify
-    if precheck_ok and search is not None and local:
-        on_window = lsq_fit(search, task.nominal, refit_budget)
-        if np.isfinite(on_window.J):  # else the global search
-            fit = lsq_fit(problem, on_window.x, refit_budget)
-            say(f"declared model: J = {fit.J:.4g} ({on_window.evaluations} + {fit.evaluations} evaluations)")
-            return fit
-    if precheck_ok and linear is not None and search is None:
+    if precheck_ok and linear is not None:
         run = Search(linear, run_streams(ident.seed, 0).optimizer, ident.budget or refit_budget)
         x = gauss_newton(run, task.nominal)
         if x is not None and np.isfinite(run.best_cost):
@@ -354,12 +346,12 @@ def diagnose(
     screen, head = screening(task, ref, split, car, specs, files) if is_long(task) else (None, car)
     # 0. can the data tell at all? (before any fit: length, noise, excitation)
     pre = precheck_vehicle(task, ref)
-    # 1. the declared model, by the configured algorithm (a long record: on its window), then polished
+    # 1. the declared model: the linear car's by LM, else by the configured algorithm (a long record: on its
+    # window), then polished
     step("declared fit", 0, 1)
     search = None if screen is None else screen.problem_for(task.names)[0]
-    linear = car.linear_for(task.names) if screen is None else None  # a long record's first fit: on its window
-    local = screen is not None and twin is not None  # a long record's linear car
-    fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear, local)
+    linear = car.linear_for(task.names)  # the linear car (a long record's: its normal equations, summed over blocks)
+    fit = fit_declared(config, task, car.problem_for(task.names)[0], pre.ok, refit_budget, say, search, linear)
     del search, linear  # the first fit's problems not held on
     before = car.report(fit, ())
     step("declared fit", 1, 1)
@@ -376,11 +368,10 @@ def diagnose(
         )
     if screen is not None:
         notes += (
-            f"a long record: the declared model's first fit (a local fit from the configured values for the linear "
-            f"car, else the global search) and the candidates' screening ran on the first "
-            f"{SCREEN_SAMPLES} samples of each run (their LR and validation J are the window's), and so did the "
-            "estimate of the unexplained strut force; the polish, every re-fit, interval, removal test and claim on "
-            "the whole record",
+            f"a long record: the candidates' screening ran on the first {SCREEN_SAMPLES} samples of each run (their "
+            "LR and validation J are the window's), and so did the estimate of the unexplained strut force and a "
+            "declared model's global search (the linear car's first fit is Levenberg–Marquardt on the whole record); "
+            "the polish, every re-fit, interval, removal test and claim on the whole record",
         )
     subject = Subject(
         specs=specs, declared=frozenset(config.vehicle.effect_values()), problem_for=car.problem_for,
@@ -409,11 +400,13 @@ def screening(
         wsplit = ValidationSplit(split.task, split.reference, None, None, split.source)
     else:
         wsplit = validation_split(task.config, head, wref, files, None)
-    wcar = CarLoop(head, wref, wsplit, car.ranges, car.files, analyse_residuals=False)
+    twin = exact_twin(head) if car.twin is not None else None  # the linear car's known parameters: by LM there too
+    wcar = CarLoop(head, wref, wsplit, car.ranges, car.files, analyse_residuals=False, twin=twin)
     R = int(head.residual_samples if wsplit.keep is None else wsplit.keep.sum())
     subject = Subject(
         specs=specs, declared=frozenset(), problem_for=wcar.problem_for, validation_J=wcar.validation_J,
         residual_count=R, statistic=lambda _fit: chi2_statistic(R), scale=lambda f: f.J, noise_limit=chi2_limit(R),
+        linear_for=None if twin is None else wcar.linear_for,
     )  # fmt: skip
     return subject, wcar
 
