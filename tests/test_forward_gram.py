@@ -106,3 +106,60 @@ def test_blocked_sums_hold_no_record_sized_jacobian():
     (j10, b10, w10), (j40, b40, w40) = peaks
     assert w40 - w10 > j40 - j10  # the check can fail: the usual way is caught by it
     assert b40 - b10 < (j40 - j10) / 4
+
+
+def _faulty_task(tmp_path, *unknowns: str, start: dict[str, float]):
+    """The diagnosis's task on a 5 s run of the paper's car recorded through a faulty chain (acc2 upside down, acc3
+    and acc4 swapped, acc1 read 0.1 m/s² high), with those corrections and kf as unknowns."""
+    from tests.conftest import BASE_CONFIG
+    from vehid_cli.config import load_config
+    from vehid_cli.identify.task import build_tasks
+    from vehid_cli.systems import write_simulation
+
+    sets = ["identify.objective=wls", "noise.level=0.03", "simulation.duration=5", "simulation.integrator=rk4"]
+    path = tmp_path / "run.csv"
+    write_simulation(load_config(BASE_CONFIG, sets), path, seed=7)
+    lines = path.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    head = lines[first].split(",")
+    a1, a2, a3, a4 = (head.index(c) for c in ("acc1", "acc2", "acc3", "acc4"))
+    rows = [line.split(",") for line in lines[first + 1 :]]
+    for row in rows:
+        row[a1], row[a2] = repr(float(row[a1]) + 0.1), repr(-float(row[a2]))
+        row[a3], row[a4] = row[a4], row[a3]
+    path.write_text("\n".join(lines[: first + 1] + [",".join(r) for r in rows]) + "\n")
+    task = build_tasks(load_config(BASE_CONFIG, sets), (path,))
+    limits = {"sensor:acc2:sign": (-3.0, -0.3), "sensor:acc3:swap:acc4": (0.0, 1.0),
+              "sensor:acc1:offset": (-1.0, 1.0), "sensor:acc3:delay": (-0.05, 0.05)}  # fmt: skip
+    return task.with_unknowns(("kf", *unknowns), limits=limits, start=start)
+
+
+def test_blocked_sums_apply_the_measurement_chains_corrections(tmp_path, monkeypatch):
+    """A fit that carries corrections of the chain (a sign, a swap, an offset: each reads only its own samples) has
+    its Gram matrix summed block by block as well, each block's channels corrected alone: the same as the whole
+    residual vectors' forward differences to 1e-9; a delay, which reads other samples, leaves it to the held
+    Jacobian (no sums) and forward_gram refuses it."""
+    names = ("sensor:acc2:sign", "sensor:acc3:swap:acc4", "sensor:acc1:offset")
+    task = _faulty_task(tmp_path, *names, start=dict(zip(names, (-1.0, 0.9, 0.1), strict=True)))
+    assert len(task.corrections) == 3
+    ref = task.reference(0)
+    X, step = _points(task)
+    X[:, -3:] = [-0.97, 0.93, 0.08]  # the corrections away from their null, as a fit has them
+    X[1:, -3:] += np.diag(step)[:, -3:]
+    _, R = task.problem(ref).residuals(X)
+    A = np.vstack([(R[1:] - R[0]) / step[:, None], R[:1]])
+    want = A @ A.T
+    values = {n: X[:, j] for j, n in enumerate(task.names)}
+    G = forward_gram(task.experiment, task.objective(ref), values, step, None, task.corrections)
+    assert _relative(G, want) < 1e-9
+    uncorrected = forward_gram(task.experiment, task.objective(ref), values, step)  # the corrections matter here
+    assert _relative(uncorrected, want) > 1e-3
+    monkeypatch.setattr(Experiment, "long", property(lambda self: True))
+    monkeypatch.setattr(Experiment, "blocked", lambda self, values=None: True)
+    assert _relative(task.problem(ref).gram(X, step, None), want) < 1e-9
+    delayed = _faulty_task(tmp_path, "sensor:acc3:delay", start={"sensor:acc3:delay": 0.0})
+    Xd, sd = _points(delayed)
+    assert delayed.problem(ref).gram(Xd, sd, None) is None
+    with pytest.raises(ValueError, match="block by block"):
+        forward_gram(delayed.experiment, delayed.objective(ref), {n: Xd[:, j] for j, n in enumerate(delayed.names)},
+                     sd, None, delayed.corrections)  # fmt: skip

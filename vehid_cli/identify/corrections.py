@@ -6,6 +6,7 @@ nested in the model with them)."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -39,6 +40,14 @@ class SensorCorrection:
     column: int
     partner: int | None
     context: Context
+
+    def samples(self, start: int, stop: int) -> SensorCorrection:
+        """The correction of samples start .. stop - 1 alone (its context cut to them): the same numbers there as
+        the whole record's where the fault is `local`."""
+        c = self.context
+        cut = Context(c.t[start:stop], None if c.measured is None else c.measured[start:stop],
+                      None if c.mask is None else c.mask[start:stop])  # fmt: skip
+        return dataclasses.replace(self, context=cut)
 
 
 def corrected(

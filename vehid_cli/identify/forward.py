@@ -5,7 +5,9 @@ and r'r (`optimizers/compressed.py`). Held as an array, J is (D, R): 9 unknowns 
 record at 1 kHz are 26 MB, with the chunks of simulated cars in flight beside it (the diagnosis's peak). Here the
 centre car and the D perturbed ones are simulated together block by block (the kernel resumes mid-record,
 `Experiment.simulate_blocks`), and each block's rows [(r(x + h_j) - r(x)) / h_j for j, r(x)] are added to
-`optimizers.normal.Gram` per channel: nothing of the size of the record is made beyond the reference itself.
+`optimizers.normal.Gram` per channel: nothing of the size of the record is made beyond the reference itself. The
+measurement chain's corrections a fit carries (a flipped sign, a gain, a swap, an offset, clipped or dropped samples:
+each reads only its own samples, `Fault.local`) are applied to each block's channels as to the whole record's.
 
 The entries are the objective's (each channel's observed samples), or some of them (`entries`: a hold-out split's
 held-in ones). With profiled offsets each channel's residual loses its mean over ALL its observed samples, held out
@@ -26,6 +28,7 @@ from numpy.typing import NDArray
 from ..core.allocator import release_free_pages
 from ..optimizers.normal import Gram
 from ..sim.kernel import available_cores
+from .corrections import SensorCorrection, corrected, is_sensor_unknown
 from .experiment import Experiment
 from .objectives import Objective
 
@@ -36,12 +39,16 @@ def forward_gram(
     values: Mapping[str, NDArray],
     scale: NDArray,
     entries: NDArray | None = None,
+    corrections: tuple[SensorCorrection, ...] = (),
 ) -> NDArray:
     """(m + 1, m + 1): the Gram matrix of [J r] over the objective's residual entries (or `entries`, increasing
     indices into them), r the weighted residual of car 0 of `values` (the batch: name -> (m + 1,)) and column j of J
     the forward difference (r_{j + 1} - r_0) / scale[j] of the others'; the same sums as J'J, J'r and r'r of the
     whole vectors (to round-off), a block of BLOCK_SAMPLES at a time. The cars are split over the cores (each part
-    running its own blocks) when called from the main thread."""
+    running its own blocks) when called from the main thread. `corrections` (local ones: `Fault.local`) make each
+    block's channels what the faulty chain recorded, their unknowns among `values`."""
+    if not all(c.fault.local for c in corrections):
+        raise ValueError("a correction that reads other samples (a delay, a drift) cannot be applied block by block")
     cars = len(next(iter(values.values())))
     width = cars  # m differences and the residual
     kept = objective.kept_masks(entries)
@@ -49,7 +56,8 @@ def forward_gram(
     grams = {f: Gram(ref.shape[-1], width, objective.offsets) for f, ref in objective.reference.items()}
     sums = {f: np.zeros((ref.shape[-1], width)) for f, ref in objective.reference.items()} if objective.offsets else {}
     parts = _parts(cars)
-    gens = [experiment.simulate_blocks({n: v[s] for n, v in values.items()}) for s in parts]
+    car = {n: v for n, v in values.items() if not is_sensor_unknown(n)}
+    gens = [experiment.simulate_blocks({n: v[s] for n, v in car.items()}) for s in parts]
     pool = ThreadPoolExecutor(len(gens)) if len(gens) > 1 else None
     try:
         while True:
@@ -60,15 +68,18 @@ def forward_gram(
             if got[0] is None:
                 break
             k0 = got[0][0]
+            block = {f: np.concatenate([g[1][f] for g in got]) if len(got) > 1 else got[0][1][f] for f in grams}
+            if corrections:
+                b = next(iter(block.values())).shape[1]
+                corrected(tuple(c.samples(k0, k0 + b) for c in corrections), block, values)
             for family, gram in grams.items():
-                sim = np.concatenate([g[1][family] for g in got]) if len(got) > 1 else got[0][1][family]
-                V = _rows(objective, family, k0, sim, scale)
+                V = _rows(objective, family, k0, block[family], scale)
                 b = V.shape[0]
                 gram.add(V, None if kept is None else kept[family][k0 : k0 + b])
                 if family in sums:  # the sum over every observed sample: the profiled offset's mean
                     mask = None if observed is None else observed[family][k0 : k0 + b]
                     sums[family] += V.sum(axis=0) if mask is None else np.einsum("tk,tki->ki", mask, V)
-            del got
+            del got, block
     finally:
         if pool is not None:
             pool.shutdown()

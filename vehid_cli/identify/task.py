@@ -187,6 +187,7 @@ class Task:
         """The optimizer's view: batched costs (and weighted residuals) over the unknowns' box."""
         objective = self.objective(reference)
         names = self.names
+        blockwise = all(c.fault.local for c in self.corrections)  # each block corrected alone (identify/forward.py)
 
         def simulate(X: NDArray) -> dict[str, NDArray]:
             return self.outputs({n: X[:, j] for j, n in enumerate(names)})
@@ -202,10 +203,11 @@ class Task:
 
         def gram(X: NDArray, scale: NDArray, entries: NDArray | None = None) -> NDArray | None:
             values = {n: X[:, j] for j, n in enumerate(names)}
-            if self.corrections or not self.experiment.long or not self.experiment.blocked(values):
-                return None  # a short record's Jacobian is held (today's path); corrections act on whole channels
+            car = {n: v for n, v in values.items() if not is_sensor_unknown(n)}
+            if not self.experiment.long or not self.experiment.blocked(car) or not blockwise:
+                return None  # a short record's Jacobian is held (today's path); a delay or drift reads other samples
             with np.errstate(all="ignore"):
-                return forward_gram(self.experiment, objective, values, scale, entries)
+                return forward_gram(self.experiment, objective, values, scale, entries, self.corrections)
 
         def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
             with np.errstate(all="ignore"):

@@ -9,7 +9,8 @@ registers every module it holds.
 The contract of a correction: `correct(y, theta, ctx)` maps the model's channel y (P, n) (and, for a fault that
 involves a second channel, `ctx.partner` (P, n)) with the fault's parameters theta (P, m) to what the faulty chain
 would have recorded; at the parameters' `null` values it is y itself (no fault), so the model with the correction is
-nested in the model without it.
+nested in the model without it. A correction that reads only each sample's own values (`local`) gives the same
+numbers on any stretch of samples with its context cut to it.
 """
 
 from __future__ import annotations
@@ -113,6 +114,9 @@ class Fault:
     order: int = 0  # the order checks run and findings are listed in
     unit: str = "-"  # the SI unit of its correction's parameter ('{channel}': the channel's own; '-': none)
     pair: bool = False  # acts on two channels (a swap): `ctx.partner` is the other's model channel
+    local: bool = True  # each sample's correction reads only that sample (of y, ctx.t, ctx.measured, ctx.mask, the
+    # partner): a long record's blocks are corrected alone (identify/forward.py); a delay or a drift about the
+    # record's middle is not
 
 
 def correlation(a: NDArray, b: NDArray) -> float:

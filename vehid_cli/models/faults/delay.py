@@ -105,4 +105,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("delay", __doc__.splitlines()[0], stops=False, check=check, correct=correct, correction=correction,
-              order=40, unit="s")  # fmt: skip
+              order=40, unit="s", local=False)  # fmt: skip

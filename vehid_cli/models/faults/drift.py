@@ -56,4 +56,4 @@ def correction(ch: Channel, finding: Finding) -> Correction:
 
 
 FAULT = Fault("drift", __doc__.splitlines()[0], stops=False, check=check, correct=correct, correction=correction,
-              order=70, unit="{channel}/s")  # fmt: skip
+              order=70, unit="{channel}/s", local=False)  # fmt: skip
