@@ -68,3 +68,32 @@ def test_the_windows_cars_are_simulated_a_few_at_a_time_with_the_same_numbers():
     costs, r = head.problem(wref).residuals(X)
     costs_whole, r_whole = whole.problem(wref).residuals(X)
     assert np.array_equal(r, r_whole) and np.array_equal(costs, costs_whole)
+
+
+def test_the_windows_linear_car_is_fitted_on_its_exact_twin():
+    """A long record's screening subject offers the window's linear car on the exact integrator (its known
+    parameters' candidates and its re-fits by Levenberg–Marquardt: a few evaluations, the window's Jacobian held),
+    the same window's first samples; with an effect declared it offers none (the trust region then)."""
+    from vehid_cli.systems.vehicle.diagnosis import CarLoop, exact_twin, screening, validation_split
+
+    base = ROOT / "configs" / "gokdag2015" / "base.yaml"
+    seconds = 1.2 * LONG_RECORD / 1000.0
+    for config, linear in ((base, True), (HYSTERESIS, False)):
+        cfg = prepare_config(load_config(config, [*LONG, f"simulation.duration={seconds}", "noise.level=0.03"]))
+        task = build_task(cfg)
+        ref = task.reference(0)
+        split = validation_split(cfg, task, ref, ["run.csv"], None)
+        car = CarLoop(task, ref, split, {"limits": {}, "start": {}}, ("run.csv",), twin=exact_twin(task))
+        subject, wcar = screening(task, ref, split, car, {}, ("run.csv",))
+        assert (subject.linear_for is not None) == linear
+        if not linear:
+            continue
+        exact = subject.linear_for(task.names + ("kf",))
+        problem = subject.problem_for(task.names + ("kf",))[0]
+        assert exact is not None and exact.linearised is not None  # a window: its Jacobian is held
+        x = np.concatenate([task.nominal, [cfg.vehicle.kf * 1.01]])
+        cost, r, _ = exact.linearised(x)
+        c0, r0 = problem.residuals(x[None, :])
+        assert r.size == r0.shape[1] == wcar.task.residual_samples - int((~wcar.split.keep).sum())
+        assert abs(cost - c0[0]) < 1e-4 * c0[0]  # the integrators agree to rk4's error at 1 kHz
+        assert subject.linear_for(task.names + ("hysteresis.alpha_f",)) is None

@@ -30,7 +30,6 @@ from ..optimizers.base import Problem
 from .attribution import (
     PARAMETER_PREFIX,
     SCORE_SKIP,
-    SCREEN_TOL,
     Candidate,
     Fit,
     Ranked,
@@ -178,8 +177,7 @@ class _Augmentation:
         if windowed:  # the current model re-fitted on the window first: the LR is what each adds
             subject = subject.screen
             free = np.array([n not in current.fixed for n in current.names])
-            problem = subject.problem_for(current.names)[0]
-            current = fit_free(problem, current.x, free, self.candidate_budget, tol=SCREEN_TOL)
+            current = subject.fit(current.names, current.x, free, self.candidate_budget)  # (the linear car's by LM)
             current_v = subject.validation_J(current.names, current.x)
         stage = f"round {len(self.rounds) + 1} candidates"
         self.progress(stage, 0, len(todo))
@@ -319,7 +317,7 @@ class _Augmentation:
         x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
         shapes = [n for e in (*self.claimed, best.effect) for n in specs[e].shape]
         free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
-        refit = fit_free(problem, x0, free, self.refit_budget, tol=SCREEN_TOL)  # the final polish goes to 1e-12
+        refit = subject.fit(names, x0, free, self.refit_budget)  # to SCREEN_TOL: the final polish goes to 1e-12
         best_J = best.fit.J
         if subject.screen is not None:  # the candidate was fitted on the screening window: its J on the whole record
             best_J = subject.J_at(Fit(names, x0, best_J, 0)).J
