@@ -53,27 +53,31 @@ def vehid(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "vehid_cli", *args], cwd=ROOT, capture_output=True, text=True)
 
 
-def timed(*args: str, root: Path = ROOT) -> tuple[float, float, int]:
-    """`vehid args` in a fresh process (the package of the source tree `root`): its wall time [s], its peak RSS [MiB]
-    and its exit code. The peak is the larger of the process's own high-water mark (VmHWM, read every 20 ms until it
-    exits: it only grows) and the summed RSS of its process tree sampled as often (a logger file's reader runs in a
-    child process). Not os.wait4's ru_maxrss: Linux folds into it the memory of the process that started the child,
-    up to its exec (this benchmark's own, 320 MiB once `time_unexplained` has run in it, which every case then
-    reported as its floor)."""
+def timed(*args: str, root: Path = ROOT) -> tuple[float, float, int, float]:
+    """`vehid args` in a fresh process (the package of the source tree `root`): its wall time [s], its peak RSS [MiB],
+    its exit code and its peak anonymous memory [MiB]. The peak is the larger of the process's own high-water mark
+    (VmHWM, read every 20 ms until it exits: it only grows) and the summed RSS of its process tree sampled as often (a
+    logger file's reader runs in a child process). Not os.wait4's ru_maxrss: Linux folds into it the memory of the
+    process that started the child, up to its exec (this benchmark's own, 320 MiB once `time_unexplained` has run in
+    it, which every case then reported as its floor). The anonymous peak (RssAnon, sampled) leaves out the mapped
+    files: their resident share depends on the page cache's state, not on the program (libllvmlite.so's pages, 94 MiB
+    resident after a fresh `pip install` wrote them to the cache in large folios, 36 MiB once read back from disk)."""
     start = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": str(root)}
     proc = subprocess.Popen([sys.executable, "-m", "vehid_cli", *args], cwd=root, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, env=env)  # fmt: skip
-    peak = 0
+    peak = anon = 0
     while proc.poll() is None:
         try:
             with open(f"/proc/{proc.pid}/status") as fh:
-                own = next((int(line.split()[1]) * 1024 for line in fh if line.startswith("VmHWM:")), 0)
+                fields = {line.split(":")[0]: line for line in fh}
+            own = int(fields["VmHWM"].split()[1]) * 1024 if "VmHWM" in fields else 0
+            anon = max(anon, int(fields["RssAnon"].split()[1]) * 1024 if "RssAnon" in fields else 0)
         except OSError:
             own = 0
         peak = max(peak, own, tree_rss_bytes(proc.pid))
         time.sleep(0.02)
-    return time.perf_counter() - start, peak / 2**20, proc.returncode
+    return time.perf_counter() - start, peak / 2**20, proc.returncode, anon / 2**20
 
 
 def anchor(repeats: int) -> float:
@@ -139,7 +143,7 @@ def main() -> None:
                 raise SystemExit(res.stderr)
             if name in FLIPPED:
                 flip(data, FLIPPED[name])
-            walls, peaks, anchors, others, other_peaks = [], [], [], [], []
+            walls, peaks, anons, anchors, others, other_peaks = [], [], [], [], [], []
             command = ("diagnose", str(BASE), "--data", str(data), "--json", str(out), *sets(diag_sets))
             for _ in range(args.repeats):  # the anchor timed beside each run: the machine's load moves both
                 anchors.append(anchor(1))
@@ -147,15 +151,17 @@ def main() -> None:
                     other = timed(*command, root=args.against.resolve())
                     others.append(other[0])
                     other_peaks.append(other[1])
-                wall, peak, code = timed(*command)
+                wall, peak, code, anon = timed(*command)
                 if code:
                     raise SystemExit(vehid("diagnose", str(BASE), "--data", str(data), *sets(diag_sets)).stderr)
                 walls.append(wall)
                 peaks.append(peak)
+                anons.append(anon)
             doc = json.loads(out.read_text())
             runs = ", ".join(f"{w:.1f}" for w in walls)
             wall, help_s = statistics.median(walls), statistics.median(anchors)
-            print(f"{name}: median {wall:.1f} s wall ({runs}), peak RSS {max(peaks):.0f} MiB; anchor vehid --help "
+            print(f"{name}: median {wall:.1f} s wall ({runs}), peak RSS {max(peaks):.0f} MiB (anonymous "
+                  f"{max(anons):.0f} MiB); anchor vehid --help "
                   f"{help_s:.2f} s (ratio {wall / help_s:.0f}); selected {doc['selected']}; "
                   f"verdict: {doc['verdict'][:60]}")  # fmt: skip
             if others:
