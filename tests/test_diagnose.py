@@ -272,3 +272,23 @@ def test_hysteresis_shape_found_from_the_wrong_basin():
     assert base.J > 5 * at_truth and fit.J < 1.01 * at_truth
     assert np.sqrt(1 / (x["hysteresis.beta"] + x["hysteresis.gamma"])) == pytest.approx(np.sqrt(1 / 6e3), rel=0.1)
     assert x["hysteresis.alpha_f"] == pytest.approx(2.5e4, rel=0.1)
+
+
+def test_a_known_parameters_fit_starts_where_its_earlier_estimate_or_its_configured_value_costs_less():
+    """attribution.lower_start on a quadratic bowl: the earlier round's estimate when it costs less (clipped into
+    the box), else the configured start; one batch of two evaluations, no screening steps."""
+    from vehid_cli.diagnose.attribution import lower_start
+    from vehid_cli.optimizers.base import Problem
+
+    calls = []
+
+    def cost(X):
+        calls.append(len(X))
+        return np.sum((X - np.array([1.0, 2.0])) ** 2, axis=1)
+
+    problem = Problem(np.zeros(2), np.full(2, 3.0), cost, names=("a", "kf"))
+    x0 = np.array([1.0, 0.5])
+    np.testing.assert_array_equal(lower_start(problem, x0, {"kf": 1.9}), [1.0, 1.9])
+    np.testing.assert_array_equal(lower_start(problem, x0, {"kf": 4.0}), [1.0, 3.0])  # clipped, and still better
+    np.testing.assert_array_equal(lower_start(problem, np.array([1.0, 1.8]), {"kf": 3.0}), [1.0, 1.8])
+    assert calls == [2, 2, 2]
