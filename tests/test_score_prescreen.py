@@ -38,3 +38,24 @@ def test_score_statistic_equals_the_fitted_likelihood_ratio(factor):
     assert abs(S - LR) <= 0.05 * LR + 1.0, (S, LR)
     if factor != 1.0:
         assert LR > 20.0  # the case tests something: a mis-set spring the test detects
+
+
+@pytest.mark.parametrize(("kind", "accepted", "beaten"), [
+    ("sensor", True, True), ("parameter", True, True), ("sensor", False, False), ("effect", True, False),
+])  # fmt: skip
+def test_an_effect_short_of_the_best_sensor_correction_or_known_parameter_is_not_fitted(kind, accepted, beaten):
+    """score.cannot_win: an effect whose twice score plus the critical LR falls short of the best accepted known
+    parameter's or sensor correction's LR cannot win the round (neither rivals an effect: an effect only rivals an
+    effect, and parsimony prefers a parameter to an effect), so it is not fitted; an unaccepted test or another
+    effect beats none."""
+    from vehid_cli.diagnose.attribution import Fit, Ranked, candidate_specs, screenable
+    from vehid_cli.diagnose.score import cannot_win
+
+    specs = [c for c in candidate_specs(prepare_config(load_config(BASE, NOISE))).values() if screenable(c)][:3]
+    current = Fit(("m",), np.ones(1), 2.0, 1)
+    scores = {c.effect: (1000.0, c.unknowns) for c in specs}  # 2 x 1000 + 20 < 5000
+    best = Ranked("x", ("x",), 1, 1.0, 5000.0, 0.0, 0.0, 1.0, accepted, current, 0.0, kind=kind)
+    keep, out = cannot_win(specs, scores, [best], current, (1.0, None), lambda k: 20.0, 10_000)
+    assert [r.effect for r in out] == ([c.effect for c in specs] if beaten else [])
+    assert len(keep) + len(out) == len(specs) == 3
+    assert all(r.screened and r.statistic == 1000.0 for r in out)

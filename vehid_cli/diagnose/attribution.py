@@ -58,6 +58,8 @@ from .tails import chi2_isf, chi2_sf
 ALPHA = 1e-3  # family-wise significance level of the candidate tests (Bonferroni over candidates)
 CANDIDATE_BUDGET = 150  # model evaluations of one candidate's fit (after the screening of its starts)
 DISTINCT_VALIDATION = 0.1  # validation J this much lower tells the best candidate from a close runner-up
+BEATERS = ("parameter", "sensor")  # fitted before a round's effects: an effect short of their best cannot win it
+# (an effect only rivals effects, `undistinguished`, and parsimony prefers a parameter to an effect, not to a sensor)
 PARSIMONY_SHARE = 0.9  # a known parameter explaining this share of an effect's LR is preferred to it
 SHAPE_IDENTIFIABLE = 0.5  # a shape parameter is freed when its 95 % half-width is below this fraction of it
 SCREEN_TOL = 1e-7  # candidate fits stop at this relative change of the cost (LR to about 1e-7 R)
@@ -439,9 +441,9 @@ def rank_candidates(
     `make_linear(names, candidate)`: the augmented problem on the exact integrator with its exact sensitivities, or
     None where the model is not the linear car: a known parameter's candidate is then fitted by `linear_fit`;
     `car()`: the residuals' derivatives (R, D) along `base`'s unknowns at `base` (all free), which the effects'
-    screenings steer by; `beat`: the LR of the round's best accepted known parameter (0: none), which an effect's fit
-    stops at when it cannot win the round (`cannot_win_after`); `threads`: how many candidates are fitted at once (None:
-    one per core). Candidate fits run in parallel threads."""
+    screenings steer by; `beat`: the LR of the round's best accepted known parameter or sensor (0: none), which an
+    effect's fit stops at when it cannot win the round (`cannot_win_after`); `threads`: how many candidates are
+    fitted at once (None: one per core). Candidate fits run in parallel threads."""
     statistic = statistic or chi2_statistic(residual_count)
     level = alpha / max(tests or len(candidates), 1)
     base_vJ, base_per = base_validation

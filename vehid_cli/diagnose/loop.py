@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from ..core.progress import ProgressHook
 from ..optimizers.base import Problem
 from .attribution import (
+    BEATERS,
     PARAMETER_PREFIX,
     SCORE_SKIP,
     Candidate,
@@ -213,25 +214,27 @@ class _Augmentation:
 
         jacobian: dict[str, NDArray | None] = {}
 
-        stops = chi2 and self.claim  # the effects' fits stop where they cannot beat the best known parameter
-        first = [c for c in todo if c.kind == "parameter"] if scores or stops else todo  # the known parameters first
+        stops = chi2 and self.claim  # the effects' fits stop where they cannot beat the best known parameter or sensor
+        first = [c for c in todo if c.kind in BEATERS] if scores or stops else todo  # known parameters, sensors first
         ranked = fit(first, len(skipped))
         rest = [c for c in todo if c not in first]
         rest, beaten = cannot_win(rest, scores, ranked, current, current_v, critical, subject.residual_count)
         if beaten:
             self.note(
                 f"round {len(self.rounds) + 1}: {', '.join(r.effect for r in beaten)} not fitted: twice the score "
-                "statistic (reported as the LR) and the critical LR fall short of the best known parameter's LR, so "
+                "statistic (reported as the LR) and the critical LR fall short of the best known parameter's or "
+                "sensor correction's LR, so "
                 "they cannot win the round"
             )
             self.progress(stage, len(skipped) + len(ranked) + len(beaten), tests)
-        best = max((r.statistic for r in ranked if r.accepted and r.kind == "parameter"), default=0.0)
+        best = max((r.statistic for r in ranked if r.accepted and r.kind in BEATERS), default=0.0)
         rest = fit(rest, len(skipped) + len(first) + len(beaten), best if stops else 0.0)
         if any(r.stopped for r in rest):
             self.note(
                 f"round {len(self.rounds) + 1}: the fits of {', '.join(r.effect for r in rest if r.stopped)} stopped "
                 f"after {STOP_STEPS} steps: {STOP_FACTOR:g} x the LR reached (reported, a lower bound) and the "
-                "critical LR fall short of the best known parameter's LR, so they cannot win the round"
+                "critical LR fall short of the best known parameter's or sensor correction's LR, so they cannot win "
+                "the round"
             )
         ranked = sorted(ranked + rest + skipped + beaten, key=lambda r: -r.statistic)
         self.rounds.append(tuple(ranked))

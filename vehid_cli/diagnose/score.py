@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..optimizers.base import Problem
-from .attribution import SCORE_SKIP, Candidate, Fit, Ranked, forward_jacobian, restricted, screenable
+from .attribution import BEATERS, SCORE_SKIP, Candidate, Fit, Ranked, forward_jacobian, restricted, screenable
 from .tails import chi2_sf
 
 Scores = dict[str, tuple[float, tuple[str, ...]]]  # effect -> its score statistic and the unknowns it adds
@@ -138,10 +138,11 @@ def cannot_win(
 ) -> tuple[list[Candidate], list[Ranked]]:  # fmt: skip
     """The screened effects of `rest` that cannot win the round: WIN_FACTOR x their score (an effect's LR has been
     up to 1.2 x its score at its starts) plus the critical LR of its test below the LR of the best accepted known
-    parameter among the `fitted` tests. The best is then that parameter whatever their fits would give (parsimony
+    parameter or sensor correction (BEATERS) among the `fitted` tests. The best is then that one whatever their fits
+    would give (parsimony
     and the rivalry of `undistinguished` compare an effect with the best only when the best is an effect), so they
     are not fitted; their tests report the score as the LR. Returns the candidates to fit and those tests."""
-    best = max((r.statistic for r in fitted if r.accepted and r.kind == "parameter"), default=0.0)
+    best = max((r.statistic for r in fitted if r.accepted and r.kind in BEATERS), default=0.0)
     keep, beaten = [], []
     for c in rest:
         S, added = scores.get(c.effect, (np.nan, ()))

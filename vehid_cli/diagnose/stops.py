@@ -51,8 +51,8 @@ def cannot_win_after(
 ) -> Callable[[float], bool] | None:  # fmt: skip
     """An effect's `stop` for candidate_fit: True when STOP_FACTOR x the LR its fit has reached after STOP_STEPS
     steps (against the current fit's J0), plus `critical` (the critical LR of the round's largest test), is below
-    `beat`, the LR of the round's best accepted known parameter (None when there is none); never while the fit is
-    not yet below J0 (no LR reached: no ratio to bound its end by).
+    `beat`, the LR of the round's best accepted known parameter or sensor correction (None when there is none);
+    never while the fit is not yet below J0 (no LR reached: no ratio to bound its end by).
 
     Why it cannot win then: the LR of a fit only grows from there; the best accepted candidate is then that parameter
     or another candidate with an LR at least `beat`, which the stopped effect's LR falls short of by more than the
