@@ -223,8 +223,7 @@ class _Augmentation:
             self.note(
                 f"round {len(self.rounds) + 1}: {', '.join(r.effect for r in beaten)} not fitted: twice the score "
                 "statistic (reported as the LR) and the critical LR fall short of the best known parameter's or "
-                "sensor correction's LR, so "
-                "they cannot win the round"
+                "sensor correction's LR, so they cannot win the round"
             )
             self.progress(stage, len(skipped) + len(ranked) + len(beaten), tests)
         best = max((r.statistic for r in ranked if r.accepted and r.kind in BEATERS), default=0.0)
