@@ -277,7 +277,7 @@ def test_hysteresis_shape_found_from_the_wrong_basin():
 def test_a_known_parameters_fit_starts_where_its_earlier_estimate_or_its_configured_value_costs_less():
     """attribution.lower_start on a quadratic bowl: the earlier round's estimate when it costs less (clipped into
     the box), else the configured start; one batch of two evaluations, no screening steps."""
-    from vehid_cli.diagnose.attribution import lower_start
+    from vehid_cli.diagnose.starts import lower_start
     from vehid_cli.optimizers.base import Problem
 
     calls = []

@@ -50,8 +50,8 @@ from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import BOUND_SHARE, gauss_newton, polish
 from ..sim.kernel import available_cores
-from .jacobians import forward_jacobian, forward_normal, restricted
-from .starts import screen_starts
+from .jacobians import exact_normal, forward_jacobian, forward_normal, restricted
+from .starts import lower_start, screen_starts
 from .stops import STOP_STEPS, Stopped, cannot_win_after, stoppable
 from .tails import chi2_isf, chi2_sf
 
@@ -259,17 +259,6 @@ def fisher_ci(problem: Problem, x: NDArray, scale: float, linear: Problem | None
     return np.where(d >= 0, Z95 * np.sqrt(np.abs(d)), np.nan)
 
 
-def exact_normal(linear: Problem, x: NDArray) -> NDArray | None:
-    """J'J (D, D) at x from the problem's exact sensitivities (one simulation of the response and its derivatives,
-    where forward differences take D + 1; a long record's summed without J); None where it has none there."""
-    with np.errstate(all="ignore"):
-        if linear.normal is not None:
-            got = linear.normal(np.asarray(x, dtype=float))
-            return None if got is None else np.asarray(got[2])
-        got = linear.linearised(np.asarray(x, dtype=float)) if linear.linearised is not None else None
-        return None if got is None else got[2].T @ got[2]
-
-
 def fit_intervals(problem: Problem, fit: Fit, scale: float, linear: Problem | None = None) -> NDArray:
     """95 % half-widths at a fit over its free unknowns (NaN for those it held fixed); `problem` over fit.names;
     `linear`: the same problem on the linear car's exact integrator (`Subject.linear_for`), whose exact
@@ -323,19 +312,6 @@ def candidate_fit(
     except Stopped as s:  # (the wrapped problem is the full one: s.x covers every unknown)
         fixed = tuple(n for n, f in zip(problem.names, free, strict=True) if not f)
         return Fit(tuple(problem.names), s.x, s.J, s.evaluations, fixed, stopped=True)
-
-
-def lower_start(problem: Problem, x0: NDArray, prior: dict[str, float]) -> NDArray:
-    """x0 or x0 with the `prior` values (a known parameter's estimate in an earlier round), whichever costs less (one
-    batch of two evaluations): a single unknown's fit needs no screening steps to choose its start
-    (`screen_starts`: three damped Gauss-Newton steps from each, the cost of three Jacobians)."""
-    warm = x0.copy()
-    for n, v in prior.items():
-        j = problem.names.index(n)
-        warm[j] = np.clip(v, problem.lower[j], problem.upper[j])
-    with np.errstate(all="ignore"):
-        costs = problem.cost(np.vstack([x0, warm]))
-    return warm if np.isfinite(costs[1]) and costs[1] < costs[0] else x0
 
 
 def parameter_fit(

@@ -1,5 +1,6 @@
 """The forward-difference Jacobian of a problem's residuals at a point, and the problem over some of its unknowns:
-what the candidate fits, their intervals and the score screening share (a long record's J'J summed without J)."""
+what the candidate fits, their intervals and the score screening share (a long record's J'J summed without J); and
+J'J from a problem's exact sensitivities where it has them (the linear car's)."""
 
 from __future__ import annotations
 
@@ -57,3 +58,14 @@ def forward_normal(problem: Problem, x: NDArray) -> NDArray:
     Jac, _ = forward_jacobian(problem, x)
     with np.errstate(all="ignore"):  # a Jacobian of penalised or diverging cars: J'J not finite, which callers test
         return Jac.T @ Jac
+
+
+def exact_normal(linear: Problem, x: NDArray) -> NDArray | None:
+    """J'J (D, D) at x from the problem's exact sensitivities (one simulation of the response and its derivatives,
+    where forward differences take D + 1; a long record's summed without J); None where it has none there."""
+    with np.errstate(all="ignore"):
+        if linear.normal is not None:
+            got = linear.normal(np.asarray(x, dtype=float))
+            return None if got is None else np.asarray(got[2])
+        got = linear.linearised(np.asarray(x, dtype=float)) if linear.linearised is not None else None
+        return None if got is None else got[2].T @ got[2]

@@ -1,6 +1,7 @@
 """The screening of a candidate's starts: a few damped Gauss-Newton steps from each of its starts (values of its shape,
 and where its force is not proportional to them, its strength parameters), all starts batched, to pick the one its fit
-(attribution.candidate_fit) polishes."""
+(attribution.candidate_fit) polishes; a known parameter's two starts (its configured value, its earlier estimate)
+compared by their costs alone (`lower_start`)."""
 
 from __future__ import annotations
 
@@ -94,6 +95,19 @@ def screen_starts(
             if np.isfinite(c[m]) and c[m] < cost[i]:
                 P[i], cost[i], resid[i], moved[i] = trial[i], c[m], r[m], True
     return P[int(np.argmin(cost))]
+
+
+def lower_start(problem: Problem, x0: NDArray, prior: dict[str, float]) -> NDArray:
+    """x0 or x0 with the `prior` values (a known parameter's estimate in an earlier round), whichever costs less (one
+    batch of two evaluations): a single unknown's fit needs no screening steps to choose its start
+    (`screen_starts`: three damped Gauss-Newton steps from each, the cost of three Jacobians)."""
+    warm = x0.copy()
+    for n, v in prior.items():
+        j = problem.names.index(n)
+        warm[j] = np.clip(v, problem.lower[j], problem.upper[j])
+    with np.errstate(all="ignore"):
+        costs = problem.cost(np.vstack([x0, warm]))
+    return warm if np.isfinite(costs[1]) and costs[1] < costs[0] else x0
 
 
 def _jacobian(R: NDArray, rows: list[NDArray], by: dict[int, int], x: NDArray, r0: NDArray, free: list[int],
