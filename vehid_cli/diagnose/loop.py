@@ -318,7 +318,9 @@ class _Augmentation:
         problem, start = subject.problem_for(names)
         x0 = np.concatenate([best.fit.x, start[len(best.fit.names) :]])
         shapes = [n for e in (*self.claimed, best.effect) for n in specs[e].shape]
-        free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
+        free = np.ones(len(names), dtype=bool)
+        if set(shapes) & set(names):  # their intervals (D + 1 simulations) only where a shape parameter may be held
+            free = identifiable(names, x0, fisher_ci(problem, x0, subject.scale(best.fit)), shapes)
         refit = subject.fit(names, x0, free, self.refit_budget)  # to SCREEN_TOL: the final polish goes to 1e-12
         best_J = best.fit.J
         if subject.screen is not None:  # the candidate was fitted on the screening window: its J on the whole record
