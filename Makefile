@@ -23,7 +23,7 @@ demo: $(STAMP)
 
 ## browser: Debian's chromium and chromium-driver, for the browser test of `vehid report --html`: installed with
 ## apt-get when missing and possible (root or password-less sudo; apt-get update only when the install fails)
-APT_BROWSER := DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver >/dev/null
+APT_BROWSER := env DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver >/dev/null
 browser:
 	@if command -v chromedriver >/dev/null 2>&1 && { command -v chromium >/dev/null 2>&1 || \
 	        command -v chromium-browser >/dev/null 2>&1; }; then exit 0; fi; \
