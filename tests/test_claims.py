@@ -1,7 +1,9 @@
-"""diagnose/claims.py: the swap test on a linear toy whose fits and likelihood ratios are closed-form.
+"""diagnose/claims.py: the swap and pair tests on a linear toy whose fits and likelihood ratios are closed-form.
 
 The toy: y = c0 u0 + kf u1 (+ hyst.a u1 + hyst.b u2) + unit noise, J the chi² per sample. The effect `hyst` can
-imitate a mis-set kf (its `a` along u1) and adds a direction of its own (u2); the known parameter kf has only u1."""
+imitate a mis-set kf (its `a` along u1) and adds a direction of its own (u2); the known parameter kf has only u1.
+The pair toy: y = c0 u0 + kf u1 + cr u2 (+ hyst.a u1 + hyst.b u2 + hyst.c u3): the effect's three unknowns span both
+known parameters' directions and one of its own."""
 
 from __future__ import annotations
 
@@ -9,20 +11,22 @@ import numpy as np
 import pytest
 
 from vehid_cli.diagnose.attribution import Candidate, Fit, Ranked, chi2_statistic, fit_free, parameter_candidate
-from vehid_cli.diagnose.claims import SWAP_SHARE, rival, swap_test
+from vehid_cli.diagnose.claims import PARSIMONY_SHARE, SWAP_SHARE, pair_test, rival, swap_test
 from vehid_cli.diagnose.subject import Subject
 from vehid_cli.diagnose.tails import chi2_isf
 from vehid_cli.optimizers.base import Problem
 
 R = 4000
 KF = 1.0  # kf's configured value
-LIMITS = {"c0": (-10.0, 10.0), "kf": (0.0, 10.0), "hyst.a": (-10.0, 10.0), "hyst.b": (-10.0, 10.0)}
-START = {"c0": 0.0, "kf": KF, "hyst.a": 0.0, "hyst.b": 0.0}
+LIMITS = {"c0": (-10.0, 10.0), "kf": (0.0, 10.0), "cr": (0.0, 10.0)} | {f"hyst.{c}": (-10.0, 10.0) for c in "abc"}
+START = {"c0": 0.0, "kf": KF, "cr": KF, "hyst.a": 0.0, "hyst.b": 0.0, "hyst.c": 0.0}
+ROWS = {"c0": 0, "kf": 1, "hyst.a": 1, "hyst.b": 2}  # the direction u[row] each unknown scales
+PAIR_ROWS = ROWS | {"cr": 2, "hyst.c": 3}
 EFFECT = Candidate("hyst", ("hyst.a", "hyst.b"), strength=("hyst.a", "hyst.b"))
 LEVEL = 0.05 / 3
 
 
-def toy(y: np.ndarray, u: np.ndarray) -> Subject:
+def toy(y: np.ndarray, u: np.ndarray, rows: dict[str, int] = ROWS) -> Subject:
     """The toy's subject: the problem over any unknowns (the others at their configured value or zero)."""
 
     def problem_for(names: tuple[str, ...]) -> tuple[Problem, np.ndarray]:
@@ -30,8 +34,8 @@ def toy(y: np.ndarray, u: np.ndarray) -> Subject:
 
         def residuals(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             X = np.atleast_2d(X)
-            v = {n: X[:, idx[n]][:, None] if n in idx else START[n] for n in START}
-            model = v["c0"] * u[0] + (v["kf"] + v["hyst.a"]) * u[1] + v["hyst.b"] * u[2]
+            v = {n: X[:, idx[n]][:, None] if n in idx else START[n] for n in rows}
+            model = sum(v[n] * u[row] for n, row in rows.items())
             r = model - y  # unit noise: the residual is weighted already
             return (r**2).mean(axis=1), r
 
@@ -40,7 +44,7 @@ def toy(y: np.ndarray, u: np.ndarray) -> Subject:
         problem = Problem(lower, upper, lambda X: residuals(X)[0], residuals, names=names)
         return problem, np.array([START[n] for n in names])
 
-    specs = {"hyst": EFFECT, "parameter:kf": parameter_candidate("kf", KF)}
+    specs = {"hyst": EFFECT} | {f"parameter:{n}": parameter_candidate(n, KF) for n in ("kf", "cr")}
     return Subject(
         specs=specs, declared=frozenset(), problem_for=problem_for, validation_J=lambda names, x: (0.0, None),
         residual_count=R, statistic=lambda _fit: chi2_statistic(R), scale=lambda f: f.J,
@@ -59,8 +63,8 @@ def fitted(subject: Subject, names: tuple[str, ...]) -> Fit:
     return fit_free(problem, start, np.ones(len(names), dtype=bool), 400)
 
 
-def ranked(effect: str, kind: str, lr: float, fit: Fit, accepted: bool = True) -> Ranked:
-    added = ("kf",) if kind == "parameter" else ("hyst.a", "hyst.b")
+def ranked(effect: str, kind: str, lr: float, fit: Fit, accepted: bool = True, added: tuple[str, ...] = ()) -> Ranked:
+    added = added or (("kf",) if kind == "parameter" else ("hyst.a", "hyst.b"))
     return Ranked(effect=effect, added=added, k=len(added), J=fit.J, statistic=lr, p_value=0.0, bic_margin=lr,
                   validation_J=0.0, accepted=accepted, fit=fit, seconds=0.0, kind=kind)  # fmt: skip
 
@@ -109,3 +113,55 @@ def test_the_rival_is_the_strongest_accepted_parameter_of_the_effects_round_with
     assert rival([(effect, refused)], "hyst", ("c0",)) is None
     assert rival([(effect, strong)], "hyst", ("c0", "kf")) is None  # kf is in the model already
     assert rival([(effect, weak), (strong,)], "hyst", ("c0",)) is None  # the round that ranked the effect last
+
+
+def pair_round(kf: float, cr: float, own: float, seed: int = 5):
+    """The pair toy's round against c0 alone: the subject, the current fit, the ranked effect (three unknowns) and
+    known parameters kf, cr (each alone) with their LRs from the fits, and the toy's directions u and data y."""
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal((4, R))
+    y = 2.0 * u[0] + kf * u[1] + cr * u[2] + own * u[3] + rng.standard_normal(R)
+    subject = toy(y, u, PAIR_ROWS)
+    current = fitted(subject, ("c0",))
+    lr = chi2_statistic(R)
+    rounds = []
+    for effect, kind, names in [
+        ("hyst", "effect", ("hyst.a", "hyst.b", "hyst.c")),
+        ("parameter:kf", "parameter", ("kf",)),
+        ("parameter:cr", "parameter", ("cr",)),
+    ]:
+        fit = fitted(subject, ("c0", *names))
+        rounds.append(ranked(effect, kind, lr(current.J, fit.J), fit, added=names))
+    return subject, current, sorted(rounds, key=lambda r: -r.statistic), u, y
+
+
+def test_two_mis_set_parameters_together_are_preferred_to_an_effect_that_spans_both():
+    subject, current, ranked_, u, y = pair_round(kf=1.6, cr=1.5, own=0.0)
+    best = ranked_[0]
+    assert best.effect == "hyst"  # the effect beats each parameter alone (it spans both directions)
+    assert all(r.statistic < PARSIMONY_SHARE * best.statistic for r in ranked_[1:])  # single parsimony cannot apply
+    pair = pair_test(subject, current, ranked_, best, LEVEL, 400)
+    assert pair is not None and pair.first.effect == "parameter:kf" and pair.second.effect == "parameter:cr"
+    # the closed form: the pair's LR is R times the fall of the mean squared residual, from c0 alone (kf, cr at their
+    # configured KF) to least squares on u0 .. u2
+    known = y - KF * (u[1] + u[2])
+    ss = [np.mean((z - u[:n].T @ np.linalg.lstsq(u[:n].T, z, rcond=None)[0]) ** 2) for z, n in ((known, 1), (y, 3))]
+    assert pair.statistic == pytest.approx(R * (ss[0] - ss[1]), rel=1e-6)
+    assert best.statistic - pair.statistic < pair.critical == pytest.approx(float(chi2_isf(LEVEL, 3)))
+    assert "parameter:kf and parameter:cr together explain the residual as well as hyst" in pair.describe()
+
+
+def test_a_real_effect_beside_two_mis_set_parameters_is_not_given_to_the_pair():
+    subject, current, ranked_, _, _ = pair_round(kf=1.6, cr=1.5, own=0.8)
+    assert ranked_[0].effect == "hyst"
+    assert pair_test(subject, current, ranked_, ranked_[0], LEVEL, 400) is None
+
+
+def test_no_pair_test_without_two_accepted_parameters_or_where_the_effect_has_one_unknown():
+    subject, current, ranked_, _, _ = pair_round(kf=1.6, cr=1.5, own=0.0)
+    best, first, second = ranked_
+    refused = ranked(second.effect, "parameter", second.statistic, second.fit, accepted=False, added=second.added)
+    assert pair_test(subject, current, [best, first, refused], best, LEVEL, 400) is None
+    small = ranked("hyst", "effect", best.statistic, best.fit, added=("hyst.a",))
+    assert pair_test(subject, current, [small, first, second], small, LEVEL, 400) is None
+    assert pair_test(subject, current, ranked_, first, LEVEL, 400) is None  # a parameter won: nothing to test

@@ -1,12 +1,15 @@
-"""The tests of a claim once the loop has made it: its own unknowns, whether its strength interval excludes its
-null, the record of its removal test, and the swap test of the final model.
+"""The tests of a claim: its own unknowns, whether its strength interval excludes its null, the record of its removal
+test, the swap test of the final model and the pair test of a round.
 
 The swap test: an effect was chosen in its round, on the screening data, over known parameters that explained
 nearly as much (a Bouc-Wen element that never yields stands in for a stiffer front spring, and on a long record's
 5 s window its three unknowns can beat the one of kf). At the end, on the whole record and beside every other claim,
 the strongest such parameter is fitted in the effect's place; it is preferred when it explains the record as well,
 by the parsimony rule a round applies (attribution.parsimonious): its LR over the model with neither short of the
-effect's by less than the critical value of chi²(k), or at least PARSIMONY_SHARE of it."""
+effect's by less than the critical value of chi²(k), or at least PARSIMONY_SHARE of it.
+
+The pair test applies that rule in the round to two known parameters at once, so that the detour is not taken: two
+mis-set parameters (kf and cr) each explain part of a residual a three-unknown Bouc-Wen element spans alone."""
 
 from __future__ import annotations
 
@@ -118,3 +121,48 @@ def swap_test(
     if not strength_excludes_null(subject.specs[parameter.effect], fit, subject.intervals(fit)):
         return None
     return Swap(effect.effect, parameter.effect, fit, gap, critical, share)
+
+
+@dataclass(frozen=True)
+class Pair:
+    """Two known parameters fitted together in a round that an effect won: their joint LR over the round's current
+    fit, the effect's, and the critical LR of chi²(k_effect) the parsimony rule allows between them."""
+
+    first: Ranked
+    second: Ranked
+    statistic: float
+    effect: Ranked
+    critical: float
+
+    def describe(self) -> str:
+        """The note that says why the round's stronger parameter is preferred to the effect."""
+        return (
+            f"{self.first.effect} and {self.second.effect} together explain the residual as well as "
+            f"{self.effect.effect} (LR {self.statistic:.4g} with 2 unknowns against {self.effect.statistic:.4g} with "
+            f"{self.effect.k}): the known parameters are preferred, {self.first.effect} first"
+        )
+
+
+def pair_test(subject: Subject, current: Fit, ranked: Sequence[Ranked], best: Ranked, level: float,
+              budget: int) -> Pair | None:  # fmt: skip
+    """The parsimony rule for two known parameters at once: where the effect `best` won the round (`ranked`, against
+    `current` on `subject`) with at least two unknowns and no single known parameter explained as much, the round's
+    two strongest accepted known parameters fitted together from their own estimates. The Pair when they explain the
+    residual as well (LR short of the effect's by less than the critical value of chi²(k) at `level`, or at least
+    PARSIMONY_SHARE of it); else None. Two mis-set parameters (kf and cr) each explain part of a residual that a
+    three-unknown Bouc-Wen element spans alone; without this the loop claims the element, fits it on the whole
+    record, and only swaps it out at the end."""
+    params = [r for r in ranked if r.kind == "parameter" and r.accepted and len(r.added) == 1]
+    if best.kind != "effect" or best.k < 2 or len(params) < 2 or current.fixed:
+        return None
+    first, second = params[0], params[1]
+    names = current.names + first.added + second.added
+    if len(set(names)) != len(names):
+        return None
+    at = [r.fit.x[r.fit.names.index(r.added[0])] for r in (first, second)]
+    fit = subject.fit(names, np.concatenate([current.x, at]), np.ones(len(names), dtype=bool), budget)
+    lr = subject.statistic(current)(current.J, min(fit.J, current.J))
+    critical = float(chi2_isf(level, best.k))
+    if best.statistic - lr < critical or lr >= PARSIMONY_SHARE * best.statistic:
+        return Pair(first, second, lr, best, critical)
+    return None

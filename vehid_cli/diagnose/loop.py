@@ -9,10 +9,10 @@ block of BLOCK samples is kept out of every fit, holdout.py). Confidence interva
 J'J of the weighted residuals at the fit, scaled by the chi² per sample (the residual's own variance).
 
 What is claimed: a candidate the likelihood-ratio test accepts (attribution.py), preferred over an effect
-when it is a known parameter explaining the residual as well (parsimony), whose strength interval excludes
-its null (zero, or the configured value) after the re-fit, and which is still needed once everything else is
-re-fitted (backward checks after each round and at the end). The verdict compares the final residual power
-with the noise: above 1 + 5 sqrt(2/R) (R residuals) it is ``incomplete``, whatever was found.
+when it is a known parameter explaining the residual as well, alone or with a second (parsimony), whose strength
+interval excludes its null (zero, or the configured value) after the re-fit, and which is still needed once
+everything else is re-fitted (backward checks after each round and at the end). The verdict compares the final
+residual power with the noise: above 1 + 5 sqrt(2/R) (R residuals) it is ``incomplete``, whatever was found.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ from .attribution import (
     screenable,
     undistinguished,
 )
-from .claims import Removal, own_unknowns, rival, strength_excludes_null, swap_test
+from .claims import Removal, own_unknowns, pair_test, rival, strength_excludes_null, swap_test
 from .quality import Quality
 from .result import Diagnosis, ModelReport, Step, chi2_limit
 from .score import Scores, cannot_win, fitted_basis, screen_effects
@@ -161,25 +161,31 @@ class _Augmentation:
                 return False
         if not todo:
             return False
-        best = self.choose(self.rank(todo))
+        on = self.basis()
+        best = self.choose(self.rank(todo, on), on)
         if best is None:
             return False
         self.try_claim(best, len(todo))
         return True
 
-    def rank(self, todo: list[Candidate]) -> list[Ranked]:
-        """The candidates `todo` ranked against the current fit (the round recorded and said); a long record's on its
-        screening window (the current fit's J and validation J there)."""
+    def basis(self) -> tuple[Subject, Fit, tuple]:
+        """What a round tests against: the subject, the current fit and its validation J; a long record's on its
+        screening window, the current model re-fitted there first (the LR is what each candidate adds)."""
         subject, current, current_v = self.subject, self.current, self.current_v
-        # A long record's candidates are fitted one at a time: two fits at once on its window (their working sets and
-        # the threads' malloc arenas) set the 60 s diagnosis's peak memory, 15-20 MiB above one; each fit's batches of
-        # cars still run on every core in the kernel (issue 26: +0.5-1.5 s of 12 s).
-        windowed = subject.screen is not None
-        if windowed:  # the current model re-fitted on the window first: the LR is what each adds
+        if subject.screen is not None:
             subject = subject.screen
             free = np.array([n not in current.fixed for n in current.names])
             current = subject.fit(current.names, current.x, free, self.candidate_budget)  # (the linear car's by LM)
             current_v = subject.validation_J(current.names, current.x)
+        return subject, current, current_v
+
+    def rank(self, todo: list[Candidate], on: tuple[Subject, Fit, tuple]) -> list[Ranked]:
+        """The candidates `todo` ranked against the current fit `on` (`basis`; the round recorded and said)."""
+        subject, current, current_v = on
+        # A long record's candidates are fitted one at a time: two fits at once on its window (their working sets and
+        # the threads' malloc arenas) set the 60 s diagnosis's peak memory, 15-20 MiB above one; each fit's batches of
+        # cars still run on every core in the kernel (issue 26: +0.5-1.5 s of 12 s).
+        windowed = self.subject.screen is not None
         stage = f"round {len(self.rounds) + 1} candidates"
         self.progress(stage, 0, len(todo))
         tests, skipped, scores = len(todo), [], {}
@@ -286,19 +292,25 @@ class _Augmentation:
             lambda k: float(chi2_isf(self.level(tests), k)), subject.residual_count,
         )  # fmt: skip
 
-    def choose(self, ranked: list[Ranked]) -> Ranked | None:
-        """The best accepted candidate, a known parameter explaining the residual as well preferred; None when none
-        is accepted or the data cannot tell it from another."""
+    def choose(self, ranked: list[Ranked], on: tuple[Subject, Fit, tuple]) -> Ranked | None:
+        """The best accepted candidate, a known parameter (or two, `pair_test`, against the round's fit `on`)
+        explaining the residual as well preferred; None when none is accepted or the data cannot tell it from
+        another."""
         best = next((r for r in ranked if r.accepted), None)
         if best is None:
             return None
         simpler = parsimonious(ranked, best, self.alpha)
+        level = self.level(len(ranked))
+        pair = None if simpler else pair_test(on[0], on[1], ranked, best, level, self.candidate_budget)
         if simpler is not None:
             self.note(
                 f"{simpler.effect} explains the residual as well as {best.effect} (LR {simpler.statistic:.4g} "
                 f"against {best.statistic:.4g}): the known parameter is preferred"
             )
             best = simpler
+        elif pair is not None:
+            self.note(pair.describe())
+            best = pair.first
         rival = undistinguished(ranked, best, self.alpha)
         if rival is not None:
             self.note(
