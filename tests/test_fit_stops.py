@@ -15,6 +15,7 @@ from tests.test_diagnose_effects import DIAGNOSE, simulate
 from vehid_cli.config import load_config
 from vehid_cli.diagnose import attribution as A
 from vehid_cli.diagnose import stops
+from vehid_cli.diagnose.jacobians import restricted
 from vehid_cli.diagnose.tails import chi2_isf
 from vehid_cli.optimizers.base import Problem
 from vehid_cli.systems.vehicle.diagnosis import diagnose
@@ -69,6 +70,30 @@ def test_a_stopped_fit_is_the_unstopped_fits_prefix():
     assert full.J < stopped.J < base.J  # stopped short of the converged fit, but past the base
 
 
+def test_a_known_parameters_fit_stops_short_of_a_sensor_corrections_lr():
+    """rank_candidates with `beat` (the round's best sensor correction's LR): a known parameter's fit is the trust
+    region, stopped after STOP_STEPS steps when it cannot reach `beat`; the exact twin's Levenberg–Marquardt is not
+    tried (it cannot stop). Without `beat` it is fitted to the end, by the twin where there is one."""
+    problem, base = decaying_problem()
+    tau = restricted(problem, np.r_[base.x, 2.0, 3.0], np.array([True, True, False, True]))  # s = 2 known, tau free
+    cand = A.parameter_candidate("e.tau", 3.0)
+    twin = []
+
+    def rank(beat: float) -> A.Ranked:
+        return A.rank_candidates(
+            [cand], base, (0.0, None), lambda names, c: (tau, np.array([3.0])), lambda names, x: (0.0, None), 400,
+            make_linear=lambda names, c: twin.append(names), beat=beat, threads=1,
+        )[0]  # fmt: skip
+
+    full = rank(0.0)
+    assert not full.stopped and twin  # the twin asked for (None here: the trust region then)
+    twin.clear()
+    stopped = rank(1e12)
+    assert stopped.stopped and stopped.fit.evaluations == 1 + stops.STOP_STEPS * (3 + 1) and not twin
+    assert 0 < stopped.statistic <= full.statistic
+    assert not rank(stops.STOP_FACTOR * stopped.statistic).stopped  # within reach of the LR it had: fitted on
+
+
 def test_the_stop_rule_compares_the_factored_lr_with_the_best_parameter():
     statistic = A.chi2_statistic(1000)
     assert stops.cannot_win_after(2.0, statistic, 10.0, 0.0) is None  # no accepted parameter: never stopped
@@ -78,23 +103,41 @@ def test_the_stop_rule_compares_the_factored_lr_with_the_best_parameter():
     assert not stop(2.5) and not stop(2.0)  # not yet below the base: no LR reached, the fit goes on
 
 
-CASES = {  # issue 26's kf and cr mis-set, its Bouc-Wen hysteresis at 13 mm, and a backlash
+CASES = {  # issue 26's kf and cr mis-set, its Bouc-Wen hysteresis at 13 mm, a backlash, and acc2 upside down
     "kf-cr": (BASE_CONFIG, ["vehicle.kf=54000", "vehicle.cr=2975"]),
     "hysteresis": (ROOT / "configs" / "effects" / "hysteresis.yaml",
                    ["vehicle.effects.hysteresis.beta=3e3", "vehicle.effects.hysteresis.gamma=3e3"]),
     "backlash": (ROOT / "configs" / "effects" / "backlash.yaml", []),
+    "acc2-flipped": (BASE_CONFIG, []),
 }  # fmt: skip
+BEATEN_BY = {"parameter": ("sensor",), "effect": ("parameter", "sensor")}  # what a stopped fit falls short of
+
+
+def flipped(path, column: str):
+    """The simulated CSV with `column`'s sign inverted (a sensor mounted upside down), its comments kept."""
+    lines = path.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    j = lines[first].split(",").index(column)
+    rows = [line.split(",") for line in lines[first + 1 :]]
+    for row in rows:
+        row[j] = repr(-float(row[j]))
+    path.write_text("\n".join(lines[: first + 1] + [",".join(r) for r in rows]) + "\n")
+    return path
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_a_stopped_fit_could_not_have_won(tmp_path, monkeypatch, case):
-    """The loop with its effects' fits stopped and with them run to the end (STOP_FACTOR infinite): the same
-    selection and verdict, and each stopped effect's full fit of the same round (same current fit) has an LR within
-    STOP_FACTOR of the LR its stopped fit reported, at least that LR, and with the critical LR below the best
-    accepted known parameter's: it could neither have won the round nor been a rival of its winner."""
+    """The loop with its effects' (and, beside a sensor correction, known parameters') fits stopped and with them run
+    to the end (STOP_FACTOR infinite): the same selection and verdict, and each stopped fit's full fit of the same
+    round (same current fit) has an LR within STOP_FACTOR of the LR its stopped fit reported, at least that LR, and
+    with the critical LR below the best accepted candidate's of the kinds that beat it (a known parameter's or sensor
+    correction's for an effect, a sensor correction's for a known parameter): it could neither have won the round
+    nor been a rival of its winner."""
     truth, sets = CASES[case]
     data = simulate(tmp_path / "run.csv", truth, sets)
+    if case == "acc2-flipped":
+        data = flipped(data, "acc2")
     config = load_config(BASE_CONFIG, DIAGNOSE)
     fast = diagnose(config, data, analyse_residuals=False)
     factor = stops.STOP_FACTOR
@@ -105,11 +148,11 @@ def test_a_stopped_fit_could_not_have_won(tmp_path, monkeypatch, case):
     for k, (rf, rs) in enumerate(zip(fast.rounds, full.rounds, strict=False)):
         steps_same = fast.steps[:k] == full.steps[:k]
         by = {r.effect: r for r in rs}
-        best = max((r.statistic for r in rs if r.accepted and r.kind == "parameter"), default=0.0)
         critical = float(chi2_isf(A.ALPHA / len(rf), 4))
         for r in rf:
             if not r.stopped:
                 continue
+            best = max((b.statistic for b in rs if b.accepted and b.kind in BEATEN_BY[r.kind]), default=0.0)
             whole = by[r.effect]
             assert not whole.stopped
             assert whole.statistic + critical < best, (k, r.effect, whole.statistic, best)
@@ -119,3 +162,6 @@ def test_a_stopped_fit_could_not_have_won(tmp_path, monkeypatch, case):
                 compared += 1
     if case != "backlash":  # a known parameter wins there: the library's effects far below it are stopped
         assert compared > 0
+    if case == "acc2-flipped":  # the known parameters' fits stopped beside the sign correction
+        assert fast.selected == ("sensor:acc2:sign",)
+        assert any(r.stopped and r.kind == "parameter" for r in fast.rounds[0])

@@ -435,9 +435,12 @@ def rank_candidates(
         own = None
         if earlier is not None and earlier.statistic > 0:
             own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
-        fit = parameter_fit(problem, base, x_added, cand, budget, make_linear)
         at_base = cols if cand.kind == "effect" and names[: len(base.names)] == base.names else None
-        stop = cannot_win_after(base.J, statistic, margin, beat) if claim and not_screened(cand) else None
+        stoppable = not_screened(cand) or cand.kind == "parameter"  # (a parameter's beat: the best sensor's LR)
+        stop = cannot_win_after(base.J, statistic, margin, beat) if claim and stoppable else None
+        # a known parameter with a sensor correction's LR to beat: the trust region, which can stop (beside a faulty
+        # channel the exact twin's Levenberg–Marquardt walks to a bound and is discarded anyway)
+        fit = parameter_fit(problem, base, x_added, cand, budget, make_linear) if stop is None else None
         fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base, stop)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)

@@ -222,7 +222,10 @@ class _Augmentation:
 
         stops = chi2 and self.claim  # the effects' fits stop where they cannot beat the best known parameter or sensor
         first = [c for c in todo if c.kind in BEATERS] if scores or stops else todo  # known parameters, sensors first
-        ranked = fit(first, len(skipped))
+        sensors = [c for c in first if c.kind == "sensor"] if stops else []  # and of those the sensors: a known
+        ranked = fit(sensors, len(skipped))  # parameter's fit stops where it cannot beat the best sensor correction
+        top = max((r.statistic for r in ranked if r.accepted), default=0.0)
+        ranked += fit([c for c in first if c not in sensors], len(skipped) + len(sensors), top)
         rest = [c for c in todo if c not in first]
         rest, beaten = cannot_win(rest, scores, ranked, current, current_v, critical, subject.residual_count)
         if beaten:
@@ -234,10 +237,10 @@ class _Augmentation:
             self.progress(stage, len(skipped) + len(ranked) + len(beaten), tests)
         best = max((r.statistic for r in ranked if r.accepted and r.kind in BEATERS), default=0.0)
         rest = fit(rest, len(skipped) + len(first) + len(beaten), best if stops else 0.0)
-        if any(r.stopped for r in rest):
+        if any(r.stopped for r in ranked + rest):
             self.note(
-                f"round {len(self.rounds) + 1}: the fits of {', '.join(r.effect for r in rest if r.stopped)} stopped "
-                f"after {STOP_STEPS} steps: {STOP_FACTOR:g} x the LR reached (reported, a lower bound) and the "
+                f"round {len(self.rounds) + 1}: the fits of {', '.join(r.effect for r in ranked + rest if r.stopped)} "
+                f"stopped after {STOP_STEPS} steps: {STOP_FACTOR:g} x the LR reached (reported, a lower bound) and the "
                 "critical LR fall short of the best known parameter's or sensor correction's LR, so they cannot win "
                 "the round"
             )
