@@ -1,6 +1,8 @@
-"""Stopping an effect's candidate fit that cannot win the round: after STOP_STEPS trust-region steps its LR so far,
-times STOP_FACTOR, with the critical LR, is compared with the round's best accepted known parameter's LR
-(attribution.candidate_fit, `stop`; the effects no score statistic screens, attribution.not_screened)."""
+"""Stopping a candidate fit that cannot win the round: after STOP_STEPS trust-region steps its LR so far, times
+STOP_FACTOR, with the critical LR, is compared with the LR of the round's best accepted candidate of a kind that beats
+it (attribution.candidate_fit, `stop`): an effect no score statistic screens (attribution.not_screened) against the
+best known parameter or sensor correction, a known parameter against the best sensor correction (parsimony prefers
+a parameter to an effect, never to a sensor correction)."""
 
 from __future__ import annotations
 
