@@ -7,11 +7,22 @@ known parameters' directions and one of its own."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from vehid_cli.diagnose.attribution import Candidate, Fit, Ranked, chi2_statistic, fit_free, parameter_candidate
+from vehid_cli.diagnose.attribution import (
+    Candidate,
+    Fit,
+    Ranked,
+    chi2_statistic,
+    fit_free,
+    parameter_candidate,
+    undistinguished,
+)
 from vehid_cli.diagnose.claims import PARSIMONY_SHARE, SWAP_SHARE, pair_test, rival, swap_test
+from vehid_cli.diagnose.loop import _Augmentation
 from vehid_cli.diagnose.subject import Subject
 from vehid_cli.diagnose.tails import chi2_isf
 from vehid_cli.optimizers.base import Problem
@@ -165,3 +176,18 @@ def test_no_pair_test_without_two_accepted_parameters_or_where_the_effect_has_on
     small = ranked("hyst", "effect", best.statistic, best.fit, added=("hyst.a",))
     assert pair_test(subject, current, [small, first, second], small, LEVEL, 400) is None
     assert pair_test(subject, current, ranked_, first, LEVEL, 400) is None  # a parameter won: nothing to test
+
+
+def test_the_loop_claims_the_pairs_first_though_its_second_is_as_strong():
+    """_Augmentation.choose: with the pair preferred to the effect, the pair's second (its LR within the critical
+    value of the first's, so `undistinguished` alone would refuse both) is no rival: the first is chosen."""
+    subject, current, ranked_, _, _ = pair_round(kf=1.6, cr=1.5, own=0.0)
+    best, first, second = ranked_
+    close = dataclasses.replace(second, statistic=first.statistic - 1.0)
+    loop = _Augmentation(subject, 0.05, 400, 400, True, lambda _s: None, [], current, (0.0, None))
+    chosen = loop.choose([best, first, close], (subject, current, (0.0, None)))
+    assert chosen is first and "together explain the residual as well as hyst" in loop.notes[0]
+    assert undistinguished([best, first, close], first, 0.05) is close  # what the pair's exception overrides
+    loop = _Augmentation(subject, 0.05, 400, 400, True, lambda _s: None, [], current, (0.0, None))
+    other = dataclasses.replace(close, effect="parameter:x")  # a third parameter as strong: no choice
+    assert loop.choose([best, first, close, other], (subject, current, (0.0, None))) is None

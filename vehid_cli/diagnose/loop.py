@@ -314,7 +314,8 @@ class _Augmentation:
         elif pair is not None:
             self.note(pair.describe())
             best = pair.first
-        rival = undistinguished(ranked, best, self.alpha)
+        # the pair's second is no rival of its first: the data need both (it is tested again in the next round)
+        rival = undistinguished([r for r in ranked if pair is None or r is not pair.second], best, self.alpha)
         if rival is not None:
             self.note(
                 f"cannot tell {best.effect} (LR {best.statistic:.3g}) from {rival.effect} (LR {rival.statistic:.3g}) "
