@@ -234,7 +234,8 @@ def test_misset_known_parameters_are_named_not_disguised_as_effects(tmp_path):
 def test_misset_known_parameters_on_a_long_record_are_not_left_to_an_effect_that_imitates_one(tmp_path):
     """kf and cr mis-set on a 15 s random road (a long record, screened on its 5 s window): on the window a Bouc-Wen
     element that never yields beats kf alone, and before the swap test (diagnose/claims.py) the loop claimed
-    "hysteresis, parameter:cr" with the residual at the noise. The swap test puts kf in its place at the end."""
+    "hysteresis, parameter:cr" with the residual at the noise. The swap test put kf in its place at the end; the
+    pair test now prefers kf and cr together to the element in the round, so the element is never claimed."""
     data, out = tmp_path / "kfcr15.csv", tmp_path / "d.json"
     road = ["--set", "road.bump=null", "--set", "road.random.iso_class=C", "--set", "simulation.duration=15"]
     sim = ["simulate", str(BASE), "-o", str(data), *road, "--set", "vehicle.kf=54000", "--set", "vehicle.cr=2975"]
@@ -243,7 +244,8 @@ def test_misset_known_parameters_on_a_long_record_are_not_left_to_an_effect_that
     assert result.exit_code == 0, result.output
     doc = json.loads(out.read_text())
     assert sorted(doc["selected"]) == ["parameter:cr", "parameter:kf"] and doc["verdict"].startswith("found")
-    assert any("hysteresis swapped for parameter:kf" in n for n in doc["notes"])
+    assert any("together explain the residual as well as hysteresis" in n for n in doc["notes"]), doc["notes"]
+    assert all(s["effect"] != "hysteresis" for s in doc["steps"])
     for name, truth in (("kf", 54000.0), ("cr", 2975.0)):
         lo, hi = doc["after"]["ci95"][name]
         assert lo - (hi - lo) < truth < hi + (hi - lo)  # the truth within about two intervals
