@@ -15,7 +15,6 @@ from tests.test_diagnose_effects import DIAGNOSE, simulate
 from vehid_cli.config import load_config
 from vehid_cli.diagnose import attribution as A
 from vehid_cli.diagnose import stops
-from vehid_cli.diagnose.jacobians import restricted
 from vehid_cli.diagnose.tails import chi2_isf
 from vehid_cli.optimizers.base import Problem
 from vehid_cli.systems.vehicle.diagnosis import diagnose
@@ -70,28 +69,54 @@ def test_a_stopped_fit_is_the_unstopped_fits_prefix():
     assert full.J < stopped.J < base.J  # stopped short of the converged fit, but past the base
 
 
-def test_a_known_parameters_fit_stops_short_of_a_sensor_corrections_lr():
-    """rank_candidates with `beat` (the round's best sensor correction's LR): a known parameter's fit is the trust
-    region, stopped after STOP_STEPS steps when it cannot reach `beat`; the exact twin's Levenberg–Marquardt is not
-    tried (it cannot stop). Without `beat` it is fitted to the end, by the twin where there is one."""
-    problem, base = decaying_problem()
-    tau = restricted(problem, np.r_[base.x, 2.0, 3.0], np.array([True, True, False, True]))  # s = 2 known, tau free
-    cand = A.parameter_candidate("e.tau", 3.0)
-    twin = []
+def tau_problem(seed: int = 0) -> tuple[Problem, A.Fit]:
+    """decaying_problem's data with the strength s = 2 known and its time constant tau a known parameter (configured
+    3.0, truly 0.7) over the car's (a, b); its exact linearisation (the residuals' Jacobian in closed form), and the
+    base: the straight line fitted with tau at its configured value."""
+    full, base = decaying_problem(seed)
+    t = np.linspace(0.0, 5.0, 400)
+    y = full.residuals(np.r_[0.0, 0.0, 0.0, 1.0][None, :])[1][0] * -1.0  # the data: the residual of the zero model
 
-    def rank(beat: float) -> A.Ranked:
+    def residuals(X):
+        X = np.atleast_2d(X)
+        R = X[:, :1] + X[:, 1:2] * t + 2.0 * np.exp(-t / X[:, 2:3]) - y
+        return np.mean(R**2, axis=1), R
+
+    def linearised(x):
+        r = residuals(x[None, :])[1][0]
+        J = np.column_stack([np.ones_like(t), t, 2.0 * np.exp(-t / x[2]) * t / x[2] ** 2])
+        return float(np.mean(r**2)), r, J
+
+    lo, hi = np.array([-10.0, -10.0, 0.05]), np.array([10.0, 10.0, 5.0])
+    problem = Problem(lo, hi, lambda X: residuals(X)[0], residuals, names=("a", "b", "e.tau"), linearised=linearised)
+    line = np.polyfit(t, y - 2.0 * np.exp(-t / 3.0), 1)[::-1]
+    return problem, A.Fit(("a", "b"), line, float(residuals(np.r_[line, 3.0])[0][0]), 1)
+
+
+def test_a_known_parameters_fit_stops_short_of_a_sensor_corrections_lr():
+    """rank_candidates with `beat` (the round's best sensor correction's LR): a known parameter's fit, by the exact
+    twin's Levenberg–Marquardt or else the trust region, is stopped after STOP_STEPS steps when it cannot reach
+    `beat`; within reach, or without `beat`, it is the same fit as before."""
+    problem, base = tau_problem()
+    cand = A.parameter_candidate("e.tau", 3.0)
+
+    def rank(beat: float, twin: bool) -> A.Ranked:
         return A.rank_candidates(
-            [cand], base, (0.0, None), lambda names, c: (tau, np.array([3.0])), lambda names, x: (0.0, None), 400,
-            make_linear=lambda names, c: twin.append(names), beat=beat, threads=1,
+            [cand], base, (0.0, None), lambda names, c: (problem, np.array([3.0])), lambda names, x: (0.0, None), 400,
+            statistic=lambda J0, J: 400 * (J0 - J) / 0.05**2, make_linear=(lambda names, c: problem if twin else None),
+            beat=beat, threads=1,
         )[0]  # fmt: skip
 
-    full = rank(0.0)
-    assert not full.stopped and twin  # the twin asked for (None here: the trust region then)
-    twin.clear()
-    stopped = rank(1e12)
-    assert stopped.stopped and stopped.fit.evaluations == 1 + stops.STOP_STEPS * (3 + 1) and not twin
-    assert 0 < stopped.statistic <= full.statistic
-    assert not rank(stops.STOP_FACTOR * stopped.statistic).stopped  # within reach of the LR it had: fitted on
+    for twin in (True, False):  # the trust region's check after 1 + STOP_STEPS (d + 1) evaluations; the LM's after
+        full = rank(0.0, twin)  # its start and STOP_STEPS accepted steps, its rejected ones between them
+        assert not full.stopped and full.statistic > 100.0
+        stopped = rank(1e12, twin)
+        assert stopped.stopped and stopped.fit.evaluations < full.fit.evaluations
+        assert twin or stopped.fit.evaluations == 1 + stops.STOP_STEPS * (3 + 1)
+        assert 0 < stopped.statistic <= full.statistic * (1 + 1e-9)
+        reach = rank(stops.STOP_FACTOR * stopped.statistic, twin)  # within reach of the LR it had: fitted on
+        assert not reach.stopped and reach.statistic == full.statistic
+    assert rank(0.0, True).fit.evaluations < rank(0.0, False).fit.evaluations  # the twin's LM: fewer evaluations
 
 
 def test_the_stop_rule_compares_the_factored_lr_with_the_best_parameter():

@@ -317,13 +317,24 @@ def candidate_fit(
 def parameter_fit(
     problem: Problem, base: Fit, x_added: NDArray, cand: Candidate, budget: int,
     make_linear: Callable[[tuple[str, ...], Candidate], Problem | None] | None,
+    stop: Callable[[float], bool] | None = None,
 ) -> Fit | None:  # fmt: skip
     """A known parameter's candidate fit by `linear_fit` where the augmented model is the linear car (`make_linear`
-    gives its exact-integrator problem), from the current fit and the configured value; None elsewhere."""
+    gives its exact-integrator problem), from the current fit and the configured value; None elsewhere. `stop(J)`:
+    asked once after 1 + STOP_STEPS Levenberg–Marquardt evaluations; True ends the fit there (the Fit `stopped`, its
+    J the exact integrator's at that point)."""
     if cand.kind != "parameter" or make_linear is None or base.fixed:
         return None
     linear = make_linear(base.names, cand)
-    return None if linear is None else linear_fit(problem, linear, np.concatenate([base.x, x_added]), budget)
+    if linear is None:
+        return None
+    x0 = np.concatenate([base.x, x_added])
+    if stop is None:
+        return linear_fit(problem, linear, x0, budget)
+    try:
+        return linear_fit(problem, stoppable(linear, 1 + STOP_STEPS, stop), x0, budget)
+    except Stopped as s:
+        return Fit(tuple(problem.names), s.x, s.J, s.evaluations, stopped=True)
 
 
 @dataclass(frozen=True)
@@ -438,9 +449,7 @@ def rank_candidates(
         at_base = cols if cand.kind == "effect" and names[: len(base.names)] == base.names else None
         stoppable = not_screened(cand) or cand.kind == "parameter"  # (a parameter's beat: the best sensor's LR)
         stop = cannot_win_after(base.J, statistic, margin, beat) if claim and stoppable else None
-        # a known parameter with a sensor correction's LR to beat: the trust region, which can stop (beside a faulty
-        # channel the exact twin's Levenberg–Marquardt walks to a bound and is discarded anyway)
-        fit = parameter_fit(problem, base, x_added, cand, budget, make_linear) if stop is None else None
+        fit = parameter_fit(problem, base, x_added, cand, budget, make_linear, stop)
         fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base, stop)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
         lr = statistic(base.J, J)

@@ -26,9 +26,20 @@ class Stopped(Exception):
 
 
 def stoppable(problem: Problem, after: int, stop: Callable[[float], bool]) -> Problem:
-    """The problem whose residuals, once `after` evaluations are done (checked at the end of the batch that reaches
-    it, once), raise Stopped with the best point so far when stop(its J) says the fit cannot matter."""
-    state = {"n": 0, "checked": False, "J": np.inf, "x": None}
+    """The problem whose evaluations, once `after` are counted (checked at the end of the batch that reaches it,
+    once), raise Stopped with the best point so far when stop(its J) says the fit cannot matter. Its residuals count
+    one per point (a trust-region step: d + 1 of them); its exact linearisation or normal equations (a
+    Levenberg–Marquardt step's evaluation) one each where they lower J (an accepted step: a rejected one only
+    raises the damping), so that `after` = 1 + STOP_STEPS is the start and STOP_STEPS steps taken."""
+    state = {"n": 0, "evaluations": 0, "checked": False, "J": np.inf, "x": None}
+
+    def tally(n: int, counted: int) -> None:
+        state["n"] += counted
+        state["evaluations"] += n
+        if state["n"] >= after and not state["checked"]:
+            state["checked"] = True
+            if state["x"] is not None and stop(state["J"]):
+                raise Stopped(state["x"], state["J"], state["evaluations"])
 
     def residuals(X: NDArray):
         costs, R = problem.residuals(X)
@@ -38,14 +49,29 @@ def stoppable(problem: Problem, after: int, stop: Callable[[float], bool]) -> Pr
             i = int(np.flatnonzero(ok)[np.argmin(c[ok])])
             if c[i] < state["J"]:
                 state["J"], state["x"] = float(c[i]), np.array(X[i], dtype=float)
-        state["n"] += len(X)
-        if state["n"] >= after and not state["checked"]:
-            state["checked"] = True
-            if state["x"] is not None and stop(state["J"]):
-                raise Stopped(state["x"], state["J"], state["n"])
+        tally(len(X), len(X))
         return costs, R
 
-    return Problem(problem.lower, problem.upper, problem.cost, residuals, problem.penalty, problem.names)
+    def one(at: Callable | None) -> Callable | None:
+        if at is None:
+            return None
+
+        def evaluated(x: NDArray):
+            got = at(x)  # the cost, then arrays (residuals first)
+            lower = got is not None and bool(np.isfinite(got[0])) and float(got[0]) < state["J"]
+            if lower and all(np.all(np.isfinite(a)) for a in got[1:]):
+                state["J"], state["x"] = float(got[0]), np.array(x, dtype=float)
+            else:
+                lower = False
+            tally(1, int(lower))
+            return got
+
+        return evaluated
+
+    return Problem(
+        problem.lower, problem.upper, problem.cost, residuals, problem.penalty, problem.names,
+        linearised=one(problem.linearised), normal=one(problem.normal),
+    )  # fmt: skip
 
 
 def cannot_win_after(
