@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from benchmarks.bench_diagnose import flip
 from tests.conftest import BASE_CONFIG, ROOT
 from tests.test_candidate_screening import counted
 from tests.test_diagnose_effects import DIAGNOSE, simulate
@@ -138,18 +139,6 @@ CASES = {  # issue 26's kf and cr mis-set, its Bouc-Wen hysteresis at 13 mm, a b
 BEATEN_BY = {"parameter": ("sensor",), "effect": ("parameter", "sensor")}  # what a stopped fit falls short of
 
 
-def flipped(path, column: str):
-    """The simulated CSV with `column`'s sign inverted (a sensor mounted upside down), its comments kept."""
-    lines = path.read_text().splitlines()
-    first = next(i for i, line in enumerate(lines) if not line.startswith("#"))
-    j = lines[first].split(",").index(column)
-    rows = [line.split(",") for line in lines[first + 1 :]]
-    for row in rows:
-        row[j] = repr(-float(row[j]))
-    path.write_text("\n".join(lines[: first + 1] + [",".join(r) for r in rows]) + "\n")
-    return path
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_a_stopped_fit_could_not_have_won(tmp_path, monkeypatch, case):
@@ -162,7 +151,7 @@ def test_a_stopped_fit_could_not_have_won(tmp_path, monkeypatch, case):
     truth, sets = CASES[case]
     data = simulate(tmp_path / "run.csv", truth, sets)
     if case == "acc2-flipped":
-        data = flipped(data, "acc2")
+        flip(data, "acc2")
     config = load_config(BASE_CONFIG, DIAGNOSE)
     fast = diagnose(config, data, analyse_residuals=False)
     factor = stops.STOP_FACTOR
