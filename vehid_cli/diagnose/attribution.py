@@ -321,8 +321,8 @@ def parameter_fit(
 ) -> Fit | None:  # fmt: skip
     """A known parameter's candidate fit by `linear_fit` where the augmented model is the linear car (`make_linear`
     gives its exact-integrator problem), from the current fit and the configured value; None elsewhere. `stop(J)`:
-    asked once after 1 + STOP_STEPS Levenberg–Marquardt evaluations; True ends the fit there (the Fit `stopped`, its
-    J the exact integrator's at that point)."""
+    asked once after its start and STOP_STEPS accepted Levenberg–Marquardt steps (`stoppable`); True ends the fit
+    there (the Fit `stopped`, its J the exact integrator's at that point)."""
     if cand.kind != "parameter" or make_linear is None or base.fixed:
         return None
     linear = make_linear(base.names, cand)
@@ -447,8 +447,8 @@ def rank_candidates(
         if earlier is not None and earlier.statistic > 0:
             own = {n: float(v) for n, v in zip(earlier.fit.names, earlier.fit.x, strict=True) if n in added}
         at_base = cols if cand.kind == "effect" and names[: len(base.names)] == base.names else None
-        stoppable = not_screened(cand) or cand.kind == "parameter"  # (a parameter's beat: the best sensor's LR)
-        stop = cannot_win_after(base.J, statistic, margin, beat) if claim and stoppable else None
+        can_stop = not_screened(cand) or cand.kind == "parameter"  # (a parameter's beat: the best sensor's LR)
+        stop = cannot_win_after(base.J, statistic, margin, beat) if claim and can_stop else None
         fit = parameter_fit(problem, base, x_added, cand, budget, make_linear, stop)
         fit = fit or candidate_fit(problem, base, x_added, cand, budget, scale, own, at_base, stop)
         J = min(fit.J, base.J)  # the nested model (candidate off) is always available
