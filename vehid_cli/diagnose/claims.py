@@ -152,7 +152,10 @@ def pair_test(subject: Subject, current: Fit, ranked: Sequence[Ranked], best: Ra
     PARSIMONY_SHARE of it); else None. Two mis-set parameters (kf and cr) each explain part of a residual that a
     three-unknown Bouc-Wen element spans alone; without this the loop claims the element, fits it on the whole
     record, and only swaps it out at the end."""
-    params = [r for r in ranked if r.kind == "parameter" and r.accepted and len(r.added) == 1]
+    # (fitted ones: a score-screened parameter's test holds no estimate of it)
+    params = [
+        r for r in ranked if r.kind == "parameter" and r.accepted and len(r.added) == 1 and r.added[0] in r.fit.names
+    ]
     if best.kind != "effect" or best.k < 2 or len(params) < 2 or current.fixed:
         return None
     first, second = params[0], params[1]
