@@ -129,7 +129,8 @@ def interrupt(args: list[str], delay: float, sig: signal.Signals) -> dict:
     time.sleep(1.5)  # workers of a SIGKILLed parent notice within 0.5 s
     return dict(
         sent=sent, returncode=proc.returncode, traceback="Traceback" in stderr and not hung,
-        orphans=sum(alive(w) for w in workers), hung=hung, stderr_tail=stderr[-4000:] if hung else "",
+        orphans=sum(alive(w) for w in workers), hung=hung,
+        stderr_tail=stderr[-4000:] if hung or "Traceback" in stderr else "",  # what to read when a trial fails
     )  # fmt: skip
 
 
