@@ -21,12 +21,17 @@ from vehid_cli.optimizers.base import Problem
 from vehid_cli.systems.vehicle.diagnosis import diagnose
 
 
+def decaying_data(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """t and y = 1 + 0.3 t + 2 exp(-t / 0.7) + noise (sigma 0.05)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 5.0, 400)
+    return t, 1.0 + 0.3 * t + 2.0 * np.exp(-t / 0.7) + 0.05 * rng.standard_normal(t.size)
+
+
 def decaying_problem(seed: int = 0) -> tuple[Problem, A.Fit]:
     """y = a + b t + s exp(-t / tau) + noise over 2 'car' unknowns (a, b) and an effect's strength s and shape tau
     (nonlinear: a few trust-region steps to converge); and the fit without the effect (s = 0) as the base."""
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, 5.0, 400)
-    y = 1.0 + 0.3 * t + 2.0 * np.exp(-t / 0.7) + 0.05 * rng.standard_normal(t.size)
+    t, y = decaying_data(seed)
 
     def residuals(X):
         X = np.atleast_2d(X)
@@ -74,9 +79,7 @@ def tau_problem(seed: int = 0) -> tuple[Problem, A.Fit]:
     """decaying_problem's data with the strength s = 2 known and its time constant tau a known parameter (configured
     3.0, truly 0.7) over the car's (a, b); its exact linearisation (the residuals' Jacobian in closed form), and the
     base: the straight line fitted with tau at its configured value."""
-    full, base = decaying_problem(seed)
-    t = np.linspace(0.0, 5.0, 400)
-    y = full.residuals(np.r_[0.0, 0.0, 0.0, 1.0][None, :])[1][0] * -1.0  # the data: the residual of the zero model
+    t, y = decaying_data(seed)
 
     def residuals(X):
         X = np.atleast_2d(X)

@@ -58,11 +58,10 @@ def stoppable(problem: Problem, after: int, stop: Callable[[float], bool]) -> Pr
 
         def evaluated(x: NDArray):
             got = at(x)  # the cost, then arrays (residuals first)
-            lower = got is not None and bool(np.isfinite(got[0])) and float(got[0]) < state["J"]
-            if lower and all(np.all(np.isfinite(a)) for a in got[1:]):
+            ok = got is not None and bool(np.isfinite(got[0])) and all(np.all(np.isfinite(a)) for a in got[1:])
+            lower = ok and float(got[0]) < state["J"]
+            if lower:
                 state["J"], state["x"] = float(got[0]), np.array(x, dtype=float)
-            else:
-                lower = False
             tally(1, int(lower))
             return got
 
