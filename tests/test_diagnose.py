@@ -262,7 +262,7 @@ def test_hysteresis_shape_found_from_the_wrong_basin():
     ref = build_task(truth).reference(0)
     cfg = prepare_config(load_config(BASE, ["noise.level=0.05"]))
     task = build_task(cfg)
-    specs = A.candidate_specs(cfg)
+    specs = A.candidate_specs(cfg, cfg.simulation.dt)
     limits, starts = A.candidate_ranges(specs)
     base = A.lsq_fit(task.problem(ref), task.nominal, 400)
     cand = specs["hysteresis"]

@@ -121,7 +121,7 @@ def test_effect_score_is_the_fitted_likelihood_ratio_to_first_order(effect, trut
     problem = masked(task.problem(ref), keep)
     declared = lsq_fit(problem, task.nominal, 600)
     cfg = prepare_config(load_config(BASE, NOISE))
-    cand = candidate_specs(cfg)[effect]
+    cand = candidate_specs(cfg, cfg.simulation.dt)[effect]
     aug = task.with_unknowns(list(cand.unknowns + cand.shape), limits={**cand.limits, **cand.shape_limits},
                              start=cand.start)  # fmt: skip
     cproblem = masked(aug.problem(ref), keep)
@@ -154,7 +154,8 @@ def test_effects_that_cannot_win_would_have_lost_to_the_parameter():
     kf = linear_fit(masked(with_kf.problem(ref), keep), masked(exact_twin(with_kf).problem(ref), keep),
                     np.concatenate([declared.x, with_kf.nominal[D:]]), 100)  # fmt: skip
     best = (declared.J - kf.J) * R
-    specs = candidate_specs(prepare_config(load_config(BASE, NOISE)))
+    cfg = prepare_config(load_config(BASE, NOISE))
+    specs = candidate_specs(cfg, cfg.simulation.dt)
     basis = fitted_basis(problem, declared.x, np.ones(D, dtype=bool))
     scores, problems = {}, {}
     for cand in (c for c in specs.values() if screenable(c)):

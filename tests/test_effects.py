@@ -11,7 +11,8 @@ from tests.test_kernel import knotted_road, orders
 from vehid_cli.config import load_config
 from vehid_cli.identify.experiment import build_experiment
 from vehid_cli.io.measurement import read_measurement, time_grid
-from vehid_cli.models.effects import LIBRARY, effect_rows, strut_effects
+from vehid_cli.models.effects import LIBRARY, CarScale, effect_rows, strut_effects
+from vehid_cli.models.effects.backlash import STABLE, car, stiffest_contact
 from vehid_cli.models.fullcar import assemble
 from vehid_cli.sim.kernel import integrate
 from vehid_cli.sim.nonlinear import fullcar_struts, simulate_effects
@@ -293,3 +294,19 @@ def test_bad_effect_unknowns_are_named(unknowns, message):
         sets.append("vehicle.effects.hysteresis.alpha_f=0")
     with pytest.raises(InputError, match=message.replace("(", r"\(")):
         load_config(base, sets)
+
+
+def test_backlash_contact_bound_is_the_rk4_stability_edge():
+    """The car candidate's contact stiffness stops below the stiffness at which one RK4 step of the piston's state
+    (eigenvalue -k / c) stops damping it: the growth factor of RK4's polynomial crosses 1 there; a finer step moves
+    the edge out until the fixed 1e8 N/m bound applies."""
+    def growth(z: float) -> float:
+        return abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)
+
+    c, h = 2800.0, 1e-3
+    k = stiffest_contact(c, h)
+    assert growth(-0.999 * k * h / c) < 1.0 < growth(-1.001 * k * h / c)
+    upper = car(CarScale(c, 3500.0, h)).shape_limits["backlash.k_contact"][1]
+    assert upper == pytest.approx(STABLE * k, rel=1e-12)  # the softer axle's damping sets it
+    assert car(CarScale(c, 3500.0, h / 4)).shape_limits["backlash.k_contact"][1] == pytest.approx(4 * upper)
+    assert car(CarScale(c, 3500.0, 1e-5)).shape_limits["backlash.k_contact"][1] == 1e8

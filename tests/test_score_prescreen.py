@@ -51,7 +51,8 @@ def test_an_effect_short_of_the_best_sensor_correction_or_known_parameter_is_not
     from vehid_cli.diagnose.attribution import Fit, Ranked, candidate_specs, screenable
     from vehid_cli.diagnose.score import cannot_win
 
-    specs = [c for c in candidate_specs(prepare_config(load_config(BASE, NOISE))).values() if screenable(c)][:3]
+    cfg = prepare_config(load_config(BASE, NOISE))
+    specs = [c for c in candidate_specs(cfg, cfg.simulation.dt).values() if screenable(c)][:3]
     current = Fit(("m",), np.ones(1), 2.0, 1)
     scores = {c.effect: (1000.0, c.unknowns) for c in specs}  # 2 x 1000 + 20 < 5000
     best = Ranked("x", ("x",), 1, 1.0, 5000.0, 0.0, 0.0, 1.0, accepted, current, 0.0, kind=kind)

@@ -23,7 +23,7 @@ EFFECT = Effect(
     strength="cq",
     force=force,
     order=35,
-    car_candidate=lambda cf, cr: per_axle_candidate("toy_quadratic_damper", "cq", constant(0.0), constant(5e4), cf, cr),
+    car_candidate=lambda s: per_axle_candidate("toy_quadratic_damper", "cq", constant(0.0), constant(5e4), s),
     shapes=(Shape("toy_quadratic", "velocity", lambda x: [(np.abs(x) * x, 0, "")], rank=9),),
     resembles={"toy_quadratic": 1.0, "quadratic_damping": 1.0},
 )

@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from ..core.allocator import release_if_handing_back
 from ..core.result import Result
-from ..models.effects import LIBRARY, CandidateForm
+from ..models.effects import LIBRARY, CandidateForm, CarScale
 from ..models.faults import Channel, fault_of
 from ..optimizers.base import BudgetExhausted, Problem, Search
 from ..optimizers.lsq import BOUND_SHARE, gauss_newton, polish
@@ -132,12 +132,14 @@ def effect_candidate(name: str, form: CandidateForm) -> Candidate:
     )  # fmt: skip
 
 
-def candidate_specs(config) -> dict[str, Candidate]:
+def candidate_specs(config, step: float) -> dict[str, Candidate]:
     """Every candidate for the car: each registered effect's car form (its ranges may scale with the configured
-    damping cf, cr), in the library's order, then the configured known parameters (``parameter:<name>``)."""
+    damping cf, cr and the integrator's step [s]), in the library's order, then the configured known parameters
+    (``parameter:<name>``)."""
     v = config.vehicle.values()
+    scale = CarScale(v["cf"], v["cr"], step)
     out = {
-        name: effect_candidate(name, e.car_candidate(v["cf"], v["cr"]))
+        name: effect_candidate(name, e.car_candidate(scale))
         for name, e in LIBRARY.items()
         if e.car_candidate is not None
     }

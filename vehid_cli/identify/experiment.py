@@ -89,6 +89,11 @@ class Experiment:
         """Time step [s]."""
         return float(self.t[1] - self.t[0])
 
+    @property
+    def step(self) -> float:
+        """The integrator's step [s]: the time step over the configured substeps (the compiled kernel's)."""
+        return self.dt / (self.config.simulation.substeps or 1)
+
     def parameters(self, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:
         """All 16 parameters for a batch: the configured car with `values` replacing some of them
         (effect parameters, ``effect.name``, are ignored here: see ``effects``)."""

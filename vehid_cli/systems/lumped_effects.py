@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..diagnose.attribution import Candidate, effect_candidate
-from ..models.effects import LIBRARY, effect_rows
+from ..models.effects import LIBRARY, CarScale, effect_rows
 from ..sim.kernel import integrate
 from ..sim.nonlinear import upsample
 
@@ -67,11 +67,12 @@ def rig_candidates(system) -> dict[str, Candidate]:
     unknowns of axles the rig lacks dropped, companions renamed to the rig's parameters."""
     damping = system.strut_damping(system.parameters(system.box.nominal[None, :]))[0]
     axles = system.axles  # e.g. ("f",) for a quarter car
+    scale = CarScale(float(damping[0]), float(damping[1]), min(r.dt for r in system.rigs) / SUBSTEPS)
     out = {}
     for name, e in LIBRARY.items():
         if e.car_candidate is None or name in system.excluded_effects:
             continue
-        c = effect_candidate(name, e.car_candidate(float(damping[0]), float(damping[1])))
+        c = effect_candidate(name, e.car_candidate(scale))
 
         def keep(n: str) -> bool:
             tail = n.rsplit("_", 1)

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 
 from numpy.typing import ArrayLike
 
-from .base import BenchScale, CandidateForm, Effect, Param, Shape
+from .base import BenchScale, CandidateForm, CarScale, Effect, Param, Shape
 from .law import AXLE_OF_CORNER, N_CORNERS, EffectSet, bench_law, layout, rows_for, strut_law
 
 AXLES = ("f", "r")
@@ -140,7 +140,7 @@ def parameter_unit(effect: str, name: str) -> str:
 
 
 __all__ = [
-    "AXLES", "AXLE_OF_CORNER", "LIBRARY", "N_CORNERS", "BenchScale", "CandidateForm", "Effect", "EffectSet", "Param",
-    "Shape", "bench_effect_rows", "bench_lag_state", "bench_names", "bound_violation", "check_names", "effect_rows",
-    "parameter_unit", "register", "unregister",
+    "AXLES", "AXLE_OF_CORNER", "LIBRARY", "N_CORNERS", "BenchScale", "CandidateForm", "CarScale", "Effect", "EffectSet",
+    "Param", "Shape", "bench_effect_rows", "bench_lag_state", "bench_names", "bound_violation", "check_names",
+    "effect_rows", "parameter_unit", "register", "unregister",
 ]  # fmt: skip

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .base import SLOT, BenchScale, CandidateForm, Effect, Param, Shape, per_axle_candidate, velocity_starts
+from .base import SLOT, BenchScale, CandidateForm, CarScale, Effect, Param, Shape, per_axle_candidate, velocity_starts
 
 ASYM_EPS = 0.02  # [m/s] the library's switch width: the shape the non-parametric estimate compares with
 
@@ -20,10 +20,10 @@ def force(x, v, c, i, p, z, zd, f, damper):
     return f, damper
 
 
-def car(cf: float, cr: float) -> CandidateForm:
+def car(s: CarScale) -> CandidateForm:
     """dc per axle within +-2 c; the re-fit also frees the damping it splits (cf, cr)."""
     return per_axle_candidate(
-        "asymmetric_damping", "dc", lambda c: -2 * c, lambda c: 2 * c, cf, cr, companions=("cf", "cr"),
+        "asymmetric_damping", "dc", lambda c: -2 * c, lambda c: 2 * c, s, companions=("cf", "cr"),
         shape_limits={"asymmetric_damping.v_eps": (1e-3, 0.5)}, starts=velocity_starts("asymmetric_damping.v_eps"),
     )  # fmt: skip
 

@@ -88,6 +88,17 @@ class BenchScale:
 
 
 @dataclass(frozen=True)
+class CarScale:
+    """What a car (or rig) candidate's ranges are set from: the configured linear damping of the front and rear
+    struts cf, cr [N s/m] and the integrator's step h [s] (the sampling step over the RK4 substeps), which bounds how
+    fast an internal state the fit may give an effect (an explicit step diverges beyond it)."""
+
+    cf: float
+    cr: float
+    h: float
+
+
+@dataclass(frozen=True)
 class Shape:
     """A curve an additive strut force g(d) or h(v) can have, as the non-parametric estimate compares it: for the
     values x of its variable, candidate curves (curve, sign the amplitude must have (0: free), detail)."""
@@ -111,7 +122,7 @@ class Effect:
     states: int = 0  # internal states per strut
     tyre: bool = False  # acts on the tyres (needs the tyre struts)
     bench: bool = False  # acts around a damper on a test bench too (the composed bench law)
-    car_candidate: Callable[[float, float], CandidateForm] | None = None  # (cf, cr) -> the car's candidate form
+    car_candidate: Callable[[CarScale], CandidateForm] | None = None  # the car's damping and step -> its form there
     bench_candidate: Callable[[BenchScale], CandidateForm] | None = None  # a bench run's scales -> its form there
     shapes: tuple[Shape, ...] = ()  # the shapes its own force has
     resembles: Mapping[str, float] = field(default_factory=dict)  # shape name -> affinity: which shapes point to it
@@ -142,8 +153,7 @@ def per_axle_candidate(
     param: str,
     low: Callable[[float], float],
     high: Callable[[float], float],
-    cf: float,
-    cr: float,
+    s: CarScale,
     *,
     start: float | None = None,
     companions: tuple[str, ...] = (),
@@ -152,9 +162,9 @@ def per_axle_candidate(
     linear: bool = True,
 ) -> CandidateForm:
     """The car's usual candidate form: the strength `param` per axle (``effect.param_f``, ``_r``) in [low(c), high(c)]
-    of the axle's configured damping c, null 0; shape parameters (``effect.name``) in `shape_limits`."""
+    of the axle's configured damping c (`s`), null 0; shape parameters (``effect.name``) in `shape_limits`."""
     names = (f"{effect}.{param}_f", f"{effect}.{param}_r")
-    limits = {n: (low(c), high(c)) for n, c in zip(names, (cf, cr), strict=True)}
+    limits = {n: (low(c), high(c)) for n, c in zip(names, (s.cf, s.cr), strict=True)}
     return CandidateForm(
         names, limits, {n: start for n in names} if start is not None else {}, tuple(shape_limits or {}),
         dict(shape_limits or {}), strength=names, null={n: 0.0 for n in names}, starts=tuple(starts), linear=linear,

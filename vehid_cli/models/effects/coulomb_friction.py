@@ -6,7 +6,18 @@ import math
 
 import numpy as np
 
-from .base import SLOT, BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate, velocity_starts
+from .base import (
+    SLOT,
+    BenchScale,
+    CandidateForm,
+    CarScale,
+    Effect,
+    Param,
+    Shape,
+    constant,
+    per_axle_candidate,
+    velocity_starts,
+)
 
 COULOMB_EPS = 0.01  # [m/s] the library's smoothing: the shape the non-parametric estimate compares with
 
@@ -18,10 +29,10 @@ def force(x, v, c, i, p, z, zd, f, damper):
     return f, damper
 
 
-def car(cf: float, cr: float) -> CandidateForm:
+def car(s: CarScale) -> CandidateForm:
     """Fc per axle up to 2 kN."""
     return per_axle_candidate(
-        "coulomb_friction", "Fc", constant(0.0), constant(2000.0), cf, cr,
+        "coulomb_friction", "Fc", constant(0.0), constant(2000.0), s,
         shape_limits={"coulomb_friction.v_eps": (1e-3, 0.5)}, starts=velocity_starts("coulomb_friction.v_eps"),
     )  # fmt: skip
 

@@ -3,7 +3,7 @@ constant T (one state per strut): dF_d/dt = (c v - F_d) / T; adds F_d - c v [N].
 
 from __future__ import annotations
 
-from .base import SLOT, BenchScale, CandidateForm, Effect, Param, constant, per_axle_candidate
+from .base import SLOT, BenchScale, CandidateForm, CarScale, Effect, Param, constant, per_axle_candidate
 
 
 def force(x, v, c, i, p, z, zd, f, damper):
@@ -19,10 +19,10 @@ def force(x, v, c, i, p, z, zd, f, damper):
     return f, damper
 
 
-def car(cf: float, cr: float) -> CandidateForm:
+def car(s: CarScale) -> CandidateForm:
     """T per axle from 1 to 100 ms."""
     return per_axle_candidate(
-        "damper_lag", "T", constant(1e-3), constant(0.1), cf, cr, start=3e-3, linear=False,
+        "damper_lag", "T", constant(1e-3), constant(0.1), s, start=3e-3, linear=False,
         starts=tuple({"damper_lag.T_f": t, "damper_lag.T_r": t} for t in (2e-3, 8e-3, 3e-2)),
     )  # fmt: skip
 

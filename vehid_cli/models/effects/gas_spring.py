@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import SLOT, BenchScale, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
+from .base import SLOT, BenchScale, CandidateForm, CarScale, Effect, Param, Shape, constant, per_axle_candidate
 
 GAS_L, GAS_KAPPA = 0.1, 1.4  # the library's defaults [m], [-]: the shape the non-parametric estimate compares with
 
@@ -21,10 +21,10 @@ def force(x, v, c, i, p, z, zd, f, damper):
     return f, damper
 
 
-def car(cf: float, cr: float) -> CandidateForm:
+def car(s: CarScale) -> CandidateForm:
     """F0 per axle up to 20 kN; the gas column from 2 cm to 1 m."""
     return per_axle_candidate(
-        "gas_spring", "F0", constant(0.0), constant(2e4), cf, cr, shape_limits={"gas_spring.L": (0.02, 1.0)},
+        "gas_spring", "F0", constant(0.0), constant(2e4), s, shape_limits={"gas_spring.L": (0.02, 1.0)},
         starts=tuple({"gas_spring.L": s} for s in (0.04, 0.1, 0.3)),
     )  # fmt: skip
 

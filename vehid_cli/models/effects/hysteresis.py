@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .base import SLOT, BenchScale, CandidateForm, Effect, Param, constant, per_axle_candidate
+from .base import SLOT, BenchScale, CandidateForm, CarScale, Effect, Param, constant, per_axle_candidate
 
 
 def force(x, v, c, i, p, z, zd, f, damper):
@@ -23,10 +23,10 @@ def yield_starts(yields_m: Sequence[float], A: float = 1.0) -> tuple[dict[str, f
     return tuple({"hysteresis.beta": A / (2 * y * y), "hysteresis.gamma": A / (2 * y * y)} for y in yields_m)
 
 
-def car(cf: float, cr: float) -> CandidateForm:
+def car(s: CarScale) -> CandidateForm:
     """alpha per axle up to 2e6 N/m; loops that yield between 0.5 and 20 mm."""
     return per_axle_candidate(
-        "hysteresis", "alpha", constant(0.0), constant(2e6), cf, cr,
+        "hysteresis", "alpha", constant(0.0), constant(2e6), s,
         shape_limits={"hysteresis.beta": (1e3, 2e6), "hysteresis.gamma": (1e3, 2e6)},
         starts=yield_starts((0.001, 0.003, 0.008, 0.018)),
     )  # fmt: skip

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .base import SLOT, CandidateForm, Effect, Param, Shape, constant, per_axle_candidate
+from .base import SLOT, CandidateForm, CarScale, Effect, Param, Shape, constant, per_axle_candidate
 
 
 def force(x, v, c, i, p, z, zd, f, damper):
@@ -12,9 +12,9 @@ def force(x, v, c, i, p, z, zd, f, damper):
     return f, damper
 
 
-def car(cf: float, cr: float) -> CandidateForm:
+def car(s: CarScale) -> CandidateForm:
     """k3 per axle up to 1e9 N/m³."""
-    return per_axle_candidate("progressive_spring", "k3", constant(0.0), constant(1e9), cf, cr)
+    return per_axle_candidate("progressive_spring", "k3", constant(0.0), constant(1e9), s)
 
 
 EFFECT = Effect(

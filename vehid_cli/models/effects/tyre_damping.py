@@ -3,7 +3,7 @@ road's."""
 
 from __future__ import annotations
 
-from .base import SLOT, CandidateForm, Effect, Param, constant, per_axle_candidate
+from .base import SLOT, CandidateForm, CarScale, Effect, Param, constant, per_axle_candidate
 
 
 def force(x, v, c, i, p, z, zd, f, damper):
@@ -13,9 +13,9 @@ def force(x, v, c, i, p, z, zd, f, damper):
     return f, damper
 
 
-def car(cf: float, cr: float) -> CandidateForm:
+def car(s: CarScale) -> CandidateForm:
     """ct per axle up to 5 kN s/m."""
-    return per_axle_candidate("tyre_damping", "ct", constant(0.0), constant(5000.0), cf, cr)
+    return per_axle_candidate("tyre_damping", "ct", constant(0.0), constant(5000.0), s)
 
 
 EFFECT = Effect(
