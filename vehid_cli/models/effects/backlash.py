@@ -29,13 +29,15 @@ def force(x, v, c, i, p, z, zd, f, damper):
 
 def car(s: CarScale) -> CandidateForm:
     """gap per axle from 10 um to 2 cm; the contact stiffness from 1e4 N/m up to 1e8 N/m or, below that, STABLE of the
-    stiffest the integrator can step (`stiffest_contact`): a stiffer contact diverges at the run's step, and the fit
-    of data without play heads there (the rigid mount), where it crept along the edge of divergence for ~100
-    simulations."""
+    stiffest the integrator can step (`stiffest_contact`): a stiffer contact diverges at the run's step. Data without
+    play pull the fit to the rigid mount (the gap at its floor, the contact at its stiffest), where it crept along
+    the edge of divergence for ~100 simulations: that corner is one more start."""
+    k_max = max(1e5, min(1e8, STABLE * stiffest_contact(min(s.cf, s.cr), s.h)))
+    gaps = tuple({"backlash.gap_f": g, "backlash.gap_r": g} for g in (1e-4, 1e-3, 5e-3))
+    rigid = {"backlash.gap_f": 1e-5, "backlash.gap_r": 1e-5, "backlash.k_contact": k_max}
     return per_axle_candidate(
         "backlash", "gap", constant(1e-5), constant(0.02), s, start=1e-4,
-        shape_limits={"backlash.k_contact": (1e4, max(1e5, min(1e8, STABLE * stiffest_contact(min(s.cf, s.cr), s.h))))},
-        linear=False, starts=tuple({"backlash.gap_f": g, "backlash.gap_r": g} for g in (1e-4, 1e-3, 5e-3)),
+        shape_limits={"backlash.k_contact": (1e4, k_max)}, linear=False, starts=(*gaps, rigid),
     )  # fmt: skip
 
 
