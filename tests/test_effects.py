@@ -300,6 +300,7 @@ def test_backlash_contact_bound_is_the_rk4_stability_edge():
     """The car candidate's contact stiffness stops below the stiffness at which one RK4 step of the piston's state
     (eigenvalue -k / c) stops damping it: the growth factor of RK4's polynomial crosses 1 there; a finer step moves
     the edge out until the fixed 1e8 N/m bound applies."""
+
     def growth(z: float) -> float:
         return abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)
 
@@ -310,3 +311,4 @@ def test_backlash_contact_bound_is_the_rk4_stability_edge():
     assert upper == pytest.approx(STABLE * k, rel=1e-12)  # the softer axle's damping sets it
     assert car(CarScale(c, 3500.0, h / 4)).shape_limits["backlash.k_contact"][1] == pytest.approx(4 * upper)
     assert car(CarScale(c, 3500.0, 1e-5)).shape_limits["backlash.k_contact"][1] == 1e8
+    assert car(CarScale(c, 3500.0, None)).shape_limits["backlash.k_contact"][1] == 1e8  # Newmark: not RK4's edge

@@ -132,10 +132,10 @@ def effect_candidate(name: str, form: CandidateForm) -> Candidate:
     )  # fmt: skip
 
 
-def candidate_specs(config, step: float) -> dict[str, Candidate]:
+def candidate_specs(config, step: float | None) -> dict[str, Candidate]:
     """Every candidate for the car: each registered effect's car form (its ranges may scale with the configured
-    damping cf, cr and the integrator's step [s]), in the library's order, then the configured known parameters
-    (``parameter:<name>``)."""
+    damping cf, cr and the RK4 step [s], None on another integrator), in the library's order, then the configured
+    known parameters (``parameter:<name>``)."""
     v = config.vehicle.values()
     scale = CarScale(v["cf"], v["cr"], step)
     out = {

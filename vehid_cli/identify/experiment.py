@@ -91,7 +91,7 @@ class Experiment:
 
     @property
     def step(self) -> float:
-        """The integrator's step [s]: the time step over the configured substeps (the compiled kernel's)."""
+        """The time-stepping integrator's step [s]: the time step over the configured substeps (the kernel's)."""
         return self.dt / (self.config.simulation.substeps or 1)
 
     def parameters(self, values: Mapping[str, ArrayLike] | None = None) -> dict[str, NDArray]:

@@ -28,11 +28,11 @@ def force(x, v, c, i, p, z, zd, f, damper):
 
 
 def car(s: CarScale) -> CandidateForm:
-    """gap per axle from 10 um to 2 cm; the contact stiffness from 1e4 N/m up to 1e8 N/m or, below that, STABLE of the
-    stiffest the integrator can step (`stiffest_contact`): a stiffer contact diverges at the run's step. Data without
+    """gap per axle from 10 um to 2 cm; the contact stiffness from 1e4 N/m up to 1e8 N/m or, on RK4, below that STABLE
+    of the stiffest its step can take (`stiffest_contact`): a stiffer contact diverges at the run's step. Data without
     play pull the fit to the rigid mount (the gap at its floor, the contact at its stiffest), where it crept along
     the edge of divergence for ~100 simulations: that corner is one more start."""
-    k_max = max(1e5, min(1e8, STABLE * stiffest_contact(min(s.cf, s.cr), s.h)))
+    k_max = 1e8 if s.h is None else max(1e5, min(1e8, STABLE * stiffest_contact(min(s.cf, s.cr), s.h)))
     gaps = tuple({"backlash.gap_f": g, "backlash.gap_r": g} for g in (1e-4, 1e-3, 5e-3))
     rigid = {"backlash.gap_f": 1e-5, "backlash.gap_r": 1e-5, "backlash.k_contact": k_max}
     return per_axle_candidate(

@@ -90,12 +90,12 @@ class BenchScale:
 @dataclass(frozen=True)
 class CarScale:
     """What a car (or rig) candidate's ranges are set from: the configured linear damping of the front and rear
-    struts cf, cr [N s/m] and the integrator's step h [s] (the sampling step over the RK4 substeps), which bounds how
-    fast an internal state the fit may give an effect (an explicit step diverges beyond it)."""
+    struts cf, cr [N s/m] and the RK4 step h [s] (the sampling step over the substeps; None on another integrator),
+    which bounds how fast an internal state the fit may give an effect (the explicit step diverges beyond it)."""
 
     cf: float
     cr: float
-    h: float
+    h: float | None = None
 
 
 @dataclass(frozen=True)

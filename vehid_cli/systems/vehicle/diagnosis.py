@@ -341,7 +341,8 @@ def diagnose(
     found = check_runs(runs, views)  # the measurement chain first: its faults are candidates beside the physics
     for f in found.problems:
         say(f"check {f.status}: {f.channel} {f.check}: {f.message}")
-    specs = {**candidate_specs(config, min(t.experiment.step for t in runs)), **sensor_candidates(found, views[0])}
+    rk4 = min(t.experiment.step for t in runs) if config.simulation.integrator == "rk4" else None  # (else newmark)
+    specs = {**candidate_specs(config, rk4), **sensor_candidates(found, views[0])}
     del views  # each channel four times over the record (15 MB at 60 s, 1 kHz): not held under the fits (issue 26)
     limits, starts = candidate_ranges(specs)
     twin = exact_twin(task)
