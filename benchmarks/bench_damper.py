@@ -16,10 +16,14 @@ from __future__ import annotations
 import argparse
 import platform
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.machine import host  # noqa: E402
 from vehid_cli.models.bench import BenchHistory, sawtooth, sine
 from vehid_cli.models.damper import default_values
 from vehid_cli.sim.bench import simulate_damper
@@ -91,7 +95,7 @@ def main() -> None:
     args = parser.parse_args()
     benches = {"sine": sine(0.025, 0.8, 2.4, 1e-3), "sawtooth": sawtooth(cycles=4.5)}  # 3001 samples each
     print(
-        f"# {platform.node()} {platform.machine()}, python {platform.python_version()}; "
+        f"# {host()}, python {platform.python_version()}; "
         f"{benches['sine'].t.size - 1} steps, RK4 1 ms; evaluations per CPU second, median (best) of {args.repeats}"
     )
     print(f"{'model':<42} {'bench':<8} {'batch':>5} {'fast path':>16} {'reference':>14} {'x ref':>6} {'/ BW':>5}")

@@ -26,6 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.bench_campaign import tree_rss_bytes  # noqa: E402
+from benchmarks.machine import host  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "configs" / "gokdag2015" / "base.yaml"
@@ -130,7 +131,7 @@ def main() -> None:
     parser.add_argument("--long", action="store_true", help="also the 60 s record")
     parser.add_argument("--against", type=Path, help="another source tree, timed interleaved with this one")
     args = parser.parse_args()
-    print(f"# {platform.node()} {platform.machine()}, {os.cpu_count()} cpus, python {platform.python_version()}, "
+    print(f"# {host()}, {os.cpu_count()} cpus, python {platform.python_version()}, "
           f"load average {os.getloadavg()[0]:.1f}")  # fmt: skip
     print(f"anchor: vehid --help median {anchor(args.repeats):.2f} s wall")
     time_unexplained(args.repeats)

@@ -32,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.bench_campaign import tree_rss_bytes, tree_sum_bytes  # noqa: E402
+from benchmarks.machine import host  # noqa: E402
 from examples.make_rig_runs import write_rig_run  # noqa: E402
 from vehid_cli.config import load_config  # noqa: E402
 from vehid_cli.systems import build_system  # noqa: E402
@@ -83,7 +84,7 @@ def main() -> None:
     parser.add_argument("--anchor", type=float, default=3.0, help="duration [s] of the anchor's short record")
     parser.add_argument("--against", type=Path, help="another vehid checkout to identify the long record with")
     args = parser.parse_args()
-    print(f"# {platform.node()} {platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
+    print(f"# {host()}, {os.cpu_count()} cores, python {platform.python_version()}")
     cases = {
         f"identify lsq, {args.anchor:g} s record (anchor)": (ROOT, args.anchor),
         f"identify lsq, {args.duration:g} s record": (ROOT, args.duration),

@@ -17,8 +17,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -26,6 +26,8 @@ import numpy as np
 import scipy.signal
 from scipy.optimize import least_squares
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.machine import host  # noqa: E402
 from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.core.streams import run_streams
@@ -79,7 +81,7 @@ def main() -> None:
     parser.add_argument("--peer-runs", type=int, default=10, help="runs the peer fits (of the campaign's 30)")
     args = parser.parse_args()
     threads = {k: os.environ.get(k) for k in ("NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
-    print(f"# {platform.node()} {platform.machine()}, {os.cpu_count()} cores, threads {threads}")
+    print(f"# {host()}, {os.cpu_count()} cores, threads {threads}")
     config = load_config(BASE, OVERRIDES)
     system = build_system(config)
     n_runs = system.runs
