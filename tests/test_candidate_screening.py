@@ -7,11 +7,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.test_diagnose_exact import BASE, NOISE, case
+from vehid_cli.config import load_config
 from vehid_cli.diagnose import attribution as A
 from vehid_cli.diagnose import starts as S
+from vehid_cli.diagnose.holdout import masked
 from vehid_cli.diagnose.score import fitted_basis
 from vehid_cli.optimizers import lsq
 from vehid_cli.optimizers.base import Problem, Search
+from vehid_cli.systems.vehicle.diagnosis import prepare_config
 
 
 def counted(problem: Problem) -> tuple[Problem, list[int]]:
@@ -175,11 +179,6 @@ def test_backlash_on_data_without_play_ends_at_its_rigid_corner_in_few_simulatio
     divergence (models/effects/backlash) and that corner is a start, so the fit ends there, at the bound, in a few
     trust-region steps (it had crept along the edge of divergence for 142 evaluations, 181 simulations with the
     screening of its starts), never below the declared model's J (LR 0)."""
-    from tests.test_diagnose_exact import BASE, NOISE, case
-    from vehid_cli.config import load_config
-    from vehid_cli.diagnose.holdout import masked
-    from vehid_cli.systems.vehicle.diagnosis import prepare_config
-
     task, ref, keep = case()
     problem = masked(task.problem(ref), keep)
     declared = A.lsq_fit(problem, task.nominal, 600)
