@@ -2,7 +2,7 @@
 
 Targets (issue 26): a 3 s car case in <= 2 s wall on 2 cores; a 60 s ISO-road record at 1 kHz in <= 15 s and
 <= 300 MiB peak RSS (`--long`: an effect, two mis-set known parameters, a sensor upside down, nothing missing);
-data too short to tell answered before any fit. Each figure is printed beside an anchor timed in
+data too short to tell answered before any candidate is fitted. Each figure is printed beside an anchor timed in
 the same run (`vehid --help`, the start-up every command pays), so a loaded machine can be read as a ratio.
 Each case is simulated once by `vehid simulate` (the project's own simulator) and then diagnosed through the CLI
 in a fresh process (imports and the cached kernels included), `--repeats` times; the median wall and the peak RSS
@@ -37,7 +37,8 @@ CASES = {  # name: (truth config, simulate --set overrides, diagnose --set overr
     "3 s bump, Bouc-Wen yielding at 13 mm": (
         HYSTERESIS, ["vehicle.effects.hysteresis.beta=3e3", "vehicle.effects.hysteresis.gamma=3e3"], []),
     "3 s bump, nothing missing": (BASE, [], []),
-    "0.3 s bump (too short: refused before any fit)": (BASE, ["simulation.duration=0.3"], ["simulation.duration=0.3"]),
+    "0.3 s bump (too short: refused before any candidate is fitted)": (
+        BASE, ["simulation.duration=0.3"], ["simulation.duration=0.3"]),
 }  # fmt: skip
 ROAD60 = ["road.bump=null", "road.random.iso_class=C", "simulation.duration=60"]
 LONG = {
