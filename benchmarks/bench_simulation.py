@@ -35,7 +35,7 @@ import scipy  # noqa: E402
 from scipy import signal  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.machine import cpu_model  # noqa: E402
+from benchmarks.machine import host  # noqa: E402
 from vehid_cli.config import load_config  # noqa: E402
 from vehid_cli.identify.experiment import build_experiment  # noqa: E402
 from vehid_cli.sim.kernel import cubic_spring, set_threads  # noqa: E402
@@ -65,8 +65,7 @@ def main() -> None:
     exp = build_experiment(cfg)
     road, dt = exp.road, exp.dt
     rng = np.random.default_rng(0)
-    node, machine = platform.node(), platform.machine()
-    print(f"# {node} {machine} {cpu_model()}, {os.cpu_count()} cpus, python {platform.python_version()}")
+    print(f"# {host()}, {os.cpu_count()} cpus, python {platform.python_version()}")
     set_threads(1)  # one core: the kernel would otherwise split each batch over the process's cores
     threads = ", ".join(f"{v}={os.environ[v]}" for v in ("NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS"))
     print(f"# numpy {np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}, {threads}")
