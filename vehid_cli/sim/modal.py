@@ -11,10 +11,10 @@ which is the same update as ``foh_discretisation`` (the Van Loan matrix exponent
 compiled loop runs it in x = z - g2 . y, which needs one input sample per step (x[k+1] = e x[k] + (g1 +
 (e - 1) g2) . y[k]; ``_shifted``), and the projection adds the g2 . y back:
 7 complex scalar recursions per car instead of a 14 x 14 matrix-vector product per step, and one
-14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential: for the car, A's eigenvalues by
-LAPACK and its eigenvectors and their inverse's rows from the 7 x 7 quadratic eigenproblem
-(lam^2 M + lam C + K) v = 0 (``_second_order_modes``; LAPACK's vectors and the inverse had cost 40 % of the
-eigen-solve). A real system has
+14 x 14 eigen-decomposition per car instead of a 22 x 22 matrix exponential: for the car, A's eigenvalues by a
+compiled QR iteration (``sim.eigenvalues``: LAPACK's through numpy had cost twice as much) and its eigenvectors and
+their inverse's rows from the 7 x 7 quadratic eigenproblem (lam^2 M + lam C + K) v = 0 (``_second_order_modes``;
+LAPACK's vectors and the inverse had cost 40 % of the eigen-solve). A real system has
 conjugate pairs, so only modes with Im(lam) >= 0 run, conjugates counted twice. Round-off grows with
 the condition number of V; a candidate with an ill-conditioned V (a near-defective, e.g. near
 critically damped, mode) goes through the real state-space recursion instead (``statespace_foh``,
@@ -39,6 +39,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
+from .eigenvalues import eigenvalues
 from .modes import _pick_modes, _quadratic_vectors
 
 N_STATE = 2 * N_DOF
@@ -471,9 +472,9 @@ def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray
 def _second_order_modes(
     A: NDArray, M: NDArray, C: NDArray, K: NDArray
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
-    """``_kept_modes`` of A = [[0, I], [-M^-1 K, -M^-1 C]] (P, 2 d, 2 d) from its eigenvalues alone: what LAPACK's
-    eigenvectors and the inverse of their matrix had cost (two fifths of the eigen-solve) comes from the d x d
-    quadratic eigenproblem (lam^2 M + lam C + K) v = 0 instead (``_quadratic_vectors``, compiled).
+    """``_kept_modes`` of A = [[0, I], [-M^-1 K, -M^-1 C]] (P, 2 d, 2 d) from its eigenvalues alone (``eigenvalues``,
+    compiled): what LAPACK's eigenvectors and the inverse of their matrix had cost (two fifths of the eigen-solve)
+    comes from the d x d quadratic eigenproblem (lam^2 M + lam C + K) v = 0 instead (``_quadratic_vectors``, compiled).
 
     Right eigenvector [v, lam v] (unit length, as LAPACK's), left one [(lam M + C)^T u, M^T u] with u^T Q(lam) = 0,
     scaled so that it is the row of the inverse: y . x = u^T (2 lam M + C) v = 1. Modes of distinct eigenvalues are
@@ -487,7 +488,7 @@ def _second_order_modes(
 
 def _quadratic_modes(A: NDArray, M: NDArray, C: NDArray, K: NDArray) -> tuple[NDArray, ...]:
     """``_second_order_modes``' modes with the condition numbers (P,) in place of the verdict."""
-    lam = np.linalg.eigvals(A).astype(complex, copy=False)
+    lam = eigenvalues(A)
     m = int((lam.imag >= 0).sum(axis=-1).max())
     P, ns = lam.shape
     lam_k, w_k = np.empty((P, m), dtype=complex), np.empty((P, m))

@@ -11,7 +11,7 @@ import numpy as np
 
 @numba.njit(cache=True)
 def _upper_first(lam_p, order):  # pragma: no cover - compiled
-    """The modes' order: those with Im(lam) >= 0 first, then the rest, each in LAPACK's order (a stable argsort of
+    """The modes' order: those with Im(lam) >= 0 first, then the rest, each in the order given (a stable argsort of
     Im(lam) < 0), written into `order`; returns how many come first."""
     count = 0
     for i in range(lam_p.size):
