@@ -44,14 +44,13 @@ class CarValues(Protocol):
 def geometry(a1: ArrayLike, a2: ArrayLike, b1: ArrayLike, b2: ArrayLike) -> NDArray:
     """G (..., 4, 3): vertical displacement of the body point above corner i from [x, phi, theta] (Eq. 7)."""
     a1, a2, b1, b2 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a1, a2, b1, b2)))
-    one = np.ones_like(a1)
-    rows = [
-        (one, b1, -a1),  # corner 1: front, side b1
-        (one, -b2, -a1),  # corner 2: front, side b2
-        (one, -b2, a2),  # corner 3: rear, side b2
-        (one, b1, a2),  # corner 4: rear, side b1
-    ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    G = np.empty(a1.shape + (N_CORNERS, 3))  # filled entry by entry (nested stacks had cost a quarter of assemble)
+    G[..., :, 0] = 1.0
+    G[..., 0, 1], G[..., 0, 2] = b1, -a1  # corner 1: front, side b1
+    G[..., 1, 1], G[..., 1, 2] = -b2, -a1  # corner 2: front, side b2
+    G[..., 2, 1], G[..., 2, 2] = -b2, a2  # corner 3: rear, side b2
+    G[..., 3, 1], G[..., 3, 2] = b1, a2  # corner 4: rear, side b1
+    return G
 
 
 @dataclass(frozen=True)
