@@ -115,6 +115,27 @@ def test_candidates_whose_nodes_differ_look_their_tables_up_one_by_one():
     assert np.array_equal(new.force, ref.force), np.max(np.abs(new.force - ref.force))
 
 
+@pytest.mark.parametrize("nu", [3, 17])
+def test_the_force_maps_look_up_at_its_end_nodes_and_past_its_kept_reciprocals(nu):
+    """The force map's look-up of u: nodes whose intervals are not powers of two, the sawtooth's command (0.15 <-> 0.5)
+    beyond the last node (held at its end value: its last interval x is one where x (1 / x) misses 1, so the fraction
+    there must be set to 1, not computed) and, with 17 nodes, more intervals than the batch law keeps reciprocals of
+    (16 > 12: the rest taken at each look-up): the reference's forces bit for bit."""
+    nodes = [float(v) for v in np.linspace(0.0, 0.3, nu - 1) ** 1.3]
+    misses = (nodes[-1] + x for x in np.arange(0.1, 0.2, 1e-4) if (d := nodes[-1] + x - nodes[-1]) * (1.0 / d) != 1.0)
+    last = float(next(misses))
+    x = last - nodes[-1]
+    assert x * (1.0 / x) != 1.0
+    values = force_map_values(5, nu)
+    values.update({f"u_node_{j + 1}": v for j, v in enumerate(nodes + [last])})
+    spec, rows = batch("force_map", (5, nu), dict(values, **LAG, **DELAY), 6, seed=nu)
+    h = sawtooth(cycles=1.5)
+    ref = simulate_damper(spec.damper, rows, h.t, h.x, h.v, h.u, reference=True)
+    new = simulate_damper(spec.damper, rows, h.t, h.x, h.v, h.u)
+    assert ref.stable.all()
+    assert np.array_equal(new.force, ref.force), np.max(np.abs(new.force - ref.force))
+
+
 def test_an_unstable_candidate_is_flagged_and_leaves_the_others_alone():
     model, table, values = CASES["bouc_wen"]
     spec, rows = batch(model, table, values, 4, seed=2)
