@@ -265,10 +265,32 @@ def bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
 # call: RK4's stages 2 and 3, and its stage 4 and the output, see the same inputs), the input the damper sees (u),
 # (the force map) the velocity's interval in the table's nodes and the fraction in it (the generalised model: the
 # cell of u of its latest look-up, -1 when it had none), the u last looked up and what was found there (the
-# generalised model: its fourteen tables' values; the force map: the cell of u).
+# generalised model: its fourteen tables' values; the force map: the cell of u), and the reciprocals of the u nodes'
+# intervals (computed at the first call: a look-up multiplies by them instead of dividing).
 W_S, W_X, W_U, W_JV, W_TV, W_AT, W_TAB = range(7)  # W_TAB..W_TAB + 13: the tables at u (compression, rebound)
-N_SCRATCH = W_TAB + 14
-W_CELL = N_SCRATCH - 2  # the force map's cell of u (interval, fraction); its intervals' reciprocals from W_TAB
+W_INV = W_TAB + 14  # W_INV..W_INV + N_INV - 1: 1 / (node i+1 - node i) of the u nodes
+N_INV = 12  # intervals whose reciprocals are kept; a table of more nodes divides at each look-up (the same numbers)
+N_SCRATCH = W_INV + N_INV
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _reciprocals(par, first, m, w):  # pragma: no cover - compiled
+    """At the first call (its rows still NaN), w[W_INV + i] <- 1 / (node i + 1 - node i) of every candidate's m u nodes
+    par[first : first + m]; returns whether they are kept (m - 1 <= N_INV)."""
+    kept = m - 1 <= N_INV
+    if kept and m > 1 and not w[W_INV, 0] == w[W_INV, 0]:
+        for i in range(m - 1):
+            for p in range(w.shape[1]):
+                w[W_INV + i, p] = 1.0 / (par[first + i + 1, p] - par[first + i, p])
+    return kept
+
+
+@numba.njit(error_model="numpy", inline="always")
+def _fraction(par, first, j, u, w, kept, p):  # pragma: no cover - compiled
+    """Where u is in candidate p's interval j of the nodes par[first ..]: the offset from node j times the interval's
+    reciprocal (kept in w, or taken now), as ``_table_1d`` computes it."""
+    a = par[first + j, p]
+    return (u - a) * (w[W_INV + j, p] if kept else 1.0 / (par[first + j + 1, p] - a))
 
 
 @numba.njit(error_model="numpy", inline="always")
@@ -303,10 +325,10 @@ def _controls(d, z, par, zd, w, i):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def _cell(par, first, m, u, p):  # pragma: no cover - compiled
+def _cell(par, first, m, u, p, w, kept):  # pragma: no cover - compiled
     """Where candidate p's u falls in its m nodes par[first : first + m, p], found as ``_table_1d`` finds it but once
     for every table over the same nodes: (i, -1) for the value at node i itself (u at or outside the end nodes, or
-    m = 1), else the interval j and the fraction t in [0, 1) of it (NaN for a NaN u)."""
+    m = 1), else the interval j and the fraction t in [0, 1) of it (``_fraction``; NaN for a NaN u)."""
     if m == 1 or u <= par[first, p]:
         return 0, -1.0
     if u >= par[first + m - 1, p]:
@@ -314,7 +336,7 @@ def _cell(par, first, m, u, p):  # pragma: no cover - compiled
     j = 0
     while par[first + j + 1, p] < u:
         j += 1
-    return j, (u - par[first + j, p]) * (1.0 / (par[first + j + 1, p] - par[first + j, p]))
+    return j, _fraction(par, first, j, u, w, kept, p)
 
 
 @numba.njit(error_model="numpy", inline="always")
@@ -369,13 +391,14 @@ def _tables_at(par, w, nodes, m, P):  # pragma: no cover - compiled
     usual batch: the nodes held fixed by the config, the lags alike), the values are taken table by table over the
     whole batch (contiguous rows: SIMD) instead of candidate by candidate: the same numbers."""
     comp = nodes + m  # the compression tables' first row
+    kept = _reciprocals(par, nodes, m, w)
     changed, shared, j0, end0 = 0, True, -1, False
     for p in range(P):
         u = w[W_U, p]
         if u == w[W_AT, p]:
             w[W_JV, p] = -1.0
             continue
-        j, t = _cell(par, nodes, m, u, p)
+        j, t = _cell(par, nodes, m, u, p, w, kept)
         if changed == 0:
             j0, end0 = j, t < 0.0
         shared &= j == j0 and (t < 0.0) == end0
@@ -440,9 +463,9 @@ def force_map_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
     """``force_map_law`` over the batch (every row has the same nv x nu table; scratch w of N_SCRATCH rows): the
     velocity's interval (only when the motion is new: twice per RK4 step), then (a lagged input moves at every
     stage) u's interval in the nu nodes by counting the inner nodes below it (u clamped to the end
-    nodes, where the fraction 0 or 1 gives the end value) and its fraction from the intervals' reciprocals, kept in
-    w[W_TAB ..] from the first call (up to W_CELL - W_TAB intervals; more are taken at each look-up: the same
-    numbers), only when u changed. The search and the division there had cost a quarter of the model's time."""
+    nodes, where the fraction 0 or 1 gives the end value) and its fraction from the intervals' reciprocals
+    (``_reciprocals``, ``_fraction``), only when u changed. The search and the division there had cost a quarter of
+    the model's time."""
     q = P0
     nv, nu = int(par[q, 0]), int(par[q + 1, 0])
     vn, un, F = q + 2, q + 2 + nv, q + 2 + nv + nu
@@ -456,11 +479,7 @@ def force_map_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
             j, t = int(w[W_JV, p]), w[W_TV, p]
             f[p] = (1 - t) * par[F + j, p] + t * par[F + j + 1, p] + par[0, p] * (d[0, p] - par[1, p])
         return
-    kept = nu - 1 <= W_CELL - W_TAB
-    if kept and not w[W_TAB, 0] == w[W_TAB, 0]:  # NaN: the first call
-        for i in range(nu - 1):
-            for p in range(P):
-                w[W_TAB + i, p] = 1.0 / (par[un + i + 1, p] - par[un + i, p])
+    kept = _reciprocals(par, un, nu, w)
     for p in range(P):
         u = w[W_U, p]
         if u != w[W_AT, p]:  # the cell of a new u (a held command, a settled lag: the same)
@@ -469,12 +488,11 @@ def force_map_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
             ju = 0
             for i in range(1, nu - 1):
                 ju += par[un + i, p] < u
-            a = par[un + ju, p]
-            tu = (u - a) * (w[W_TAB + ju, p] if kept else 1.0 / (par[un + ju + 1, p] - a))
-            w[W_CELL, p] = ju
-            w[W_CELL + 1, p] = 1.0 if u == above else tu  # x (1 / x) can miss 1: the end value exactly, as the law's
+            w[W_TAB, p] = ju
+            # x (1 / x) can miss 1 by an ulp: at the last node the fraction 1, the end value exactly, as the law's
+            w[W_TAB + 1, p] = 1.0 if u == above else _fraction(par, un, ju, u, w, kept, p)
             w[W_AT, p] = w[W_U, p]
-        j, t, ju, tu = int(w[W_JV, p]), w[W_TV, p], int(w[W_CELL, p]), w[W_CELL + 1, p]
+        j, t, ju, tu = int(w[W_JV, p]), w[W_TV, p], int(w[W_TAB, p]), w[W_TAB + 1, p]
         lo, hi = F + j * nu + ju, F + (j + 1) * nu + ju
         low = (1 - tu) * par[lo, p] + tu * par[lo + 1, p]
         high = (1 - tu) * par[hi, p] + tu * par[hi + 1, p]
