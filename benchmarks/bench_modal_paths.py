@@ -1,7 +1,8 @@
 """The linear car's modal path piece by piece, each new piece beside the one it replaced, interleaved in one run on
 ONE core (a benchmark, not a test; issue 26: the identification's path at >= 8000 evaluations/s).
 
-* modes: A's eigenvalues by LAPACK and the vectors from the 7 x 7 quadratic eigenproblem
+* eigenvalues: A's by a compiled QR iteration (``sim.eigenvalues``) against LAPACK's through numpy (before);
+* modes: A's eigenvalues (compiled) and the vectors from the 7 x 7 quadratic eigenproblem
   (``sim.modal._second_order_modes``) against LAPACK's eigenvectors and the inverse of their matrix
   (``sim.modal._kept_modes``, the path before);
 * recursion + projection: each car's rows contiguous and padded to whole vectors (``sim.modal._modal_blocks``)
@@ -32,6 +33,7 @@ from vehid_cli.config import load_config  # noqa: E402
 from vehid_cli.identify.experiment import build_experiment  # noqa: E402
 from vehid_cli.models.fullcar import N_DOF  # noqa: E402
 from vehid_cli.sim import modal  # noqa: E402
+from vehid_cli.sim.eigenvalues import eigenvalues  # noqa: E402
 from vehid_cli.sim.kernel import set_threads  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -120,6 +122,7 @@ def batch_pieces(exp, values: dict[str, np.ndarray], batch: int) -> list[tuple[s
             modal._second_order_modes = original
 
     return [
+        ("eigenvalues", lambda: np.linalg.eigvals(A), lambda: eigenvalues(A)),
         ("modes", lambda: modal._kept_modes(A), lambda: modal._second_order_modes(A, *MCK)),
         (
             "recursion + projection (8 cols)",
