@@ -118,9 +118,9 @@ def test_candidates_whose_nodes_differ_look_their_tables_up_one_by_one():
 @pytest.mark.parametrize("nu", [3, 17])
 def test_the_force_maps_look_up_at_its_end_nodes_and_past_its_kept_reciprocals(nu):
     """The force map's look-up of u: nodes whose intervals are not powers of two, the sawtooth's command (0.15 <-> 0.5)
-    beyond the last node (held at its end value: its last interval x is one where x (1 / x) misses 1, so the fraction
-    there must be set to 1, not computed) and, with 17 nodes, more intervals than the batch law keeps reciprocals of
-    (16 > 12: the rest taken at each look-up): the reference's forces bit for bit."""
+    beyond the last node (held at its end value: its last interval x is one where x (1 / x) misses 1, so that value
+    must be the node's own, not one reached through a fraction) and, with 17 nodes, more intervals than the batch law
+    keeps reciprocals of (16 > 12: the rest taken at each look-up): the reference's forces bit for bit."""
     nodes = [float(v) for v in np.linspace(0.0, 0.3, nu - 1) ** 1.3]
     misses = (nodes[-1] + x for x in np.arange(0.1, 0.2, 1e-4) if (d := nodes[-1] + x - nodes[-1]) * (1.0 / d) != 1.0)
     last = float(next(misses))
