@@ -47,50 +47,53 @@ def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray, out: N
             out[p, :, 1] = _hold(np.where(change > 0, 1.0, np.where(change < 0, 0.0, np.nan)))
         return out
     if np.all(delays == delays[:1]):  # the same delays for every candidate (they are not fitted): ramped once
-        _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays[:1], dt, out)
+        _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays[:1], dt,
+               out[:1].transpose(1, 2, 0))  # fmt: skip
         out[1:] = out[0]
         return out
-    _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays, dt, out)
+    _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays, dt, out.transpose(1, 2, 0))
     return out
 
 
 @numba.njit(cache=True, error_model="numpy")
 def _ramps(t, at, jumps, rising, which, delays, dt, out):  # pragma: no cover - compiled
-    """Each candidate p's delayed command out[p, :, 0] (the initial command, already there, plus each jump as a
+    """Each candidate p's delayed command out[k, 0, p] (the initial command, already there, plus each jump as a
     one-sample ramp from its effective time at + delay - dt, never before an earlier change's: in order) and the
-    direction of the latest change completed by each sample out[p, :, 1] (left as it is before the first): as
+    direction of the latest change completed by each sample out[k, 1, p] (left as it is before the first): as
     ``level += jump * clip((t - e) / dt, 0, 1)`` and ``searchsorted(effective + dt, t, 'right') - 1`` compute
-    them, number for number."""
-    n, m = t.shape[0], at.shape[0]
-    effective = np.empty(m)
-    for p in range(delays.shape[0]):
+    them, number for number. `out` (n, 2, P) is the kernel's lanes (the candidates last): time outside, the
+    candidates inside, so each sample's row is written whole (candidate by candidate it had been a strided store
+    per sample, a tenth of a batch's time on the sawtooth with steps)."""
+    n, m, P = t.shape[0], at.shape[0], delays.shape[0]
+    effective = np.empty((P, m))
+    for p in range(P):
         for i in range(m):
-            effective[i] = at[i] - dt + delays[p, which[i]]
+            effective[p, i] = at[i] - dt + delays[p, which[i]]
             if i > 0:
-                effective[i] = max(effective[i], effective[i - 1])  # np.maximum.accumulate
-        # One walk over the samples (each written once, not once per change): before sample k the changes [0, on)
-        # have begun (t_k > effective) and [0, done) have ended ((t_k - effective) / dt >= 1; effective never
-        # decreases, so both are prefixes); the level is the initial command plus the ended jumps, added in their
-        # order, then the ramps under way, in theirs: the sums above, term for term (the changes not yet begun
-        # add nothing).
-        level = out[p, 0, 0]  # the initial command (every sample holds it)
-        on = done = 0
-        for k in range(n):
-            while on < m and t[k] > effective[on]:
-                on += 1
-            while done < on and not (t[k] - effective[done]) / dt < 1.0:
-                level += jumps[done]
-                done += 1
-            value = level
-            for i in range(done, on):
-                value += jumps[i] * ((t[k] - effective[i]) / dt)
-            out[p, k, 0] = value
-        i = -1
-        for k in range(n):  # effective (and t) never decrease: walk them together
-            while i + 1 < m and effective[i + 1] + dt <= t[k]:
-                i += 1
-            if i >= 0:
-                out[p, k, 1] = rising[i]
+                effective[p, i] = max(effective[p, i], effective[p, i - 1])  # np.maximum.accumulate
+    # One walk over the samples (each written once, not once per change): before sample k the changes [0, on) have
+    # begun (t_k > effective) and [0, done) have ended ((t_k - effective) / dt >= 1; effective never decreases, so
+    # both are prefixes); the level is the initial command plus the ended jumps, added in their order, then the
+    # ramps under way, in theirs: the sums above, term for term (the changes not yet begun add nothing). The
+    # direction walks effective (and t, neither decreases) with the completed changes' count.
+    level = out[0, 0, :].copy()  # the initial command (every sample holds it)
+    on, done, ended = np.zeros(P, np.int64), np.zeros(P, np.int64), np.zeros(P, np.int64)
+    for k in range(n):
+        for p in range(P):
+            e = effective[p]
+            while on[p] < m and t[k] > e[on[p]]:
+                on[p] += 1
+            while done[p] < on[p] and not (t[k] - e[done[p]]) / dt < 1.0:
+                level[p] += jumps[done[p]]
+                done[p] += 1
+            value = level[p]
+            for i in range(done[p], on[p]):
+                value += jumps[i] * ((t[k] - e[i]) / dt)
+            out[k, 0, p] = value
+            while ended[p] < m and e[ended[p]] + dt <= t[k]:
+                ended[p] += 1
+            if ended[p] > 0:
+                out[k, 1, p] = rising[ended[p] - 1]
 
 
 def _hold(flags: NDArray) -> NDArray:
