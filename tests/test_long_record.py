@@ -1,19 +1,16 @@
 """A long record's fit within bounded memory (issue 26): the compressed least squares and the chunked residuals.
 
-The compressed fit (optimizers/compressed.py) must take the same steps as scipy's least_squares on the full residual
-(to round-off), hold far less than scipy does, and the residuals of a batch of cars simulated a chunk at a time
+The compressed fit (optimizers/compressed.py) must take the same steps as the trust region on the full residual
+(to round-off), hold far less than it does, and the residuals of a batch of cars simulated a chunk at a time
 must be the unchunked ones bit for bit.
 """
 
 from __future__ import annotations
 
-import sys
 import tracemalloc
 
 import numpy as np
 import pytest
-import scipy.optimize  # noqa: F401 - imported before the traced fits: its import is not theirs
-from scipy.optimize._lsq import trf
 
 from examples.make_rig_runs import write_rig_run
 from tests.conftest import ROOT
@@ -22,7 +19,7 @@ from vehid_cli.identify.crlb import information
 from vehid_cli.identify.experiment import Experiment
 from vehid_cli.identify.task import information_by_parameter
 from vehid_cli.models.faults import delay
-from vehid_cli.optimizers import compressed, get_optimizer, lsq
+from vehid_cli.optimizers import get_optimizer, lsq
 from vehid_cli.optimizers.base import Problem
 from vehid_cli.optimizers.compressed import compress
 from vehid_cli.systems import build_system
@@ -80,8 +77,8 @@ def test_compress_keeps_the_normal_equations_and_the_residual_norm_whatever_the_
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_the_compressed_fit_takes_scipys_steps(seed, monkeypatch):
-    """The same estimate (to round-off) and the same number of evaluations as least_squares on the full residual."""
+def test_the_compressed_fit_takes_the_full_fits_steps(seed, monkeypatch):
+    """The same estimate (to round-off) and the same number of evaluations as the trust region on the full residual."""
     problem, truth = damped_sine(4000, seed)
     full = fit(problem, 2**62, monkeypatch, seed)
     small = fit(problem, 0, monkeypatch, seed)
@@ -89,41 +86,6 @@ def test_the_compressed_fit_takes_scipys_steps(seed, monkeypatch):
     np.testing.assert_allclose(small.x, full.x, rtol=1e-9)
     np.testing.assert_allclose(small.cost, full.cost, rtol=1e-12)
     assert np.all(np.abs(full.x - truth) < 0.05 * np.abs(truth) + 0.01)  # and it is a fit, not two equal failures
-
-
-@pytest.mark.parametrize("scipy_has", ["no trf_bounds", "another trf_bounds"])
-def test_without_scipys_private_loop_the_long_fit_is_the_public_one(scipy_has, monkeypatch):
-    """On a scipy whose private trf_bounds is gone (or takes other arguments) a long record is still fitted: by the
-    public least_squares on the whole residual, to the estimate and evaluations of the full path."""
-    problem, _ = damped_sine(4000, 1)
-    full = fit(problem, 2**62, monkeypatch, 1)
-    if scipy_has == "no trf_bounds":
-        monkeypatch.setitem(sys.modules, "scipy.optimize._lsq.trf", None)  # `from ... import` raises ImportError
-    else:
-        moved = ("fun", "jac", "x0", "lb", "ub", "ftol", "xtol", "gtol", "max_nfev", "x_scale", "loss_function")
-        monkeypatch.setattr(compressed, "TRF_BOUNDS_PARAMETERS", moved)  # as if trf_bounds took these arguments
-    compressed.private_trf.cache_clear()
-    assert compressed.private_trf() is None
-    small = fit(problem, 0, monkeypatch, 1)
-    assert small.evaluations == full.evaluations
-    np.testing.assert_allclose(small.x, full.x, rtol=1e-12)
-    monkeypatch.undo()
-    compressed.private_trf.cache_clear()
-    assert compressed.private_trf() is trf.trf_bounds
-
-
-def test_without_scipys_private_helpers_the_fit_is_the_same(monkeypatch):
-    """On a scipy without its private least-squares helpers (make_strictly_feasible, the trust region's scaling and
-    quadratic model) lsq still fits: x0 is used as it is (least_squares moves it inside itself) and every Jacobian
-    is computed (no stop is guessed): the same estimate, a few more evaluations at most."""
-    problem, _ = damped_sine(4000, 2)
-    full = fit(problem, 2**62, monkeypatch, 2)
-    monkeypatch.setitem(sys.modules, "scipy.optimize._lsq.common", None)
-    x = np.array([0.5, 2.0])
-    assert lsq.strictly_feasible(x, np.zeros(2), np.full(2, 2.0)) is x
-    bare = fit(problem, 2**62, monkeypatch, 2)
-    np.testing.assert_allclose(bare.x, full.x, rtol=1e-9)
-    assert full.evaluations <= bare.evaluations <= full.evaluations + 10
 
 
 def traced_peak(problem: Problem, limit: int, monkeypatch) -> int:
@@ -138,7 +100,7 @@ def traced_peak(problem: Problem, limit: int, monkeypatch) -> int:
 def test_the_compressed_fit_holds_the_jacobian_once(monkeypatch):
     """Peak traced memory of a fit over 200 000 residuals: the compressed one within the Jacobian, its residuals and
     the problem's temporaries (its result, one Jacobian, and a candidate's model: half of one): within two
-    Jacobians; scipy's own beyond four (its copies: the check can fail)."""
+    Jacobians; the full trust region's beyond four (its copies: the check can fail)."""
     n = 200_000
     problem, _ = damped_sine(n)
     jacobian = 6 * n * 8

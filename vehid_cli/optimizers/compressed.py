@@ -1,30 +1,29 @@
-"""Least squares on a long residual through its compressed form: scipy's trust region on D + 1 rows instead of R.
+"""Least squares on a long residual through its compressed form: the trust region on D + 1 rows instead of R.
 
-A long logger record gives R = 768 000 weighted residuals (60 s at 1 kHz, 16 channels) for D = 9 unknowns. scipy's
-'trf' holds its Jacobian (R, D) about six times (its own copy, the scaled copy, the augmented matrix, the SVD's
-input and its U: 55 MB each), which made the fit of a long record peak at nearly 800 MiB. Its steps, though, depend
-on the Jacobian J and the residual r only through J'J, J'r and r'r. The thin QR of the augmented matrix
-[J r] = Q [[Rj, z], [0, rho]] keeps exactly these: J'J = Rj'Rj, J'r = Rj'z, r'r = z'z + rho². So the trust region
-runs on the compressed pair J_c = [Rj; 0] ((D + 1, D)) and f_c = [z; rho] ((D + 1,)), and gives the same iterates
-as on (J, r), to round-off (tests/test_optimizers.py compares the two). The QR is accumulated over blocks of rows
-(`compress`, a tall-skinny QR), so the only (R, D) array is the Jacobian itself, once.
+A long logger record gives R = 768 000 weighted residuals (60 s at 1 kHz, 16 channels) for D = 9 unknowns. The trust
+region ('trf', trust_region.py) holds its Jacobian (R, D) about six times (its own copy, the scaled copy, the
+augmented matrix, the SVD's input and its U: 55 MB each), which made the fit of a long record peak at nearly 800 MiB.
+Its steps, though, depend on the Jacobian J and the residual r only through J'J, J'r and r'r. The thin QR of the
+augmented matrix [J r] = Q [[Rj, z], [0, rho]] keeps exactly these: J'J = Rj'Rj, J'r = Rj'z, r'r = z'z + rho². So the
+trust region runs on the compressed pair J_c = [Rj; 0] ((D + 1, D)) and f_c = [z; rho] ((D + 1,)), and gives the same
+iterates as on (J, r), to round-off (tests/test_optimizers.py compares the two). The QR is accumulated over blocks of
+rows (`compress`, a tall-skinny QR), so the only (R, D) array is the Jacobian itself, once.
 
 The compressed residual is tied to the basis Q of the Jacobian at the same point, which the trust region asks for
 only after it accepted a step. So `fun` returns a vector that carries the residual's norm alone (all the cost and
 the step's acceptance need), and `jac` at that accepted point writes the residual's compressed coordinates into
-that same array before scipy forms the gradient from it. This calls scipy's own `trf_bounds`, the loop behind
-`least_squares(method='trf')` with bounds, directly (a private function of scipy: tested against the public one;
-`private_trf` checks that it is there with the arguments it is called with, else lsq fits the whole residual).
+that same array before the solver forms the gradient from it (`trust_region.trf_bounds`, the loop behind
+`least_squares`).
 """
 
 from __future__ import annotations
 
-import functools
-import inspect
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
+
+from .trust_region import trf_bounds
 
 BLOCK_ROWS = 8192  # rows of [J r] per step of the blocked QR: 0.7 MB for D = 9
 
@@ -109,17 +108,14 @@ def trf_compressed(
     stops: Callable[..., bool] | None = None,
     gram: Callable[[NDArray], NDArray | None] | None = None,
 ) -> NDArray:
-    """scipy's trust-region reflective least squares (`least_squares(method='trf', x_scale=x_scale, xtol=ftol=gtol=
-    tol)`) of `residual` (x -> (R,)) from x0 inside [lower, upper], its Jacobian given transposed by
+    """The trust-region reflective least squares (`trust_region.least_squares`, x_scale=x_scale, xtol=ftol=gtol=tol)
+    of `residual` (x -> (R,)) from x0 inside [lower, upper], its Jacobian given transposed by
     `jacobian_rows` (x -> (D, R), may be overwritten) and compressed (`compress`); returns the final point.
-    x0 must be strictly inside the box (scipy's `make_strictly_feasible`). `stops(xp, rp, J, x, r, lower, upper,
+    x0 must be strictly inside the box (`make_strictly_feasible`). `stops(xp, rp, J, x, r, lower, upper,
     x_scale, tol)` (lsq.trf_stops): True where trf will stop at x without using its Jacobian there; it is then given
     the last one again (D simulations saved), judged on the compressed pair, which gives J'J, J'r and r'r exactly.
     `gram(x)` (optional): the Gram matrix of [J r] at x summed without J (`compress_gram`), or None: then
-    `jacobian_rows`. Only where `private_trf()` finds scipy's loop (the caller otherwise fits the whole residual)."""
-    trf_bounds = private_trf()
-    if trf_bounds is None:
-        raise RuntimeError("this scipy has no trf_bounds as trf_compressed calls it: check private_trf() first")
+    `jacobian_rows`."""
 
     D = x0.size
     last: dict[str, object] = {}
@@ -133,7 +129,7 @@ def trf_compressed(
 
     def jac(x: NDArray) -> NDArray:
         f = last["f"]
-        if not np.array_equal(last["x"], x):  # scipy asks for the Jacobian at the point it evaluated last
+        if not np.array_equal(last["x"], x):  # the solver asks for the Jacobian at the point it evaluated last
             raise RuntimeError("trf asked for the Jacobian at a point other than its last residual's")
         before = last.get("J")
         if before is not None and stops is not None:
@@ -142,7 +138,7 @@ def trf_compressed(
         got = None if gram is None else gram(x)
         pair = None if got is None else compress_gram(got)
         rj, z, rho = compress(jacobian_rows(x), residual(x)) if pair is None else pair
-        f[:D] = z  # in place: the very array scipy holds as the residual at x
+        f[:D] = z  # in place: the very array the solver holds as the residual at x
         f[D] = rho
         J = np.vstack([rj, np.zeros((1, D))])
         last["xJ"], last["fJ"], last["J"] = x.copy(), f.copy(), J
@@ -150,32 +146,4 @@ def trf_compressed(
 
     f0 = fun(x0)
     j0 = jac(x0)
-    result = trf_bounds(
-        fun, jac, x0, f0, j0, lower, upper, tol, tol, tol, max_nfev, np.asarray(x_scale, dtype=float), None, "exact",
-        {}, 0,
-    )  # fmt: skip
-    return result.x
-
-
-TRF_BOUNDS_PARAMETERS = (  # scipy 1.x's trf_bounds, as trf_compressed calls it (later ones with defaults may follow)
-    "fun", "jac", "x0", "f0", "J0", "lb", "ub", "ftol", "xtol", "gtol", "max_nfev", "x_scale", "loss_function",
-    "tr_solver", "tr_options", "verbose",
-)  # fmt: skip
-
-
-@functools.cache
-def private_trf() -> Callable | None:
-    """scipy's private `trf_bounds` (the loop behind least_squares(method='trf') with bounds), or None where this
-    scipy has none, or one of another signature: a private function may move in any release (then a long record is
-    fitted on its whole residual, in the memory this module saves)."""
-    try:
-        from scipy.optimize._lsq.trf import trf_bounds
-    except ImportError:
-        return None
-    try:
-        params = list(inspect.signature(trf_bounds).parameters.values())
-    except (TypeError, ValueError):  # pragma: no cover - a compiled replacement without a signature
-        return None
-    n = len(TRF_BOUNDS_PARAMETERS)
-    known = tuple(p.name for p in params[:n]) == TRF_BOUNDS_PARAMETERS
-    return trf_bounds if known and all(p.default is not inspect.Parameter.empty for p in params[n:]) else None
+    return trf_bounds(fun, jac, x0, f0, j0, lower, upper, tol, tol, tol, max_nfev, np.asarray(x_scale, dtype=float))

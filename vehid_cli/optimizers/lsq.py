@@ -1,14 +1,14 @@
-"""Trust-region least squares (scipy's 'trf') on the weighted residual vector, inside the box.
+"""Trust-region least squares (scipy's 'trf', ported: trust_region.py) on the weighted residual vector, inside the box.
 
 Minimising the sum of squared weighted residuals is the Gaussian maximum-likelihood estimate, which is
 what reaches the Cramér–Rao bound. A problem that gives its residuals with their exact Jacobian from one
 simulation (`Problem.linearised`: the linear car's sensitivities through the same modal solution) is solved by
 Levenberg–Marquardt on them (`gauss_newton`), one evaluation per step, stopping once the step is a negligible
-fraction of the estimate's own standard deviation; otherwise scipy's trust-region least squares, whose Jacobian is
+fraction of the estimate's own standard deviation; otherwise the trust-region least squares, whose Jacobian is
 a forward difference computed in ONE batched evaluation of the D perturbed points (counted as D evaluations),
 reusing the residual at the centre.
 A forward-difference Jacobian above LONG_JACOBIAN_BYTES (a long record) is fitted compressed (`compressed.py`):
-the same steps on D + 1 rows, without scipy's copies of the (R, D) matrix.
+the same steps on D + 1 rows, without the solver's copies of the (R, D) matrix.
 """
 
 from __future__ import annotations
@@ -19,12 +19,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .base import BudgetExhausted, Optimizer, Search, register
-from .compressed import private_trf, trf_compressed
+from .compressed import trf_compressed
+from .trust_region import CL_scaling_vector, evaluate_quadratic, least_squares, make_strictly_feasible
 
 JACOBIAN_STEP = 1e-7  # forward-difference step, as a fraction of each parameter's box width
 LONG_JACOBIAN_BYTES = 4 * 2**20  # a Jacobian larger than this is fitted compressed (optimizers/compressed.py), or
-# from its normal equations summed over the record (`Problem.normal`): above it scipy's copies of the (R, D) Jacobian
-# (6 of them, 70 MB for 60 s x 8 channels x 3 unknowns) outweigh the memory of the rest of a fit (issue 26)
+# from its normal equations summed over the record (`Problem.normal`): above it the solver's copies of the (R, D)
+# Jacobian (6 of them, 70 MB for 60 s x 8 channels x 3 unknowns) outweigh the memory of the rest of a fit (issue 26)
 
 
 def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1e-12) -> NDArray:
@@ -71,31 +72,12 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         last.update(x=x.copy(), r=r, J=J)
         return J
 
-    from scipy.optimize import least_squares  # 0.3 s to import: not when a config naming lsq is only validated
-
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
-    x0 = strictly_feasible(x0, lo, hi)
-    if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES and private_trf() is not None:  # a long record: the same
-        # steps on D + 1 rows (on a scipy without the private loop, the whole residual below: more memory, same fit)
+    x0 = make_strictly_feasible(x0, lo, hi)
+    if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES:  # a long record: the same steps on D + 1 rows
         gram = jacobian_gram if run.problem.gram is not None else None
         return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev, stops=trf_stops, gram=gram)
-    result = least_squares(
-        residual, x0, jac=jacobian, bounds=(lo, hi), method="trf", x_scale=width,
-        xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev,
-    )  # fmt: skip
-    return result.x
-
-
-def strictly_feasible(x: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
-    """x moved strictly inside the box as least_squares moves its x0 (scipy's private `make_strictly_feasible`,
-    idempotent: the compressed path, which calls scipy's loop directly, needs it done; the public path does it
-    again to no effect). On a scipy without it, x itself: only the compressed path needs it, and it is not taken
-    there (compressed.private_trf)."""
-    try:
-        from scipy.optimize._lsq.common import make_strictly_feasible
-    except ImportError:  # pragma: no cover - another scipy
-        return x
-    return make_strictly_feasible(x, lo, hi)
+    return least_squares(residual, jacobian, x0, lo, hi, width, tol, max_nfev)
 
 
 STOP_MARGIN = 0.5  # trf_stops claims a stop only with this margin on scipy's own tests (else it differences)
@@ -104,17 +86,13 @@ STOP_MARGIN = 0.5  # trf_stops claims a stop only with this margin on scipy's ow
 def trf_stops(
     xp: NDArray, rp: NDArray, J: NDArray, x: NDArray, r: NDArray, lo: NDArray, hi: NDArray, width: NDArray, tol: float
 ) -> bool:  # fmt: skip
-    """Will scipy's trust-region least squares ('trf', bounds, x_scale = width, ftol = xtol = tol) stop at x, the
-    point it accepted after the last Jacobian J at xp (residuals rp there, r at x)? It asks for the Jacobian at x
-    before it tests for the stop (scipy 1.x `trf_bounds`), so the D simulations of the last one are wasted: where the
-    step passes scipy's own tests (its cost fall below ftol of the cost with the ratio to its quadratic model's
-    prediction above 1/4, or the step below xtol of x) with a STOP_MARGIN to spare, trf is given J again, which it
-    does not use. The prediction is trf's own: its Coleman-Li scaled quadratic model at xp. A wrong guess (never
-    seen) would only cost trf one step on the previous Jacobian, the costs staying exact."""
-    try:  # scipy's private helpers: without them no guess, every Jacobian computed
-        from scipy.optimize._lsq.common import CL_scaling_vector, evaluate_quadratic
-    except ImportError:  # pragma: no cover - another scipy
-        return False
+    """Will the trust-region least squares ('trf', bounds, x_scale = width, ftol = xtol = tol) stop at x, the point it
+    accepted after the last Jacobian J at xp (residuals rp there, r at x)? It asks for the Jacobian at x before it
+    tests for the stop (as scipy's `trf_bounds`, whose steps it takes), so the D simulations of the last one would be
+    wasted: where the step passes its tests (its cost fall below ftol of the cost with the ratio to its quadratic
+    model's prediction above 1/4, or the step below xtol of x) with a STOP_MARGIN to spare, it is given J again, which
+    it does not use. The prediction is the solver's own: its Coleman-Li scaled quadratic model at xp. A wrong guess
+    (never seen) would only cost one step on the previous Jacobian, the costs staying exact."""
     g = J.T @ rp
     v, dv = CL_scaling_vector(xp, g, lo, hi)
     v[dv != 0] /= width[dv != 0]
