@@ -18,7 +18,7 @@ LAPACK's vectors and the inverse had cost 40 % of the eigen-solve). A real syste
 conjugate pairs, so only modes with Im(lam) >= 0 run, conjugates counted twice. Round-off grows with
 the condition number of V; a candidate with an ill-conditioned V (a near-defective, e.g. near
 critically damped, mode) goes through the real state-space recursion instead (``statespace_foh``,
-same discretisation via scipy's ``expm``, also compiled), so every candidate gets the exact answer.
+same discretisation via the matrix exponential, ``sim.expm``, also compiled), so every candidate gets the exact answer.
 
 Both paths start from static equilibrium on the first road sample, s0 = [K^-1 B y0, 0], like the
 NumPy reference in ``sim.linear``.
@@ -35,11 +35,11 @@ from collections.abc import Sequence
 
 import numba
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
 from .eigenvalues import eigenvalues
+from .expm import expm
 from .modes import _pick_modes, _quadratic_vectors
 
 N_STATE = 2 * N_DOF
@@ -264,7 +264,7 @@ def foh_discretisation(A: NDArray, Bs: NDArray, dt: float) -> tuple[NDArray, NDA
     big[..., :n, :n] = A * dt
     big[..., :n, n : n + m] = Bs * dt
     big[..., n : n + m, n + m :] = np.eye(m)
-    E = scipy.linalg.expm(big)
+    E = expm(big)
     return E[..., :n, :n], E[..., :n, n : n + m], E[..., :n, n + m :]
 
 
@@ -281,7 +281,7 @@ def _statespace_outputs(A: NDArray, Bs: NDArray, G: NDArray, q0: NDArray, u: NDA
 
 def statespace_foh(mats: FullCarMatrices, road: NDArray, dt: float, points: NDArray | None = None) -> Outputs:
     """q, qd, qdd (batch..., n, 7), disp, acc (batch..., n, nb) at the body `points` (..., nb, 3) (default the
-    corners'): exact FOH via scipy's expm, real 14-state recursion.
+    corners'): exact FOH via the matrix exponential (``sim.expm``), real 14-state recursion.
 
     The same discretisation as the NumPy reference, with the time loop compiled; kept as the modal
     path's fallback and as a benchmark competitor.
@@ -549,7 +549,7 @@ def linear_foh(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: 
 
 
 def _statespace_linear(A: NDArray, Bs: NDArray, s0: NDArray, u: NDArray, dt: float, Cy: NDArray) -> NDArray:
-    """(P, n, ny) Cy s of the real state-space recursion (exact FOH via scipy's expm), compiled."""
+    """(P, n, ny) Cy s of the real state-space recursion (exact FOH via ``sim.expm``), compiled."""
     P, ns = s0.shape
     n, nu = u.shape[1], u.shape[2]
     Phi, G1, G2 = foh_discretisation(A, Bs, dt)
