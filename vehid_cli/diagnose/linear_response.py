@@ -19,7 +19,7 @@ from ..models.fullcar import N_CORNERS, N_DOF
 from ..sim.modal import foh_discretisation, propagate
 from ..sim.nonlinear import fullcar_struts
 
-if TYPE_CHECKING:  # the fit's types only (psplines imports scipy)
+if TYPE_CHECKING:  # the fit's types only
     from .psplines import Basis, PenalisedFit
 
 

@@ -8,6 +8,9 @@ least squares with one smoothing parameter per penalised block chosen by REML (o
 * ``penalised_fit`` solves min |r - A c|² + sum_j lambda_j c_j' P_j c_j from the normal equations, each lambda_j
   relative to its block's own scale, and returns the coefficients, their unscaled covariance (A'A + P_lambda)^-1,
   the effective degrees of freedom (the hat matrix' trace) and tr(2 H - H H).
+* The B-splines (``bsplines``, Cox-de Boor) and the smoothing parameters' search (``box_minimum``, projected BFGS)
+  are this module's own, not scipy.interpolate's and scipy.optimize's: their imports had cost 0.2-0.3 s of
+  `vehid diagnose`'s start-up (tests/test_psplines.py checks both against scipy's).
 """
 
 from __future__ import annotations
@@ -16,9 +19,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.optimize
 from numpy.typing import NDArray
-from scipy.interpolate import BSpline
 
 LOG_LAMBDA = (-7.0, 8.0)  # search range of log10 lambda relative to the basis' own scale
 
@@ -39,8 +40,7 @@ class Basis:
         """(len(x), size) constrained basis at x (clipped into the knot span)."""
         lo, hi = self.t[3], self.t[-4]
         xc = np.clip(np.asarray(x, dtype=float).ravel(), lo, hi)
-        B = BSpline.design_matrix(xc, self.t, 3).toarray()
-        return B @ self.Z
+        return bsplines(xc, self.t) @ self.Z
 
 
 def basis(values: NDArray, n_knots: int) -> Basis:
@@ -56,16 +56,15 @@ def basis(values: NDArray, n_knots: int) -> Basis:
     inner = 0.5 * (np.quantile(v, p) + lo + p * (hi - lo))
     inner = np.unique(inner[(inner > lo) & (inner < hi)])
     t = np.r_[[lo] * 4, inner, [hi] * 4]
-    nb = t.size - 4
     # penalty: exact 2-point Gauss quadrature per knot interval (B'' is linear on each)
     edges = np.unique(t)
     a, b = edges[:-1], edges[1:]
     g = np.array([-1.0, 1.0]) / math.sqrt(3.0)
     xq = (0.5 * (a + b)[:, None] + 0.5 * (b - a)[:, None] * g[None, :]).ravel()
     wq = np.repeat(0.5 * (b - a), 2)
-    d2 = BSpline(t, np.eye(nb), 3).derivative(2)(xq)  # (nq, nb)
+    d2 = bsplines(xq, t, derivative=2)  # (nq, nb)
     P = d2.T @ (wq[:, None] * d2)
-    c = BSpline.design_matrix(np.array([0.0]), t, 3).toarray()[0]
+    c = bsplines(np.array([0.0]), t)[0]
     Q, _ = np.linalg.qr(c[:, None], mode="complete")
     Z = Q[:, 1:]
     return Basis(t=t, Z=Z, P=Z.T @ P @ Z)
@@ -137,8 +136,89 @@ def penalised_fit(
     rho = np.full(k, common)
     if k:
         with np.errstate(invalid="ignore"):  # a step where the score is inf: inf - inf, not a printed warning
-            res = scipy.optimize.minimize(score, rho, method="L-BFGS-B", bounds=[LOG_LAMBDA] * k, options={"eps": 1e-4})
-        if np.isfinite(res.fun) and score(res.x) <= score(rho):
-            rho = res.x
+            best = box_minimum(score, rho, *LOG_LAMBDA)
+        if score(best) <= score(rho):
+            rho = best
     c, Hinv, rss, edf, _, _, edf2 = fit(rho)
     return PenalisedFit(c / scale, Hinv / np.outer(scale, scale), 10.0**rho, edf, rss, edf2)
+
+
+def bsplines(x: NDArray, t: NDArray, degree: int = 3, derivative: int = 0) -> NDArray:
+    """(len(x), len(t) - degree - 1): every B-spline of `degree` on the knots t (ends repeated degree + 1 times), or
+    its `derivative`, at x within [t[degree], t[-degree - 1]] (the right end in the last interval): Cox-de Boor's
+    recursion from the one-hot degree 0 up, d B_j,p / dx = p (B_j,p-1 / (t_j+p - t_j) - B_j+1,p-1 / (t_j+p+1 - t_j+1))
+    for the derivatives (0 / 0 = 0). What scipy's BSpline.design_matrix and derivative give, to round-off; here to
+    keep scipy.interpolate's import (with the scipy it pulls in: 0.2-0.3 s) off `vehid diagnose`'s start-up."""
+    x = np.asarray(x, dtype=float)
+    t = np.asarray(t, dtype=float)
+    nb = t.size - degree - 1
+    i = np.clip(np.searchsorted(t, x, side="right") - 1, degree, nb - 1)  # t[i] <= x < t[i + 1]
+    B = np.zeros((x.size, t.size - 1))
+    B[np.arange(x.size), i] = 1.0
+    for p in range(1, degree - derivative + 1):  # values of degree p from those of p - 1
+        j = np.arange(t.size - p - 1)
+        left, right = (
+            _ratio(x[:, None] - t[j], t[j + p] - t[j]),
+            _ratio(t[j + p + 1] - x[:, None], t[j + p + 1] - t[j + 1]),
+        )
+        B = left * B[:, j] + right * B[:, j + 1]
+    for p in range(degree - derivative + 1, degree + 1):  # derivatives of degree p from the p - 1 ones
+        j = np.arange(t.size - p - 1)
+        B = p * (_ratio(B[:, j], t[j + p] - t[j]) - _ratio(B[:, j + 1], t[j + p + 1] - t[j + 1]))
+    return B
+
+
+def _ratio(num: NDArray, den: NDArray) -> NDArray:
+    """num / den, 0 where den is 0 (a repeated knot: its B-spline of the lower degree vanishes)."""
+    safe = np.where(den == 0.0, 1.0, den)
+    return np.where(den == 0.0, 0.0, num / safe)
+
+
+def box_minimum(f, x0: NDArray, lo: float, hi: float, step: float = 1e-4, max_iter: int = 200) -> NDArray:
+    """A local minimum of the smooth f over the box [lo, hi]^k from x0: projected BFGS on central-difference
+    gradients (step `step`), a backtracking line search along the projected path, the bounds' coordinates held while
+    the gradient pushes out. Stops when the projected gradient is below 1e-5, a step lowers f by less than 1e-12 of
+    it, or none lowers it (scipy's L-BFGS-B, which this replaces to keep scipy.optimize's import off the start-up,
+    stopped at a fall of 2.2e-9: earlier). f may be inf where the fit fails: the line search backs away from it."""
+    x = np.clip(np.asarray(x0, dtype=float), lo, hi)
+    k = x.size
+    fx, g = f(x), _gradient(f, x, step, lo, hi)
+    H = np.eye(k)  # the inverse Hessian's estimate
+    for _ in range(max_iter):
+        held = ((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0))
+        if not np.all(np.isfinite(g)) or np.max(np.abs(np.where(held, 0.0, g)), initial=0.0) < 1e-5:
+            break
+        d = np.where(held, 0.0, -(H @ np.where(held, 0.0, g)))
+        if d @ g >= 0:  # not a descent direction: the projected gradient's
+            H, d = np.eye(k), np.where(held, 0.0, -g)
+        a, xn, fn = 1.0, x, fx
+        while a > 1e-10:
+            xn = np.clip(x + a * d, lo, hi)
+            fn = f(xn)
+            if fn <= fx + 1e-4 * (g @ (xn - x)):
+                break
+            a *= 0.5
+        else:
+            break  # no step lowers f
+        gn = _gradient(f, xn, step, lo, hi)
+        s, y = xn - x, gn - g
+        if s @ y > 1e-10 * np.linalg.norm(s) * np.linalg.norm(y):  # BFGS update of the inverse Hessian
+            r = 1.0 / (s @ y)
+            V = np.eye(k) - r * np.outer(s, y)
+            H = V @ H @ V.T + r * np.outer(s, s)
+        converged = fx - fn <= 1e-12 * max(abs(fx), abs(fn), 1.0)
+        x, fx, g = xn, fn, gn
+        if converged:
+            break
+    return x
+
+
+def _gradient(f, x: NDArray, step: float, lo: float, hi: float) -> NDArray:
+    """Central differences of f at x (one-sided at a bound): error O(step²) where forward ones leave O(step) times the
+    curvature, which stalled the search along a stiff direction."""
+    g = np.empty(x.size)
+    for i in range(x.size):
+        up, down = x.copy(), x.copy()
+        up[i], down[i] = min(x[i] + step, hi), max(x[i] - step, lo)
+        g[i] = (f(up) - f(down)) / (up[i] - down[i])
+    return g
