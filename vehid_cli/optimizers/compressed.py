@@ -105,15 +105,12 @@ def trf_compressed(
     x_scale: NDArray,
     tol: float,
     max_nfev: int | None = None,
-    stops: Callable[..., bool] | None = None,
     gram: Callable[[NDArray], NDArray | None] | None = None,
 ) -> NDArray:
     """The trust-region reflective least squares (`trust_region.least_squares`, x_scale=x_scale, xtol=ftol=gtol=tol)
     of `residual` (x -> (R,)) from x0 inside [lower, upper], its Jacobian given transposed by
     `jacobian_rows` (x -> (D, R), may be overwritten) and compressed (`compress`); returns the final point.
-    x0 must be strictly inside the box (`make_strictly_feasible`). `stops(xp, rp, J, x, r, lower, upper,
-    x_scale, tol)` (lsq.trf_stops): True where trf will stop at x without using its Jacobian there; it is then given
-    the last one again (D simulations saved), judged on the compressed pair, which gives J'J, J'r and r'r exactly.
+    x0 must be strictly inside the box (`make_strictly_feasible`).
     `gram(x)` (optional): the Gram matrix of [J r] at x summed without J (`compress_gram`), or None: then
     `jacobian_rows`."""
 
@@ -131,18 +128,12 @@ def trf_compressed(
         f = last["f"]
         if not np.array_equal(last["x"], x):  # the solver asks for the Jacobian at the point it evaluated last
             raise RuntimeError("trf asked for the Jacobian at a point other than its last residual's")
-        before = last.get("J")
-        if before is not None and stops is not None:
-            if stops(last["xJ"], last["fJ"], before, x, f, lower, upper, x_scale, tol):
-                return before  # f keeps the residual's norm: trf stops without forming a gradient from it
         got = None if gram is None else gram(x)
         pair = None if got is None else compress_gram(got)
         rj, z, rho = compress(jacobian_rows(x), residual(x)) if pair is None else pair
         f[:D] = z  # in place: the very array the solver holds as the residual at x
         f[D] = rho
-        J = np.vstack([rj, np.zeros((1, D))])
-        last["xJ"], last["fJ"], last["J"] = x.copy(), f.copy(), J
-        return J
+        return np.vstack([rj, np.zeros((1, D))])
 
     f0 = fun(x0)
     j0 = jac(x0)

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from .base import BudgetExhausted, Optimizer, Search, register
 from .compressed import trf_compressed
-from .trust_region import CL_scaling_vector, evaluate_quadratic, least_squares, make_strictly_feasible
+from .trust_region import least_squares, make_strictly_feasible
 
 JACOBIAN_STEP = 1e-7  # forward-difference step, as a fraction of each parameter's box width
 LONG_JACOBIAN_BYTES = 4 * 2**20  # a Jacobian larger than this is fitted compressed (optimizers/compressed.py), or
@@ -62,49 +62,15 @@ def polish(run: Search, x0: NDArray, max_nfev: int | None = None, tol: float = 1
         step = steps(x)
         return run.evaluate_gram(np.vstack([x[None, :], x[None, :] + np.diag(step)]), step)
 
-    last: dict[str, NDArray] = {}  # the point, residual and Jacobian trf was last given
-
     def jacobian(x: NDArray) -> NDArray:
-        r = residual(x)
-        if last and trf_stops(last["x"], last["r"], last["J"], x, r, lo, hi, width, tol):
-            return last["J"]  # trf stops at x without using its Jacobian there: D simulations saved
-        J = jacobian_rows(x).T
-        last.update(x=x.copy(), r=r, J=J)
-        return J
+        return jacobian_rows(x).T
 
     x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-12 * width, hi - 1e-12 * width)
     x0 = make_strictly_feasible(x0, lo, hi)
     if residual(x0).size * x0.size * 8 > LONG_JACOBIAN_BYTES:  # a long record: the same steps on D + 1 rows
         gram = jacobian_gram if run.problem.gram is not None else None
-        return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev, stops=trf_stops, gram=gram)
+        return trf_compressed(residual, jacobian_rows, x0, lo, hi, width, tol, max_nfev, gram=gram)
     return least_squares(residual, jacobian, x0, lo, hi, width, tol, max_nfev)
-
-
-STOP_MARGIN = 0.5  # trf_stops claims a stop only with this margin on scipy's own tests (else it differences)
-
-
-def trf_stops(
-    xp: NDArray, rp: NDArray, J: NDArray, x: NDArray, r: NDArray, lo: NDArray, hi: NDArray, width: NDArray, tol: float
-) -> bool:  # fmt: skip
-    """Will the trust-region least squares ('trf', bounds, x_scale = width, ftol = xtol = tol) stop at x, the point it
-    accepted after the last Jacobian J at xp (residuals rp there, r at x)? It asks for the Jacobian at x before it
-    tests for the stop (as scipy's `trf_bounds`, whose steps it takes), so the D simulations of the last one would be
-    wasted: where the step passes its tests (its cost fall below ftol of the cost with the ratio to its quadratic
-    model's prediction above 1/4, or the step below xtol of x) with a STOP_MARGIN to spare, it is given J again, which
-    it does not use. The prediction is the solver's own: its Coleman-Li scaled quadratic model at xp. A wrong guess
-    (never seen) would only cost one step on the previous Jacobian, the costs staying exact."""
-    g = J.T @ rp
-    v, dv = CL_scaling_vector(xp, g, lo, hi)
-    v[dv != 0] /= width[dv != 0]
-    d = np.sqrt(v) * width
-    step = x - xp
-    predicted = -float(evaluate_quadratic(J * d, d * g, step / d, diag=g * dv * width))
-    F = 0.5 * float(rp @ rp)
-    dF = F - 0.5 * float(r @ r)
-    ratio = dF / predicted if predicted > 0 else float(predicted == dF == 0)
-    ftol = dF < STOP_MARGIN * tol * F and ratio > 0.25 / STOP_MARGIN
-    xtol = float(np.linalg.norm(step)) < STOP_MARGIN * tol * (tol + float(np.linalg.norm(xp)))
-    return bool(np.isfinite(dF) and (ftol or xtol))
 
 
 STEP_SD = 1e-2  # gauss_newton stops when its step is below this many of the estimate's standard deviations

@@ -6,7 +6,8 @@ about 0.3 s of every `vehid diagnose` and `vehid identify` start-up, a sixth of 
 one solver these commands use. The steps are scipy 1.17's (`scipy/optimize/_lsq/trf.py` and `common.py`, BSD-3-Clause,
 Copyright (c) 2001-2002 Enthought, Inc. and 2003-2024 SciPy Developers), the same numpy operations in the same order:
 with numpy's SVD (LAPACK's gesdd, as scipy.linalg's) the iterates are scipy's bit for bit (tests/test_trust_region.py
-runs both). Here the solver also owns its loop, so callers keep no copy of scipy's private signature.
+runs both). One change: where a step meets the stop tests, scipy still asks for the Jacobian at its point (D
+simulations of a forward difference) and never uses it; this does not ask. The final point is the same.
 """
 
 from __future__ import annotations
@@ -119,6 +120,8 @@ def trf_bounds(fun, jac, x0, f0, J0, lb, ub, ftol, xtol, gtol, max_nfev, x_scale
             Delta = Delta_new
         if actual_reduction > 0:
             x, f, cost = x_new, f_new, cost_new
+            if termination_status is not None:  # scipy asks for the Jacobian here, then stops without using it
+                break
             J = np.atleast_2d(jac(x))
             g = J.T.dot(f)
     return x
