@@ -145,26 +145,16 @@ def penalised_fit(
 
 def bsplines(x: NDArray, t: NDArray, degree: int = 3, derivative: int = 0) -> NDArray:
     """(len(x), len(t) - degree - 1): every B-spline of `degree` on the knots t (ends repeated degree + 1 times), or
-    its `derivative`, at x within [t[degree], t[-degree - 1]] (the right end in the last interval). The values: the
-    degree + 1 that do not vanish on each x's interval (``_local_values``); a derivative: Cox-de Boor's recursion
-    over every B-spline from the one-hot degree 0 up, then d B_j,p / dx = p (B_j,p-1 / (t_j+p - t_j) - B_j+1,p-1 /
-    (t_j+p+1 - t_j+1)) (0 / 0 = 0). What scipy's BSpline.design_matrix and derivative give, to round-off; here to
-    keep scipy.interpolate's import (with the scipy it pulls in: 0.2-0.3 s) off `vehid diagnose`'s start-up."""
+    its `derivative`, at x within [t[degree], t[-degree - 1]] (the right end in the last interval): the values of
+    degree - derivative from those that do not vanish on each x's interval (``_local_values``), then, once per
+    derivative, d B_j,p / dx = p (B_j,p-1 / (t_j+p - t_j) - B_j+1,p-1 / (t_j+p+1 - t_j+1)) (0 / 0 = 0). What
+    scipy's BSpline.design_matrix and derivative give, to round-off; here to keep scipy.interpolate's import (with
+    the scipy it pulls in: 0.2-0.3 s) off `vehid diagnose`'s start-up."""
     x = np.asarray(x, dtype=float)
     t = np.asarray(t, dtype=float)
     nb = t.size - degree - 1
     i = np.clip(np.searchsorted(t, x, side="right") - 1, degree, nb - 1)  # t[i] <= x < t[i + 1]
-    if derivative == 0:
-        return _local_values(x, t, i, degree, nb)
-    B = np.zeros((x.size, t.size - 1))
-    B[np.arange(x.size), i] = 1.0
-    for p in range(1, degree - derivative + 1):  # values of degree p from those of p - 1
-        j = np.arange(t.size - p - 1)
-        left, right = (
-            _ratio(x[:, None] - t[j], t[j + p] - t[j]),
-            _ratio(t[j + p + 1] - x[:, None], t[j + p + 1] - t[j + 1]),
-        )
-        B = left * B[:, j] + right * B[:, j + 1]
+    B = _local_values(x, t, i, degree - derivative, nb + derivative)  # the values of the lower degree
     for p in range(degree - derivative + 1, degree + 1):  # derivatives of degree p from the p - 1 ones
         j = np.arange(t.size - p - 1)
         B = p * (_ratio(B[:, j], t[j + p] - t[j]) - _ratio(B[:, j + 1], t[j + p + 1] - t[j + 1]))
@@ -174,7 +164,7 @@ def bsplines(x: NDArray, t: NDArray, degree: int = 3, derivative: int = 0) -> ND
 def _local_values(x: NDArray, t: NDArray, i: NDArray, degree: int, nb: int) -> NDArray:
     """The values' matrix from the degree + 1 B-splines that do not vanish on each x's interval i (The NURBS Book,
     A2.2: a triangle of ratios per point, its denominators spans of the interval, never 0), scattered into their
-    columns: for many points far cheaper than the recursion over every B-spline."""
+    columns (Cox-de Boor's recursion for just these: for many points far cheaper than over every B-spline)."""
     n = x.size
     N = np.zeros((n, degree + 1))
     N[:, 0] = 1.0
