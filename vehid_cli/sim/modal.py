@@ -116,8 +116,7 @@ def _modal_recursion(e, g, x0, u, out):  # pragma: no cover - compiled
             row[2 * mp], row[2 * mp + 1], row[2 * mp + 2], row[2 * mp + 3] = y0, y1, y2, y3
         if k == n - 1:
             break
-        if one_road:
-            y0, y1, y2, y3 = u[0, k, 0], u[0, k, 1], u[0, k, 2], u[0, k, 3]
+        if one_road:  # y0..y3 still hold u[0, k] (read above, only overwritten with several roads)
             for l in range(Lp):
                 dr = gr[0, l] * y0 + gr[1, l] * y1 + gr[2, l] * y2 + gr[3, l] * y3
                 di = gi[0, l] * y0 + gi[1, l] * y1 + gi[2, l] * y2 + gi[3, l] * y3
