@@ -108,11 +108,11 @@ def penalised_fit(
     def fit(rho: NDArray):
         Pl = sum((10.0**r * P for r, P in zip(rho, Ps, strict=True)), np.zeros((m, m)))
         H = As + ridge + Pl
-        try:
+        try:  # either can refuse an H that is numerically singular: a failed fit, which the search backs away from
             L = np.linalg.cholesky(H)
+            Hinv = np.linalg.inv(H)
         except np.linalg.LinAlgError:
             return None
-        Hinv = np.linalg.inv(H)
         c = Hinv @ bs
         rss = max(rtr - 2.0 * c @ bs + c @ As @ c, 0.0)
         F_ = Hinv @ As
