@@ -55,19 +55,20 @@ def test_clean_run_from_another_simulator_is_adequate(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("effects", "shape"),
+    ("effects", "shape", "pointed"),
     [
-        ({"sqrt_damper": None}, "velocity"),
-        ({"bump_stop": {"gap_f": 0.015, "gap_r": 0.015}}, "deflection"),
+        ({"sqrt_damper": None}, "velocity", {"parameter:cf", "parameter:cr", "coulomb_friction"}),
+        ({"bump_stop": {"gap_f": 0.015, "gap_r": 0.015}}, "deflection", {"backlash", "progressive_spring"}),
     ],
     ids=["sqrt-damper", "bump-stop"],
 )
-def test_a_force_outside_the_library_is_incomplete_not_found(tmp_path, effects, shape):
+def test_a_force_outside_the_library_is_incomplete_not_found(tmp_path, effects, shape, pointed):
     d = run(tmp_path, effects=effects, seed=25)
     assert d.verdict.startswith("incomplete"), d.verdict
     assert not d.verdict.startswith("found")
     assert d.unexplained is not None and d.unexplained.significant
     assert d.unexplained.to_json()["acts_on"]["variable"] == shape
+    assert pointed <= set(d.unexplained.points_to)  # the library's terms of its shape: a damping law, a dead band
 
 
 def assert_honest(d, truth):

@@ -15,7 +15,7 @@ from vehid_cli.diagnose.attribution import lsq_fit
 from vehid_cli.diagnose.holdout import holdout_blocks
 from vehid_cli.diagnose.linear_response import car_at, responses, responses_blocks
 from vehid_cli.diagnose.psplines import basis as _basis
-from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, candidate_order, resemblance
+from vehid_cli.diagnose.shapes import SHAPES, _shape_columns, resemblance
 from vehid_cli.diagnose.unexplained import Unexplained, estimate_unexplained
 from vehid_cli.identify import experiment
 from vehid_cli.identify.experiment import Experiment
@@ -109,7 +109,7 @@ def test_progressive_spring_is_found_as_cubic_stiffening(spring):
     assert u.p_value < 1e-9 and u.chi2_after < 1.05 < 2.0 < u.chi2_before
     # the joint re-fit moves the unknowns back towards the true car (the configured m, Ix, Iy, a1, b1)
     assert np.all(np.abs(fit.x + u.dx - task.nominal) <= np.abs(fit.x - task.nominal) + 1e-9 * task.nominal)
-    assert candidate_order(u, CANDIDATES)[0] == "progressive_spring"
+    assert u.points_to[0] == "progressive_spring"
 
 
 def test_linear_data_leave_nothing():
@@ -121,7 +121,7 @@ def test_linear_data_leave_nothing():
         for curve in (axle.g, axle.h):
             assert inside(curve, np.zeros_like(curve.grid)) >= 0.9
             assert not curve.significant
-    assert candidate_order(u, CANDIDATES) == CANDIDATES
+    assert u.points_to == ()  # nothing significant: it points to nothing
 
 
 def test_an_augmented_task_with_an_effect_unknown(damping):
@@ -150,8 +150,8 @@ def test_json_candidates_and_plot(damping, tmp_path):
     assert front["acts_on"] == "velocity" and front["velocity"]["resembles"]["best"] == "linear_damping"
     assert len(front["velocity"]["force_N"]) == len(front["velocity"]["grid_m_s"]) == 41
     assert doc["peak_force_N"] == pytest.approx(0.15 * CF * max(abs(u.front.h.grid)), rel=0.05)
-    order = candidate_order(u, CANDIDATES)
-    assert order[0] == "parameter:cf" and sorted(order) == sorted(CANDIDATES)
+    assert doc["points_to"] == list(u.points_to) and doc["points_to"][0] == "parameter:cf"
+    assert set(u.points_to) <= set(CANDIDATES) | {"parameter:cf", "parameter:cr", "parameter:kf", "parameter:kr"}
     path = plot_unexplained(u, tmp_path / "unexplained.png")
     assert path == tmp_path / "unexplained.png"
     read_png(path)
@@ -189,12 +189,12 @@ def test_each_library_shape_resembles_itself(variable):
         assert resemblance(variable, x, 250.0 * curve, se).best == name
 
 
-def test_candidate_order_follows_the_dominant_curve(damping):
+def test_points_to_follows_the_dominant_curve(damping):
     _, _, u = damping
     assert isinstance(u, Unexplained)
-    order = candidate_order(u, ["coulomb_friction", "damper_lag", "parameter:cr", "parameter:cf"])
-    assert order[0] == "parameter:cf"
-    assert order.index("parameter:cr") > order.index("damper_lag")  # the rear shows nothing
+    assert u.points_to[0] == "parameter:cf"
+    assert "parameter:cr" not in u.points_to  # the rear shows nothing
+    assert "of the library's terms its shape points to parameter:cf" in u.summary()
 
 
 @pytest.mark.parametrize("block", [2, 5, 256, 2999])

@@ -1,11 +1,10 @@
 """The library's shapes of a strut force law and which effects they point to: each shape's curves over deflection
 or velocity, the resemblance of an estimated curve to them (a one-parameter weighted least-squares fit, uncentred
-R²: the curves all pass through 0), and the order in which an estimate's resemblance puts the candidates.
+R²: the curves all pass through 0), and which candidates an estimate's resemblance points to.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -17,7 +16,8 @@ from ..models.effects import LIBRARY, Shape
 
 VARIABLES = ("deflection", "velocity")
 
-ALPHA = 1e-3  # significance level below which candidate_order reorders (attribution's family-wise level)
+ALPHA = 1e-3  # significance level below which an estimate points to candidates (attribution's family-wise level)
+POINT_SHARE = 0.5  # an estimate points to the candidates scoring at least this share of the best one's score
 
 # Shapes no effect of the library owns: a linear stiffness or damping (a mis-set known spring or damper), and laws the
 # library only approximates. The effects' own shapes, and which shapes point to which effect, come from the registry
@@ -80,7 +80,7 @@ class Resemblance(Result):
 
 
 class EstimatedCurve(Protocol):
-    """What candidate_order reads of one estimated curve (unexplained.Curve)."""
+    """What points_to reads of one estimated curve (unexplained.Curve)."""
 
     chi2_explained: float
     resembles: Resemblance
@@ -90,7 +90,7 @@ class EstimatedCurve(Protocol):
 
 
 class AxleCurves(Protocol):
-    """What candidate_order reads of one axle's estimate (unexplained.AxleEstimate)."""
+    """What points_to reads of one axle's estimate (unexplained.AxleEstimate)."""
 
     axle: str
     g: EstimatedCurve
@@ -98,7 +98,7 @@ class AxleCurves(Protocol):
 
 
 class Estimate(Protocol):
-    """What candidate_order reads of the non-parametric estimate (unexplained.Unexplained, whose module compares
+    """What points_to reads of the non-parametric estimate (unexplained.Unexplained, whose module compares
     its curves with the shapes here and so imports this one)."""
 
     p_value: float
@@ -141,15 +141,14 @@ def resemblance(variable: str, x: NDArray, f: NDArray, se: NDArray, free_line: b
     return Resemblance(top, r2, amp, detail)
 
 
-def candidate_order(unexplained: Estimate, effect_names: Sequence[str], alpha: float = ALPHA) -> list[str]:
-    """`effect_names` (library effects and ``parameter:kf``-style candidates) ordered best first by how well the
-    significant estimated curves resemble each one's shape (R² x affinity of the shape to the effect, weighted by
-    the residual power each curve explains); names the estimate does not point to keep their order after the
-    others. Unchanged when the estimate is not significant (p >= alpha)."""
-    names = list(effect_names)
+def points_to(unexplained: Estimate, alpha: float = ALPHA) -> tuple[str, ...]:
+    """The library effects and known parameters (``parameter:kf``-style) the significant estimated curves resemble,
+    best first by R² x the affinity of the shape to the candidate, weighted by the residual power each curve
+    explains (ties in the order first met), those within POINT_SHARE of the best; none when the estimate is not
+    significant (p >= alpha)."""
     if not unexplained.p_value < alpha:
-        return names
-    score = {name: 0.0 for name in names}
+        return ()
+    score: dict[str, float] = {}
     pointers = shape_effects()
     total = sum(c.chi2_explained for a in (unexplained.front, unexplained.rear) for c in (a.g, a.h)) or 1.0
     for a in (unexplained.front, unexplained.rear):
@@ -161,6 +160,6 @@ def candidate_order(unexplained: Estimate, effect_names: Sequence[str], alpha: f
             for shape, r2 in c.resembles.r2.items():
                 for effect, affinity in pointers.get(shape, ()):
                     effect = effect.format(axle=tag)
-                    if effect in score:
-                        score[effect] = max(score[effect], weight * max(r2, 0.0) * affinity)
-    return sorted(names, key=lambda e: (-score[e], names.index(e)))
+                    score[effect] = max(score.get(effect, 0.0), weight * max(r2, 0.0) * affinity)
+    top = max(score.values(), default=0.0)
+    return tuple(e for e in sorted(score, key=lambda e: -score[e]) if top > 0.0 and score[e] >= POINT_SHARE * top)

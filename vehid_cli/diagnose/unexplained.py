@@ -60,7 +60,7 @@ from ..identify.task import Task
 from ..models.fullcar import N_CORNERS, N_DOF
 from .linear_response import ForceFit, LinearCar, car_at, fit_matrix, response_gram, responses_blocks
 from .psplines import Basis, basis, penalised_fit
-from .shapes import Resemblance, resemblance
+from .shapes import Resemblance, points_to, resemblance
 from .tails import f_sf
 
 Z95 = 1.959963984540054
@@ -213,6 +213,11 @@ class Unexplained(Result):
         return self.dominant[1].resembles.best
 
     @property
+    def points_to(self) -> tuple[str, ...]:
+        """The library effects and known parameters whose shapes the significant curves resemble, best first."""
+        return points_to(self)
+
+    @property
     def significant(self) -> bool:
         """Does the residual hold a strut force (the F test at SIGNIFICANCE, and a curve above its noise)?"""
         return bool(self.p_value < SIGNIFICANCE and any(c.significant for a in self.axles.values() for c in (a.g, a.h)))
@@ -222,9 +227,10 @@ class Unexplained(Result):
         where = self.acts_on
         at = f"{1e3 * where['at']:.3g} mm" if where["variable"] == "deflection" else f"{where['at']:.3g} m/s"
         r2 = self.dominant[1].resembles.r2.get(self.resembles, float("nan"))
+        pointed = f"; of the library's terms its shape points to {', '.join(self.points_to)}" if self.points_to else ""
         return (
             f"peaks at {self.peak_force_N:.3g} N on the {where['axle']} axle over {where['variable']} (at {at}) "
-            f"and resembles {self.resembles} (R² {r2:.2f})"
+            f"and resembles {self.resembles} (R² {r2:.2f}){pointed}"
         )
 
     def to_json(self) -> dict:
@@ -247,6 +253,7 @@ class Unexplained(Result):
             "peak_force_N": self.peak_force_N,
             "acts_on": self.acts_on,
             "resembles": self.resembles,
+            "points_to": list(self.points_to),
         }
 
 

@@ -6,10 +6,12 @@ itself is `diagnose.loop.close`."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,7 +43,6 @@ from ...diagnose.loop import MAX_ROUNDS, REFIT_BUDGET, close
 from ...diagnose.quality import assess_vehicle, precheck_vehicle
 from ...diagnose.residuals import ResidualAnalysis, analyse
 from ...diagnose.result import Diagnosis, ModelReport, chi2_limit
-from ...diagnose.shapes import candidate_order
 from ...diagnose.subject import Subject
 from ...diagnose.unexplained import Unexplained, estimate_unexplained
 from ...diagnose.window import SCREEN_SAMPLES, is_long, window_task
@@ -290,23 +291,38 @@ def fit_declared(
 
 
 def unexplained_force(
-    task: Task | JointTask,
-    ref: References,
-    keep: NDArray | None,
-    fit: Fit,
-    specs: dict[str, Candidate],
-    files: Sequence[str],
-) -> tuple[Unexplained, tuple[str, ...], tuple[str, ...]]:
+    task: Task | JointTask, ref: References, keep: NDArray | None, fit: Fit, files: Sequence[str]
+) -> tuple[Unexplained, tuple[str, ...]]:
     """The strut force the declared model misses, non-parametrically (from the first run alone when several are
-    fitted jointly), the candidates in the order its resemblance suggests, and the notes to add."""
+    fitted jointly), and the notes to add."""
     joint = isinstance(task, JointTask)
     first, first_ref = (task.tasks[0], ref[0]) if joint else (task, ref)
     first_keep = None if keep is None else keep[: first.residual_samples]
     missing = estimate_unexplained(first, first_ref, fit.names, fit.x, keep=first_keep)
     release_if_handing_back()  # a long record's: the estimate's freed heap (~30 MiB) back (core/allocator.py)
-    order = tuple(candidate_order(missing, tuple(specs)))
     notes = (f"the unexplained strut force is estimated from the first run ({files[0]}) alone",) if joint else ()
-    return missing, order, notes
+    return missing, notes
+
+
+def sampling_notes(R_total: int, R_train: int, long: bool) -> tuple[str, ...]:
+    """What the report says of the samples the fits used: the held-out ones (R_train of R_total trained on), and a long
+    record's screening window."""
+    notes: tuple[str, ...] = ()
+    if R_train < R_total:  # the same model and data as identify's one fit, but fewer samples: say so
+        ratio = np.sqrt(R_total / R_train)
+        notes += (
+            f"the 95 % intervals come from the {R_train} training residuals ({R_total - R_train} held out for the "
+            f"validation J) with the residual's own variance: about {ratio:.2f} x wider than vehid identify's on the "
+            "whole run, which are the bound widened by sqrt(chi2) when the residual is not noise",
+        )
+    if long:
+        notes += (
+            f"a long record: the candidates' screening ran on the first {SCREEN_SAMPLES} samples of each run (their "
+            "LR and validation J are the window's), and so did the estimate of the unexplained strut force and a "
+            "declared model's global search (the linear car's first fit is Levenberg–Marquardt on the whole record); "
+            "the polish, every re-fit, interval, removal test and claim on the whole record",
+        )
+    return notes
 
 
 def diagnose(
@@ -360,35 +376,27 @@ def diagnose(
     before = car.report(fit, ())
     step("declared fit", 1, 1)
     quality = assess_vehicle(task, ref, before, pre)
-    missing, order, notes = None, (), ()
-    if quality.ok:  # the strut force the declared model misses, non-parametrically: which candidates to fit first
-        missing, order, notes = unexplained_force(head.task, head.ref, head.split.keep, fit, specs, files)
-    if split.keep is not None:  # the same model and data as identify's one fit, but fewer samples: say so
-        ratio = np.sqrt(R_total / R_train)
-        notes += (
-            f"the 95 % intervals come from the {R_train} training residuals ({R_total - R_train} held out for the "
-            f"validation J) with the residual's own variance: about {ratio:.2f} x wider than vehid identify's on the "
-            "whole run, which are the bound widened by sqrt(chi2) when the residual is not noise",
-        )
-    if screen is not None:
-        notes += (
-            f"a long record: the candidates' screening ran on the first {SCREEN_SAMPLES} samples of each run (their "
-            "LR and validation J are the window's), and so did the estimate of the unexplained strut force and a "
-            "declared model's global search (the linear car's first fit is Levenberg–Marquardt on the whole record); "
-            "the polish, every re-fit, interval, removal test and claim on the whole record",
-        )
+    notes = sampling_notes(R_total, R_train, screen is not None)
     subject = Subject(
         specs=specs, declared=frozenset(config.vehicle.effect_values()), problem_for=car.problem_for,
         validation_J=car.validation_J, residual_count=R_train, statistic=lambda _fit: chi2_statistic(R_train),
         scale=lambda f: f.J, noise_limit=chi2_limit(R_train), screen=screen, linear_for=car.linear_for,
     )  # fmt: skip
-    return close(
-        subject, fit, before, car.report, quality, alpha=alpha, max_rounds=max_rounds,
-        candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start, order=order,
-        unexplained=missing, chi2_residuals=R_total, validation_source=split.source, sigma_source=task.sigma_source,
-        validation_from_file=validate_file is not None, data_files=tuple(map(str, files)) if car.joint else (),
-        extra_notes=notes, checks=tuple(found.to_json()), unit=config.unit, progress=progress,
-    )  # fmt: skip
+    # The strut force the declared model misses, non-parametrically: the loop reads it at its end (a residual left, or
+    # terms that may imitate a law), so it is estimated in a thread beside round 1's fits (0.1-0.4 s of a 3 s
+    # diagnosis); a long record's only once read, after the fits (two working sets at once: its peak memory).
+    with ThreadPoolExecutor(1) as beside:
+        estimate = functools.partial(unexplained_force, head.task, head.ref, head.split.keep, fit, files)
+        if quality.ok and screen is None:
+            estimate = beside.submit(estimate).result
+        return close(
+            subject, fit, before, car.report, quality, alpha=alpha, max_rounds=max_rounds,
+            candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start,
+            unexplained=estimate, chi2_residuals=R_total, validation_source=split.source,
+            sigma_source=task.sigma_source, validation_from_file=validate_file is not None,
+            data_files=tuple(map(str, files)) if car.joint else (), extra_notes=notes,
+            checks=tuple(found.to_json()), unit=config.unit, progress=progress,
+        )  # fmt: skip
 
 
 def screening(
