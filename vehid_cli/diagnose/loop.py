@@ -149,7 +149,7 @@ class _Augmentation:
         todo = [
             c for e, c in specs.items()
             if e not in subject.declared and e not in self.claimed and e not in self.dropped
-            and not (specs[e].kind == "parameter" and specs[e].unknowns[0] in current.names)
+            and not (c.kind == "parameter" and c.unknowns[0] in current.names)
         ]  # fmt: skip
         if self.claimed and subject.noise_limit is not None and current.J <= subject.noise_limit:
             # a second mis-set known parameter hardly shows in J at the noise but biases the unknowns: test those
