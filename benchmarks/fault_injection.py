@@ -188,10 +188,16 @@ def sweep_trials(n: int, rng: random.Random, work: Path) -> list[dict]:
         finished = len(list(out_dir.glob("*.h5"))) if out_dir.exists() else 0
         again = vehid(sweep_cmd(out_dir))
         got = {p.name: content(p) for p in out_dir.glob("*.h5")}
-        ok = again.returncode == 0 and got.keys() == expected.keys() and all(same(got[k], expected[k]) for k in got)
-        ok = ok and not leftovers(out_dir) and not hit["traceback"] and hit["orphans"] == 0 and not hit["hung"]
+        why = {  # what a failed trial got wrong
+            "rerun_returncode": again.returncode, "rerun_stderr_tail": again.stderr[-2000:] if again.returncode else "",
+            "missing": sorted(expected.keys() - got.keys()), "extra": sorted(got.keys() - expected.keys()),
+            "differ": sorted(k for k in got.keys() & expected.keys() if not same(got[k], expected[k])),
+            "leftovers": leftovers(out_dir),
+        }  # fmt: skip
+        ok = again.returncode == 0 and not (why["missing"] or why["extra"] or why["differ"] or why["leftovers"])
+        ok = ok and not hit["traceback"] and hit["orphans"] == 0 and not hit["hung"]
         trials.append(
-            dict(kind="sweep", signal=sig.name, delay_s=round(delay, 2), campaigns_done=finished, ok=ok, **hit)
+            dict(kind="sweep", signal=sig.name, delay_s=round(delay, 2), campaigns_done=finished, ok=ok, **hit, **why)
         )
         shutil.rmtree(out_dir)
     return trials
