@@ -15,6 +15,7 @@ from tests.conftest import BASE_CONFIG, ROOT, vehid
 from vehid_cli.campaign.results import read_campaign_h5
 from vehid_cli.campaign.sweep import parse_shard, parse_vary, plan_sweep, split_top_level
 from vehid_cli.core.errors import InputError
+from vehid_cli.core.locking import exclusive
 
 SMALL = [
     "simulation.duration=1.5", "simulation.dt=0.002", "identify.runs=2",
@@ -82,6 +83,27 @@ def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
     forced = vehid(*args, "--set", "identify.seed=9", "--force")
     assert "4 campaign(s) run" in forced.stdout
 
+
+
+def test_a_kill_during_a_campaigns_clean_up_leaves_nothing_after_the_rerun(tmp_path):
+    """SIGKILL between a campaign file's write and its clean-up leaves its checkpoint and lock file beside it; the
+    rerun skips the finished campaign and removes them (not while another process holds the lock)."""
+    sets = [x for s in SMALL for x in ("--set", s)]
+    args = ["sweep", BASE_CONFIG, "--vary", "noise.level=0.1,0.2"] + sets + ["-o", tmp_path, "--jobs", "1"]
+    assert vehid(*args).returncode == 0
+    done = {p.name: p.read_bytes() for p in tmp_path.glob("*.h5")}
+    stale = tmp_path / "level-0.1.h5.partial"
+    stale.mkdir()
+    (stale / "campaign.json").write_text('{"key": "of the finished campaign"}')
+    (tmp_path / ".level-0.2.h5.lock").touch()
+    with exclusive(tmp_path / "level-0.1.h5"):  # another process holds it: its checkpoint is its own business
+        held = vehid(*args)
+    assert held.returncode == 0 and "0 campaign(s) run, 2 up to date" in held.stdout
+    assert stale.is_dir() and not (tmp_path / ".level-0.2.h5.lock").exists()
+    again = vehid(*args)
+    assert again.returncode == 0 and "0 campaign(s) run, 2 up to date" in again.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["index.csv", "level-0.1.h5", "level-0.2.h5"]
+    assert {p.name: p.read_bytes() for p in tmp_path.glob("*.h5")} == done
 
 def test_sweep_of_a_damper_config_runs_and_reports_like_the_car(tmp_path):
     """Was an AttributeError (exit 1) after writing index.csv: a damper sweep now runs through the one pipeline,

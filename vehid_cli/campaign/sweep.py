@@ -28,8 +28,9 @@ from pathlib import Path
 from ..config import AnyConfig, Override, load_config
 from ..core.errors import InputError, quote
 from ..core.files import atomic_path, read_regular
-from ..core.locking import Busy, exclusive
+from ..core.locking import Busy, exclusive, lock_path
 from .results import campaign_file_digest, config_difference
+from .runner import Checkpoint, checkpoint_dir_for
 
 
 @dataclass(frozen=True)
@@ -243,6 +244,18 @@ def check_no_conflicts(outcome: SweepOutcome, out_dir: Path) -> None:
         )
 
 
+def tidy(path: Path, digest: str) -> None:
+    """The campaign file `path` is whole and of the planned config (`digest`): what a kill between its write and its
+    clean-up left beside it (its checkpoint, its lock file) is removed under its lock, as the campaign's own rerun
+    would (`runner.run_campaign_to_file`); left to the process holding the lock, if one does."""
+    partial = checkpoint_dir_for(path)
+    if not (partial.is_dir() or lock_path(path).exists()):
+        return
+    with contextlib.suppress(Busy), exclusive(path):  # released: the lock file goes too
+        if file_state(path)[0] == digest:
+            Checkpoint(partial, "").remove()
+
+
 def run_sweep(
     planned: Sequence[PlannedCampaign],
     shard: tuple[int, int],
@@ -267,6 +280,7 @@ def run_sweep(
     def attempt(p: PlannedCampaign, wait: bool) -> bool:
         """Run (or skip) one campaign; False if another process holds it and `wait` is not set."""
         if up_to_date(p):
+            tidy(p.path, p.config.digest())
             return True
         with contextlib.ExitStack() as stack:
             try:
