@@ -104,6 +104,10 @@ def test_a_kill_during_a_campaigns_clean_up_leaves_nothing_after_the_rerun(tmp_p
     assert again.returncode == 0 and "0 campaign(s) run, 2 up to date" in again.stdout
     assert sorted(p.name for p in tmp_path.iterdir()) == ["index.csv", "level-0.1.h5", "level-0.2.h5"]
     assert {p.name: p.read_bytes() for p in tmp_path.glob("*.h5")} == done
+    (tmp_path / ".level-0.1.h5.lock").mkdir()  # not vehid's to remove: left, and the finished campaign still done
+    odd = vehid(*args)
+    assert odd.returncode == 0 and "0 campaign(s) run, 2 up to date" in odd.stdout
+    assert (tmp_path / ".level-0.1.h5.lock").is_dir()
 
 def test_sweep_of_a_damper_config_runs_and_reports_like_the_car(tmp_path):
     """Was an AttributeError (exit 1) after writing index.csv: a damper sweep now runs through the one pipeline,

@@ -247,11 +247,13 @@ def check_no_conflicts(outcome: SweepOutcome, out_dir: Path) -> None:
 def tidy(path: Path, digest: str) -> None:
     """The campaign file `path` is whole and of the planned config (`digest`): what a kill between its write and its
     clean-up left beside it (its checkpoint, its lock file) is removed under its lock, as the campaign's own rerun
-    would (`runner.run_campaign_to_file`); left to the process holding the lock, if one does."""
+    would (`runner.run_campaign_to_file`); left to the process holding the lock, if one does. Best effort: what is
+    not vehid's to remove (a directory or symlink where the lock or checkpoint goes) is left, for the campaign's next
+    run to refuse by name, and the finished campaign still counts as done."""
     partial = checkpoint_dir_for(path)
     if not (partial.is_dir() or lock_path(path).exists()):
         return
-    with contextlib.suppress(Busy), exclusive(path):  # released: the lock file goes too
+    with contextlib.suppress(InputError, OSError), exclusive(path):  # (Busy too); released: the lock file goes
         if file_state(path)[0] == digest:
             Checkpoint(partial, "").remove()
 
