@@ -37,7 +37,7 @@ M qdd + C qd + K q + D' f = B y), with g(0) = h(0) = 0 so the car still starts a
   (weights: inverse band variance; uncentred R², the curves all pass through 0).
 
 Where the parts live: the P-splines and the penalised least squares in psplines.py, the linear car's responses to
-strut forces in linear_response.py, the library's shapes, the resemblance and the candidates' order in shapes.py;
+strut forces in linear_response.py, the library's shapes, the resemblance and the candidates it points to in shapes.py;
 here the result types and the estimate.
 
 Limitation: when the fitted car has effects of its own (declared or effect unknowns), their states and tangent
@@ -227,7 +227,8 @@ class Unexplained(Result):
         where = self.acts_on
         at = f"{1e3 * where['at']:.3g} mm" if where["variable"] == "deflection" else f"{where['at']:.3g} m/s"
         r2 = self.dominant[1].resembles.r2.get(self.resembles, float("nan"))
-        pointed = f"; of the library's terms its shape points to {', '.join(self.points_to)}" if self.points_to else ""
+        terms = self.points_to
+        pointed = f"; of the library's terms its shape points to {', '.join(terms)}" if terms else ""
         return (
             f"peaks at {self.peak_force_N:.3g} N on the {where['axle']} axle over {where['variable']} (at {at}) "
             f"and resembles {self.resembles} (R² {r2:.2f}){pointed}"
