@@ -214,9 +214,10 @@ def force_map_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
 
 
 # ------------------------------------------------------------------------------------------ lane laws
-# The same laws over a whole batch of candidates at once (``lanes``): ``law(d, z, par, f, zd, w, fresh)`` with the
-# bench's channels d (n_u, P), the states z and their rates zd (n_z, P), the rows par (n_par, P, transposed), the force
-# f (P,), the law's scratch w and whether d is new since the call before (``sim.prescribed.lanes_loop``). The
+# The same laws over a whole batch of candidates at once (``lanes``): ``law(d, z, par, f, zd, w, fresh, read)`` with
+# the bench's channels d (n_u, P), the states z and their rates zd (n_z, P), the rows par (n_par, P, transposed), the
+# force f (P,), the law's scratch w, whether d is new since the call before and whether the force is read (the output;
+# at RK4's stages only zd is: a law may leave f as it is) (``sim.prescribed.lanes_loop``). The
 # candidates are independent, so the compiled loop over them (innermost) runs several at a time (SIMD, overlapped
 # latency chains) instead of one candidate's serial chain of RK4 stages; a table look-up runs as passes over the
 # batch. Each is the scalar law above, operation for operation: the forces agree bit for bit
@@ -224,21 +225,21 @@ def force_map_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def viscous_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
+def viscous_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no cover - compiled
     """``viscous_law`` over the batch."""
     for p in range(f.shape[0]):
         f[p] = par[P0, p] * d[1, p] + par[0, p] * (d[0, p] - par[1, p])
 
 
 @numba.njit(error_model="numpy", inline="always")
-def gas_spring_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
+def gas_spring_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no cover - compiled
     """``gas_spring_law`` over the batch."""
     for p in range(f.shape[0]):
         f[p] = 0.0 + par[0, p] * (d[0, p] - par[1, p])
 
 
 @numba.njit(error_model="numpy", inline="always")
-def bingham_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
+def bingham_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no cover - compiled
     """``bingham_law`` over the batch."""
     for p in range(f.shape[0]):
         vb = d[1, p]
@@ -247,7 +248,7 @@ def bingham_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
+def bouc_wen_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no cover - compiled
     """``bouc_wen_law`` over the batch: states z[0] = y, z[1] = z."""
     q = P0
     for p in range(f.shape[0]):
@@ -422,7 +423,7 @@ def _tables_at(par, w, nodes, m, P):  # pragma: no cover - compiled
 
 
 @numba.njit(error_model="numpy", inline="always")
-def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
+def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no cover - compiled
     """``generalized_bouc_wen_law`` over the batch (every row has the same table size m; scratch w of N_SCRATCH
     rows). One node (m = 1): no look-up; more: the cell of u in the nodes found once for the fourteen tables, and
     only when u changed, in a pass of its own before the Bouc-Wen pass (``_tables_at``; interleaved, the look-up's
@@ -459,18 +460,20 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover 
 
 
 @numba.njit(error_model="numpy", inline="always")
-def force_map_lanes(d, z, par, f, zd, w, fresh):  # pragma: no cover - compiled
-    """``force_map_law`` over the batch (every row has the same nv x nu table; scratch w of N_SCRATCH rows): the
-    velocity's interval (only when the motion is new: twice per RK4 step), then the cell of u once for the
-    interval's two rows (only when u changed, which a lagged input does at every stage: its fraction from the
-    intervals' reciprocals, ``_reciprocals``, not a division, ran the model 12-26 % faster)."""
+def force_map_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no cover - compiled
+    """``force_map_law`` over the batch (every row has the same nv x nu table; scratch w of N_SCRATCH rows). At RK4's
+    stages (not `read`) only the lag's rate: the map is looked up once per step, for the output (1.6-2.5x faster,
+    benchmarks/bench_damper.py): the velocity's interval, then the cell of u once for the interval's two rows (only
+    when u changed: its fraction from the intervals' reciprocals, ``_reciprocals``, not a division)."""
     q = P0
     nv, nu = int(par[q, 0]), int(par[q + 1, 0])
     vn, un, F = q + 2, q + 2 + nv, q + 2 + nv + nu
     if fresh:  # what depends on the motion alone
         _switches(d, par, w)
-        _velocity_cells(d, par, vn, nv, w)
     _controls(d, z, par, zd, w, 0)
+    if not read:  # an RK4 stage: only the lag's rate is used, the force is not
+        return
+    _velocity_cells(d, par, vn, nv, w)
     kept = _reciprocals(par, un, nu, w)
     for p in range(f.shape[0]):
         if w[W_U, p] != w[W_AT, p]:  # the cell of a new u (a held command, a settled lag: the same)
@@ -492,7 +495,7 @@ class DamperModel:
 
     name: str
     law: object  # numba dispatcher: law(d, dd, z, params, f_out, zd_out), one candidate
-    lanes: object  # numba dispatcher: lanes(d, z, par, f, zd, w, fresh), the same law over a batch (inlined)
+    lanes: object  # numba dispatcher: lanes(d, z, par, f, zd, w, fresh, read), the same law over a batch (inlined)
     parameters: tuple[str, ...]
     n_states: int  # internal states: Bouc-Wen's y and z first, then u_f when the model has a control input
     uses_control: bool

@@ -70,11 +70,11 @@ def integrate_bench(force, params: ArrayLike, road: ArrayLike, dt: float, z0: Ar
 
 @functools.cache
 def lanes_loop(law, nz: int, nu: int, nw: int = 0):
-    """The RK4 loop of a batch law ``law(d, z, par, f, zd, w, fresh)`` (d (nu, P) the channels, z and zd (nz, P) the
-    states and their rates, par (n_par, P) the rows, f (P,) the force, w (nw, P) the law's own scratch, NaN at the
+    """The RK4 loop of a batch law ``law(d, z, par, f, zd, w, fresh, read)`` (d (nu, P) the channels, z and zd (nz, P)
+    the states and their rates, par (n_par, P) the rows, f (P,) the force, w (nw, P) the law's own scratch, NaN at the
     start and kept from call to call: what it caches; fresh: False when d is the same as at the call before (RK4's
-    stage 3 repeats stage 2's channels, the output stage 4's), so what depends on d alone is still in w), n_z
-    states, n_u channels and n_w as compile-time constants.
+    stage 3 repeats stage 2's channels, the output stage 4's), so what depends on d alone is still in w; read: True
+    only at the output call, the stages read zd alone), n_z states, n_u channels and n_w as compile-time constants.
 
     The time loop is outermost and every stage evaluates the whole batch, so the candidates' independent chains of
     stages overlap in the CPU (and share SIMD registers where the law has no look-up) instead of one candidate's
@@ -105,11 +105,11 @@ def lanes_loop(law, nz: int, nu: int, nw: int = 0):
                     for i in range(nz):
                         for p in range(P):
                             zs[i, p] = z[i, p] + h * k[stage - 1, i, p]
-                    law(d1 if stage == 3 else dm, zs, par, f, k[stage], w, stage != 2)
+                    law(d1 if stage == 3 else dm, zs, par, f, k[stage], w, stage != 2, False)
                 for i in range(nz):
                     for p in range(P):
                         z[i, p] += dt / 6.0 * (k[0, i, p] + 2.0 * k[1, i, p] + 2.0 * k[2, i, p] + k[3, i, p])
-            law(d1, z, par, f, k[0], w, nz == 0 or step == 0)  # the output here; stage 1 of the next step
+            law(d1, z, par, f, k[0], w, nz == 0 or step == 0, True)  # the output here; stage 1 of the next step
             for p in range(P):
                 out[p, step] = f[p]
 
