@@ -84,7 +84,6 @@ def test_shards_cover_the_sweep_and_reruns_skip(tmp_path):
     assert "4 campaign(s) run" in forced.stdout
 
 
-
 def test_a_kill_during_a_campaigns_clean_up_leaves_nothing_after_the_rerun(tmp_path):
     """SIGKILL between a campaign file's write and its clean-up leaves its checkpoint and lock file beside it; the
     rerun skips the finished campaign and removes them (not while another process holds the lock)."""
@@ -108,6 +107,7 @@ def test_a_kill_during_a_campaigns_clean_up_leaves_nothing_after_the_rerun(tmp_p
     odd = vehid(*args)
     assert odd.returncode == 0 and "0 campaign(s) run, 2 up to date" in odd.stdout
     assert (tmp_path / ".level-0.1.h5.lock").is_dir()
+
 
 def test_sweep_of_a_damper_config_runs_and_reports_like_the_car(tmp_path):
     """Was an AttributeError (exit 1) after writing index.csv: a damper sweep now runs through the one pipeline,

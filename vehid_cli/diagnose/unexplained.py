@@ -369,14 +369,15 @@ class _FittedCar:
 
 
 def trajectory_shift(car: LinearCar, U: NDArray, theta: NDArray) -> tuple[NDArray, NDArray]:
-    """The strut deflections and velocities (n, 4) that the force U theta drives the linear car to (the states'
-    responses to the basis inputs U (n, 4, K) combined by theta (K,), through the struts' D), a block at a time."""
+    """The strut deflections and velocities (n, 4) that the force U theta drives the linear car to (its response to
+    the one input history U (n, 4, K) @ theta (K,), through the struts' D), a block at a time. The car is linear: the
+    same as combining the K basis inputs' responses by theta (to round-off), at 1/K of the recursion's work."""
     n = U.shape[0]
     new_d, new_v = np.empty((n, N_CORNERS)), np.empty((n, N_CORNERS))
-    for k0, s in responses_blocks(car, U):
+    for k0, s in responses_blocks(car, (U @ theta)[:, :, None]):
         b = s.shape[0]
-        new_d[k0 : k0 + b] = (s[:, :N_DOF, :] @ theta) @ car.D.T
-        new_v[k0 : k0 + b] = (s[:, N_DOF:, :] @ theta) @ car.D.T
+        new_d[k0 : k0 + b] = s[:, :N_DOF, 0] @ car.D.T
+        new_v[k0 : k0 + b] = s[:, N_DOF:, 0] @ car.D.T
     return new_d, new_v
 
 
@@ -395,10 +396,17 @@ def _fit_without_force(Jk: NDArray, rk0: NDArray) -> tuple[float, float]:
 
 
 def _fit_force(
-    fitted: _FittedCar, lin: _Linearisation, d: NDArray, v: NDArray, keep: NDArray, n_knots: int, criterion: str
+    fitted: _FittedCar,
+    lin: _Linearisation,
+    d: NDArray,
+    v: NDArray,
+    keep: NDArray,
+    n_knots: int,
+    criterion: str,
+    start: NDArray | None = None,
 ) -> ForceFit:
     """The force on the trajectory d, v jointly with the unknowns' linear re-fit, over the kept residual entries,
-    one smoothing parameter per function (REML or GCV)."""
+    one smoothing parameter per function (REML or GCV; their search from `start`, log10, when given)."""
     rk, Jk = lin.r[keep], lin.Jm[keep]
     p = Jk.shape[1]
     bases, U = fitted.force_columns(d, v, n_knots)
@@ -412,7 +420,7 @@ def _fit_force(
     for b in bases:
         blocks.append((slice(k0, k0 + b.size), b.P))
         k0 += b.size
-    sol = penalised_fit(AtA, Atr, float(rk @ rk), int(keep.sum()), blocks, criterion)
+    sol = penalised_fit(AtA, Atr, float(rk @ rk), int(keep.sum()), blocks, criterion, start)
     return ForceFit(d, v, bases, U, A, AtA, Atr, rk, sol, p)
 
 
@@ -439,11 +447,12 @@ def _iterate(
     x_cur = x.copy()
     corr_d = np.zeros_like(lin.d)
     corr_v = np.zeros_like(lin.v)
-    done = 0
+    done, start = 0, None
     for it in range(max(0, iterations) + 1):
         d, v = lin.d + corr_d, lin.v + corr_v
         fit = None  # the last fit's columns freed before the next are made (a long window's are tens of MB)
-        fit = _fit_force(fitted, lin, d, v, keep, n_knots, criterion)
+        fit = _fit_force(fitted, lin, d, v, keep, n_knots, criterion, start)
+        start = np.log10(fit.sol.lam)  # the next trajectory's smoothing parameters searched from these
         theta, dx = fit.theta, fit.dx
         # the trajectory of the corrected model: fitted + the unknowns' shift + the estimate's own response
         new_d, new_v = trajectory_shift(lin.car, fit.U, theta)
