@@ -82,6 +82,73 @@ class PenalisedFit:
     edf2: float  # tr(2 H - H H): the reference degrees of freedom of the test
 
 
+RIDGE = 1e-9  # added to the scaled normal equations' diagonal: H stays positive definite where a block is unpenalised
+LN10 = math.log(10.0)
+
+
+class _Criterion:
+    """The smoothing parameters' criterion on the scaled normal equations As, bs (r'r = rtr, R residuals) with the
+    penalties Ps (each lam = 1 on its data's scale, of rank ranks[j]): each fit at rho = log10 lam, its score and
+    (REML) its exact gradient. The latest fit is kept: the search asks for its score, then for its gradient."""
+
+    def __init__(self, As: NDArray, bs: NDArray, rtr: float, R: int, Ps: list[NDArray], ranks: list[int],
+                 criterion: str) -> None:  # fmt: skip
+        self.As, self.bs, self.rtr, self.R, self.Ps, self.ranks = As, bs, rtr, R, Ps, ranks
+        self.criterion = criterion
+        self.null = As.shape[0] - sum(ranks)  # the penalties' common null space
+        self.last: dict[bytes, tuple | None] = {}
+
+    def fit(self, rho: NDArray) -> tuple | None:
+        """(c, H^-1, RSS, edf, RSS + c' P_lam c, log|H|, edf2) at rho, None where H is numerically singular."""
+        key = rho.tobytes()
+        if key not in self.last:
+            self.last.clear()
+            self.last[key] = self._fit(rho)
+        return self.last[key]
+
+    def _fit(self, rho: NDArray) -> tuple | None:
+        As, bs, m = self.As, self.bs, self.As.shape[0]
+        Pl = sum((10.0**r * P for r, P in zip(rho, self.Ps, strict=True)), np.zeros((m, m)))
+        H = As + RIDGE * np.eye(m) + Pl
+        try:  # either can refuse an H that is numerically singular: a failed fit, which the search backs away from
+            L = np.linalg.cholesky(H)
+            Hinv = np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            return None
+        c = Hinv @ bs
+        rss = max(self.rtr - 2.0 * c @ bs + c @ As @ c, 0.0)
+        F_ = Hinv @ As
+        edf = float(np.trace(F_))
+        edf2 = 2.0 * edf - float(np.sum(F_ * F_.T))
+        logdet = 2.0 * float(np.sum(np.log(np.diag(L))))
+        return c, Hinv, rss, edf, rss + float(c @ Pl @ c), logdet, edf2
+
+    def score(self, rho: NDArray) -> float:
+        """REML's (R - M0) log(RSS + c' P_lam c) + log|H| - sum_j rank_j log lam_j, or GCV's log(R RSS / (R - edf)²);
+        inf where the fit fails or leaves no degrees of freedom."""
+        out, R = self.fit(rho), self.R
+        if out is None or out[3] >= R:
+            return np.inf
+        if self.criterion == "gcv":
+            return math.log(R * max(out[2], 1e-300) / (R - out[3]) ** 2)
+        return (R - self.null) * math.log(max(out[4], 1e-300)) + out[5] - LN10 * float(np.dot(self.ranks, rho))
+
+    def reml_gradient(self, rho: NDArray) -> NDArray:
+        """The REML score's exact gradient: with D = RSS + c' P_lam c and d lam_j / d rho_j = ln10 lam_j,
+        dD/d rho_j = ln10 lam_j (c' P_j c + 2 RIDGE c' H^-1 P_j c) (c minimises the penalised sum, ridge included),
+        d log|H| / d rho_j = ln10 lam_j tr(H^-1 P_j). NaN where the fit fails (the search stops there)."""
+        out = self.fit(rho)
+        if out is None or out[3] >= self.R:
+            return np.full(rho.size, np.nan)
+        c, Hinv, _rss, _edf, D, _logdet, _edf2 = out
+        g = np.empty(rho.size)
+        for j, P in enumerate(self.Ps):
+            lam, Pc = LN10 * 10.0 ** rho[j], P @ c
+            dD = lam * (float(c @ Pc) + 2.0 * RIDGE * float(c @ (Hinv @ Pc)))
+            g[j] = (self.R - self.null) * dD / max(D, 1e-300) + lam * float(np.sum(Hinv * P)) - LN10 * self.ranks[j]
+        return g
+
+
 def penalised_fit(
     AtA: NDArray,
     Atr: NDArray,
@@ -99,7 +166,6 @@ def penalised_fit(
     """
     scale = np.sqrt(np.maximum(np.diag(AtA), 1e-300))
     As = AtA / np.outer(scale, scale)
-    bs = Atr / scale
     m = As.shape[0]
     Ps, ranks = [], []
     for sl, P in blocks:
@@ -109,70 +175,18 @@ def penalised_fit(
         ev = np.linalg.eigvalsh(Pj[sl, sl])
         ranks.append(int(np.sum(ev > 1e-9 * ev.max())))
         Ps.append(Pj)
-    RIDGE = 1e-9
-    ridge = RIDGE * np.eye(m)
-    null = m - sum(ranks)
-    ln10 = math.log(10.0)
-    last: dict[bytes, tuple | None] = {}  # the latest fit: the search asks for its score, then for its gradient
-
-    def fit(rho: NDArray):
-        key = rho.tobytes()
-        if key in last:
-            return last[key]
-        last.clear()
-        last[key] = out = _fit(rho)
-        return out
-
-    def _fit(rho: NDArray):
-        Pl = sum((10.0**r * P for r, P in zip(rho, Ps, strict=True)), np.zeros((m, m)))
-        H = As + ridge + Pl
-        try:  # either can refuse an H that is numerically singular: a failed fit, which the search backs away from
-            L = np.linalg.cholesky(H)
-            Hinv = np.linalg.inv(H)
-        except np.linalg.LinAlgError:
-            return None
-        c = Hinv @ bs
-        rss = max(rtr - 2.0 * c @ bs + c @ As @ c, 0.0)
-        F_ = Hinv @ As
-        edf = float(np.trace(F_))
-        edf2 = 2.0 * edf - float(np.sum(F_ * F_.T))
-        logdet = 2.0 * float(np.sum(np.log(np.diag(L))))
-        return c, Hinv, rss, edf, rss + float(c @ Pl @ c), logdet, edf2
-
-    def score(rho: NDArray) -> float:
-        out = fit(rho)
-        if out is None or out[3] >= R:
-            return np.inf
-        if criterion == "gcv":
-            return math.log(R * max(out[2], 1e-300) / (R - out[3]) ** 2)
-        return (R - null) * math.log(max(out[4], 1e-300)) + out[5] - ln10 * float(np.dot(ranks, rho))
-
-    def reml_gradient(rho: NDArray) -> NDArray:
-        """The REML score's exact gradient: with D = RSS + c' P_lam c and d lam_j / d rho_j = ln10 lam_j,
-        dD/d rho_j = ln10 lam_j (c' P_j c + 2 ridge c' H^-1 P_j c) (c minimises the penalised sum, ridge included),
-        d log|H| / d rho_j = ln10 lam_j tr(H^-1 P_j). NaN where the fit fails (the search stops there)."""
-        out = fit(rho)
-        if out is None or out[3] >= R:
-            return np.full(rho.size, np.nan)
-        c, Hinv, _rss, _edf, D, _logdet, _edf2 = out
-        g = np.empty(rho.size)
-        for j, P in enumerate(Ps):
-            lam, Pc = ln10 * 10.0 ** rho[j], P @ c
-            dD = lam * (float(c @ Pc) + 2.0 * RIDGE * float(c @ (Hinv @ Pc)))
-            g[j] = (R - null) * dD / max(D, 1e-300) + lam * float(np.sum(Hinv * P)) - ln10 * ranks[j]
-        return g
-
-    k = len(Ps)
+    crit = _Criterion(As, Atr / scale, rtr, R, Ps, ranks, criterion)
+    k, score = len(Ps), crit.score
     rho = None if start is None else np.clip(np.asarray(start, dtype=float), *LOG_LAMBDA)
     if rho is None or rho.shape != (k,) or not np.isfinite(score(rho)):  # from the best common value on a grid
         grid = np.arange(LOG_LAMBDA[0], LOG_LAMBDA[1] + 1e-9, 0.5)
         rho = np.full(k, min(grid, key=lambda g: score(np.full(k, g))))
     if k:
         with np.errstate(invalid="ignore"):  # a step where the score is inf: inf - inf, not a printed warning
-            best = box_minimum(score, rho, *LOG_LAMBDA, grad=reml_gradient if criterion == "reml" else None)
+            best = box_minimum(score, rho, *LOG_LAMBDA, grad=crit.reml_gradient if criterion == "reml" else None)
         if score(best) <= score(rho):
             rho = best
-    c, Hinv, rss, edf, _, _, edf2 = fit(rho)
+    c, Hinv, rss, edf, _, _, edf2 = crit.fit(rho)
     return PenalisedFit(c / scale, Hinv / np.outer(scale, scale), 10.0**rho, edf, rss, edf2)
 
 
