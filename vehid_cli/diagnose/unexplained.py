@@ -403,10 +403,9 @@ def _fit_force(
     keep: NDArray,
     n_knots: int,
     criterion: str,
-    start: NDArray | None = None,
 ) -> ForceFit:
     """The force on the trajectory d, v jointly with the unknowns' linear re-fit, over the kept residual entries,
-    one smoothing parameter per function (REML or GCV; their search from `start`, log10, when given)."""
+    one smoothing parameter per function (REML or GCV)."""
     rk, Jk = lin.r[keep], lin.Jm[keep]
     p = Jk.shape[1]
     bases, U = fitted.force_columns(d, v, n_knots)
@@ -420,7 +419,7 @@ def _fit_force(
     for b in bases:
         blocks.append((slice(k0, k0 + b.size), b.P))
         k0 += b.size
-    sol = penalised_fit(AtA, Atr, float(rk @ rk), int(keep.sum()), blocks, criterion, start)
+    sol = penalised_fit(AtA, Atr, float(rk @ rk), int(keep.sum()), blocks, criterion)
     return ForceFit(d, v, bases, U, A, AtA, Atr, rk, sol, p)
 
 
@@ -447,12 +446,11 @@ def _iterate(
     x_cur = x.copy()
     corr_d = np.zeros_like(lin.d)
     corr_v = np.zeros_like(lin.v)
-    done, start = 0, None
+    done = 0
     for it in range(max(0, iterations) + 1):
         d, v = lin.d + corr_d, lin.v + corr_v
         fit = None  # the last fit's columns freed before the next are made (a long window's are tens of MB)
-        fit = _fit_force(fitted, lin, d, v, keep, n_knots, criterion, start)
-        start = np.log10(fit.sol.lam)  # the next trajectory's smoothing parameters searched from these
+        fit = _fit_force(fitted, lin, d, v, keep, n_knots, criterion)
         theta, dx = fit.theta, fit.dx
         # the trajectory of the corrected model: fitted + the unknowns' shift + the estimate's own response
         new_d, new_v = trajectory_shift(lin.car, fit.U, theta)
