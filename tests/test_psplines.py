@@ -59,27 +59,40 @@ def test_box_minimum_of_an_ill_conditioned_quadratic():
     np.testing.assert_allclose(x, centre, atol=1e-3)
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_smoothing_parameters_as_good_as_l_bfgs_b(seed, monkeypatch):
-    """The REML (and GCV) scores of penalised fits of noisy curves on one to three penalised blocks: box_minimum's
-    smoothing parameters score no worse than scipy's L-BFGS-B (the minimiser it replaces) to 1e-9 of the score."""
+def noisy_curves(seed: int, unpenalised: int = 0):
+    """Sums of sines on one to three variables (300 noisy samples) as penalised blocks of 8-knot bases, after
+    `unpenalised` constant columns: the fit matrix A, the data r, the blocks and their count k."""
     rng = np.random.default_rng(seed)
     k = 1 + seed % 3
     x = rng.uniform(-1, 1, (300, k))
     bases = [basis(x[:, j], 8) for j in range(k)]
-    A = np.hstack([b(x[:, j]) for j, b in enumerate(bases)])
+    A = np.hstack([np.ones((300, unpenalised))] + [b(x[:, j]) for j, b in enumerate(bases)])
     r = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(300)
-    start, blocks = 0, []
+    start, blocks = unpenalised, []
     for b in bases:
         blocks.append((slice(start, start + b.size), b.P))
         start += b.size
-    scores = {}
+    return A, r, blocks, k
+
+
+def recording(monkeypatch) -> dict:
+    """What penalised_fit hands box_minimum (the score f, the start x0, the gradient), recorded as it runs."""
+    seen = {}
 
     def record(f, x0, lo, hi, grad=None):
-        scores["f"], scores["x0"] = f, x0.copy()
+        seen["f"], seen["x0"], seen["grad"] = f, x0.copy(), grad
         return box_minimum(f, x0, lo, hi, grad=grad)
 
     monkeypatch.setattr(psplines, "box_minimum", record)
+    return seen
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_smoothing_parameters_as_good_as_l_bfgs_b(seed, monkeypatch):
+    """The REML (and GCV) scores of penalised fits of noisy curves on one to three penalised blocks: box_minimum's
+    smoothing parameters score no worse than scipy's L-BFGS-B (the minimiser it replaces) to 1e-9 of the score."""
+    A, r, blocks, k = noisy_curves(seed)
+    scores = recording(monkeypatch)
     for criterion in ("reml", "gcv"):
         sol = psplines.penalised_fit(A.T @ A, A.T @ r, float(r @ r), 300, blocks, criterion)
         f = scores["f"]
@@ -113,23 +126,9 @@ def test_reml_gradient_is_the_scores_derivative(seed, monkeypatch):
     """The exact gradient the smoothing parameters' search takes agrees with central differences of the REML score
     (step 1e-5: truncation and round-off about 1e-7 of the gradient) at the optimum found and at random points, on
     one to three penalised blocks beside an unpenalised column."""
+    A, r, blocks, k = noisy_curves(seed, unpenalised=1)
     rng = np.random.default_rng(seed)
-    k = 1 + seed % 3
-    x = rng.uniform(-1, 1, (300, k))
-    bases = [basis(x[:, j], 8) for j in range(k)]
-    A = np.hstack([np.ones((300, 1))] + [b(x[:, j]) for j, b in enumerate(bases)])
-    r = np.sin(3 * x).sum(axis=1) + 0.1 * rng.standard_normal(300)
-    start, blocks = 1, []
-    for b in bases:
-        blocks.append((slice(start, start + b.size), b.P))
-        start += b.size
-    seen = {}
-
-    def record(f, x0, lo, hi, grad=None):
-        seen["f"], seen["grad"] = f, grad
-        return box_minimum(f, x0, lo, hi, grad=grad)
-
-    monkeypatch.setattr(psplines, "box_minimum", record)
+    seen = recording(monkeypatch)
     sol = psplines.penalised_fit(A.T @ A, A.T @ r, float(r @ r), 300, blocks)
     f, grad = seen["f"], seen["grad"]
     assert grad is not None
