@@ -396,13 +396,7 @@ def _fit_without_force(Jk: NDArray, rk0: NDArray) -> tuple[float, float]:
 
 
 def _fit_force(
-    fitted: _FittedCar,
-    lin: _Linearisation,
-    d: NDArray,
-    v: NDArray,
-    keep: NDArray,
-    n_knots: int,
-    criterion: str,
+    fitted: _FittedCar, lin: _Linearisation, d: NDArray, v: NDArray, keep: NDArray, n_knots: int, criterion: str
 ) -> ForceFit:
     """The force on the trajectory d, v jointly with the unknowns' linear re-fit, over the kept residual entries,
     one smoothing parameter per function (REML or GCV)."""
