@@ -463,8 +463,8 @@ def generalized_bouc_wen_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no 
 def force_map_lanes(d, z, par, f, zd, w, fresh, read):  # pragma: no cover - compiled
     """``force_map_law`` over the batch (every row has the same nv x nu table; scratch w of N_SCRATCH rows). At RK4's
     stages (not `read`) only the lag's rate: the map is looked up once per step, for the output (1.56-1.76x,
-    benchmarks/bench_damper_against.py): the velocity's interval, then the cell of u once for the interval's two rows (only
-    when u changed: its fraction from the intervals' reciprocals, ``_reciprocals``, not a division)."""
+    benchmarks/bench_damper_against.py): the velocity's interval, then the cell of u once for the interval's two
+    rows (only when u changed: its fraction from the intervals' reciprocals, ``_reciprocals``, not a division)."""
     q = P0
     nv, nu = int(par[q, 0]), int(par[q + 1, 0])
     vn, un, F = q + 2, q + 2 + nv, q + 2 + nv + nu
