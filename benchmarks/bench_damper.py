@@ -72,18 +72,25 @@ def rows_of(spec: DamperSpec, batch: int) -> np.ndarray:
     return rows
 
 
+def alternated(runs: dict, repeats: int, batch: int) -> dict:
+    """Evaluations per CPU second of each run (`batch` evaluations per call), `repeats` times, the runs alternating
+    call by call after one warm-up call each (which also compiles)."""
+    for run in runs.values():
+        run()
+    out: dict = {name: [] for name in runs}
+    for _ in range(repeats):
+        for name, run in runs.items():
+            start = time.process_time()
+            run()
+            out[name].append(batch / (time.process_time() - start))
+    return out
+
+
 def rates(spec: DamperSpec, rows: np.ndarray, h: BenchHistory, repeats: int) -> tuple[list[float], list[float]]:
     """Evaluations/s of the fast path and of the reference path, timed alternately."""
     runs = {ref: (lambda ref=ref: simulate_damper(spec.damper, rows, h.t, h.x, h.v, h.u, reference=ref)) for ref in
             (False, True)}  # fmt: skip
-    for run in runs.values():
-        run()  # compile
-    out: dict[bool, list[float]] = {False: [], True: []}
-    for _ in range(repeats):
-        for ref, run in runs.items():
-            start = time.process_time()
-            run()
-            out[ref].append(len(rows) / (time.process_time() - start))
+    out = alternated(runs, repeats, len(rows))
     return out[False], out[True]
 
 

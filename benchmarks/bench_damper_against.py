@@ -19,7 +19,6 @@ import dataclasses
 import importlib
 import statistics
 import sys
-import time
 import types
 from pathlib import Path
 
@@ -27,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import vehid_cli.sim.bench as bench_module  # noqa: E402
-from benchmarks.bench_damper import CASES, rows_of, spec_of  # noqa: E402
+from benchmarks.bench_damper import CASES, alternated, rows_of, spec_of  # noqa: E402
 from benchmarks.machine import host  # noqa: E402
 from vehid_cli.models.bench import sawtooth, sine  # noqa: E402
 from vehid_cli.sim.prescribed import integrate_lanes  # noqa: E402
@@ -41,19 +40,6 @@ def other_tree(tree: Path) -> tuple[types.ModuleType, types.ModuleType]:
         module.__path__ = [str(tree / "vehid_cli" / folder)]
         sys.modules[package] = module
     return importlib.import_module("_other_models.damper"), importlib.import_module("_other_sim.prescribed")
-
-
-def paired_rates(runs: dict[str, object], pairs: int, batch: int) -> dict[str, list[float]]:
-    """Evaluations per CPU second of each run, `pairs` times, the runs alternating (after one warm-up call each)."""
-    for run in runs.values():
-        run()
-    out: dict[str, list[float]] = {name: [] for name in runs}
-    for _ in range(pairs):
-        for name, run in runs.items():
-            start = time.process_time()
-            run()
-            out[name].append(batch / (time.process_time() - start))
-    return out
 
 
 def main() -> None:
@@ -86,7 +72,7 @@ def main() -> None:
                 bench_module.integrate_lanes = integrate_lanes
 
         same = np.array_equal(run("this"), run("other"), equal_nan=True)
-        rates = paired_rates({"other": lambda: run("other"), "this": lambda: run("this")}, args.pairs, args.batch)
+        rates = alternated({"other": lambda: run("other"), "this": lambda: run("this")}, args.pairs, args.batch)
         ratio = statistics.median(t / o for t, o in zip(rates["this"], rates["other"], strict=True))
         this, other = statistics.median(rates["this"]), statistics.median(rates["other"])
         print(f"{label:<42} {this:>10.0f} {other:>10.0f} {ratio:>10.2f}  {'yes' if same else 'NO'}")
