@@ -162,4 +162,6 @@ def points_to(unexplained: Estimate, alpha: float = ALPHA) -> tuple[str, ...]:
                     effect = effect.format(axle=tag)
                     score[effect] = max(score.get(effect, 0.0), weight * max(r2, 0.0) * affinity)
     top = max(score.values(), default=0.0)
-    return tuple(e for e in sorted(score, key=lambda e: -score[e]) if top > 0.0 and score[e] >= POINT_SHARE * top)
+    if not top > 0.0:
+        return ()
+    return tuple(e for e in sorted(score, key=lambda e: -score[e]) if score[e] >= POINT_SHARE * top)
