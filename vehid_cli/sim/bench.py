@@ -37,8 +37,8 @@ def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray, out: N
     which = np.where(v > 0, 2, 0) + np.where(rising, 0, 1)  # tau_comp_rise, tau_comp_fall, tau_reb_rise, ..._fall
     moved = np.flatnonzero(change != 0)
     out = np.empty((P, n, 2)) if out is None else out
-    out[:, :, 0], out[:, :, 1] = u[0], 1.0  # before any change takes effect: the initial command
     if moved.size == 0:
+        out[:, :, 0], out[:, :, 1] = u[0], 1.0  # no change: the initial command throughout, rising
         return out
     if moved.size > n // 10:  # a continuous command: shift it by its local delay
         for p in range(P):
@@ -46,39 +46,59 @@ def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray, out: N
             out[p, :, 0] = np.interp(t - tau, t, u)
             out[p, :, 1] = _hold(np.where(change > 0, 1.0, np.where(change < 0, 0.0, np.nan)))
         return out
+    steps = (t[moved], change[moved], rising[moved].astype(float), which[moved])
     if np.all(delays == delays[:1]):  # the same delays for every candidate (they are not fitted): ramped once
-        _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays[:1], dt,
-               out[:1].transpose(1, 2, 0))  # fmt: skip
+        _ramps(t, *steps, delays[:1], float(u[0]), dt, out[:1].transpose(1, 2, 0))
         out[1:] = out[0]
         return out
-    _ramps(t, t[moved], change[moved], rising[moved].astype(float), which[moved], delays, dt, out.transpose(1, 2, 0))
+    _ramps(t, *steps, delays, float(u[0]), dt, out.transpose(1, 2, 0))
     return out
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _ramps(t, at, jumps, rising, which, delays, dt, out):  # pragma: no cover - compiled
-    """Each candidate p's delayed command out[k, 0, p] (the initial command, already there, plus each jump as a
-    one-sample ramp from its effective time at + delay - dt, never before an earlier change's: in order) and the
-    direction of the latest change completed by each sample out[k, 1, p] (left as it is before the first): as
+def _ramps(t, at, jumps, rising, which, delays, u0, dt, out):  # pragma: no cover - compiled
+    """Each candidate p's delayed command out[k, 0, p] (the initial command u0 plus each jump as a one-sample ramp
+    from its effective time at + delay - dt, never before an earlier change's: in order) and the direction of the
+    latest change completed by each sample out[k, 1, p] (1, rising, before the first): as
     ``level += jump * clip((t - e) / dt, 0, 1)`` and ``searchsorted(effective + dt, t, 'right') - 1`` compute
     them, number for number. `out` (n, 2, P) is the kernel's lanes (the candidates last): time outside, the
     candidates inside, so each sample's row is written whole (candidate by candidate it had been a strided store per
-    sample: 0.25 -> 0.18 ms for 20 candidates on the sawtooth with steps)."""
+    sample: 0.25 -> 0.18 ms for 20 candidates on the sawtooth with steps).
+
+    Only the samples around a change's effective time (from the one before it to the second after its end, for any
+    candidate) are computed; every other sample repeats the row before it, which is what the walk would compute
+    there (no change begins, ends or is under way: the same level and direction). A sawtooth's few steps leave most
+    of a record's samples such copies: the command of 20 candidates 2.2x faster (310 -> 135-168 us, one process)."""
     n, m, P = t.shape[0], at.shape[0], delays.shape[0]
     effective = np.empty((P, m))
+    active = np.zeros(n, np.bool_)  # samples where some candidate's command or direction may change
+    active[0] = True
     for p in range(P):
         for i in range(m):
             effective[p, i] = at[i] - dt + delays[p, which[i]]
             if i > 0:
                 effective[p, i] = max(effective[p, i], effective[p, i - 1])  # np.maximum.accumulate
+            e = effective[p, i]
+            # it begins at the first sample after e and ends (its direction too) at about the first at e + dt; a
+            # sample of margin on each side (the ramp's end is tested as (t - e) / dt >= 1, not t >= e + dt)
+            lo = np.searchsorted(t, e, "right") - 1
+            hi = np.searchsorted(t, e + dt, "left") + 2
+            for k in range(max(lo, 0), min(hi, n - 1) + 1):
+                active[k] = True
     # One walk over the samples (each written once, not once per change): before sample k the changes [0, on) have
     # begun (t_k > effective) and [0, done) have ended ((t_k - effective) / dt >= 1; effective never decreases, so
     # both are prefixes); the level is the initial command plus the ended jumps, added in their order, then the
     # ramps under way, in theirs: the sums above, term for term (the changes not yet begun add nothing). The
     # direction walks effective (and t, neither decreases) with the completed changes' count.
-    level = out[0, 0, :].copy()  # the initial command (every sample holds it)
+    level = np.full(P, u0)
     on, done, ended = np.zeros(P, np.int64), np.zeros(P, np.int64), np.zeros(P, np.int64)
     for k in range(n):
+        if not active[k]:  # nothing begins, ends or is under way: the row before
+            for p in range(P):
+                out[k, 0, p] = out[k - 1, 0, p]
+            for p in range(P):
+                out[k, 1, p] = out[k - 1, 1, p]
+            continue
         for p in range(P):
             e = effective[p]
             while on[p] < m and t[k] > e[on[p]]:
@@ -92,8 +112,7 @@ def _ramps(t, at, jumps, rising, which, delays, dt, out):  # pragma: no cover - 
             out[k, 0, p] = value
             while ended[p] < m and e[ended[p]] + dt <= t[k]:
                 ended[p] += 1
-            if ended[p] > 0:
-                out[k, 1, p] = rising[ended[p] - 1]
+            out[k, 1, p] = rising[ended[p] - 1] if ended[p] > 0 else 1.0
 
 
 def _hold(flags: NDArray) -> NDArray:
