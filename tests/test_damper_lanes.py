@@ -180,3 +180,23 @@ def test_the_delayed_command_is_its_definition():
         np.testing.assert_array_equal(out[p, :, 1], rising)
     same = delayed_controls(h.t, u, h.v, np.repeat(delays[:1], 3, axis=0))  # shared delays: computed once
     assert np.array_equal(same, np.repeat(out[:1], 3, axis=0))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_delayed_command_is_its_definition_for_random_steps(seed):
+    """The walk computes only the samples around each change (sim/bench._ramps) and copies the row before elsewhere:
+    random step commands (steps a sample apart, a change's ramp crossing the next one's, steps at the first and last
+    samples), random delays per candidate from 0 to 60 ms, each candidate against the definition."""
+    rng = np.random.default_rng(seed)
+    h = sawtooth(cycles=2.0)
+    u = np.full(h.t.size, rng.uniform(0, 1))
+    for k in np.sort(rng.integers(1, h.t.size, rng.integers(1, 12))):
+        u[k:] = rng.uniform(0, 1)
+    u[rng.integers(1, h.t.size - 1) :][:2] = rng.uniform(0, 1, 1)  # two changes one sample apart
+    u[-1] = rng.uniform(0, 1)  # a change at the last sample
+    delays = rng.random((int(rng.integers(2, 9)), 4)) * rng.choice([1e-3, 1e-2, 6e-2])
+    out = delayed_controls(h.t, u, h.v, delays)
+    for p in range(len(delays)):
+        level, rising = delayed_by_definition(h.t, u, h.v, delays[p])
+        np.testing.assert_allclose(out[p, :, 0], level, rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(out[p, :, 1], rising)
