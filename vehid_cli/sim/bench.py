@@ -182,7 +182,7 @@ def simulate_damper(
     dt = float(t[1] - t[0])
     u = np.zeros(n) if u is None else np.asarray(u, dtype=float)
     road = np.empty((n, 4 if model.uses_control else 2, P))  # the candidates last: the kernel's lanes
-    road[:, 0, :], road[:, 1, :] = np.asarray(x, dtype=float)[:, None], np.asarray(v, dtype=float)[:, None]
+    _spread(road, np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float))
     for r in np.flatnonzero(rows[:, 2] > 0):  # backlash: the piston's motion through the play
         road[:, 0, r], road[:, 1, r] = play(
             np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float), rows[r, 2]
@@ -200,9 +200,21 @@ def simulate_damper(
     return _checked(t, forces[:, ::substeps])
 
 
+@numba.njit(cache=True)
+def _spread(road, x, v):  # pragma: no cover - compiled
+    """road[:, 0, p] = x and road[:, 1, p] = v for every candidate p (as a NumPy broadcast assignment, in a third
+    of its time: its inner loops were one row of 20 candidates long)."""
+    for k in range(road.shape[0]):
+        for p in range(road.shape[2]):
+            road[k, 0, p] = x[k]
+        for p in range(road.shape[2]):
+            road[k, 1, p] = v[k]
+
+
 def _checked(t: NDArray, force: NDArray) -> BenchForces:
-    """The forces (P, n) with every candidate that did not stay finite NaN throughout."""
-    stable = np.all(np.isfinite(force), axis=1)
+    """The forces (P, n) with every candidate that did not stay finite NaN throughout (a NaN or an infinity
+    anywhere makes its row's largest or smallest value not finite: two reductions, no array of flags)."""
+    stable = np.isfinite(force.max(axis=1)) & np.isfinite(force.min(axis=1))
     if stable.all():
         return BenchForces(t=t, force=np.ascontiguousarray(force), stable=stable)
     return BenchForces(t=t, force=np.where(stable[:, None], force, np.nan), stable=stable)
