@@ -10,12 +10,6 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test]'
-	@# The shared libraries pip just wrote sit in the page cache in large pieces, which the kernel maps whole into each
-	@# process (LLVM's alone: 79 MiB resident at import instead of 35). Dropped from the cache once, they are read
-	@# back as used: a 60 s identify's peak 271 MiB instead of 312 (benchmarks/RESULTS.md, fourteenth pass).
-	$(BIN)/python -c 'import os, pathlib, sysconfig; [os.posix_fadvise(fd := os.open(p, os.O_RDONLY), 0, 0, \
-	    os.POSIX_FADV_DONTNEED) or os.close(fd) for p in pathlib.Path(sysconfig.get_paths()["purelib"]).rglob("*.so*") \
-	    if p.is_file()] if hasattr(os, "posix_fadvise") else None'
 	touch $(STAMP)
 
 ## demo: the paper's car: simulate its bump run, identify it (10 runs, ABC and hybrid), report with figures
