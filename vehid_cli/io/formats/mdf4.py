@@ -97,14 +97,18 @@ def _load(src: str, names: list[str], size: int) -> tuple[list[str], dict, dict]
             if any(masters.get(g) != i for g, i in where)  # the master (time) channels are not data
         ]
         located = {n: [(g, i) for g, i in mdf.channels_db.get(n, ()) if masters.get(g) != i] for n in names}
-        signals = {}
+        signals, stamps = {}, {}
         for name in names:
             if len(located[name]) != 1:
                 continue
             group, index = located[name][0]
             _check_declared(mdf, group, size, src)
             signal = mdf.get(name, group=group, index=index)
-            signals[name] = (np.asarray(signal.samples), np.asarray(signal.timestamps), str(signal.unit or ""))
+            t = np.asarray(signal.timestamps)
+            if group in stamps and np.array_equal(stamps[group], t):
+                t = stamps[group]  # one object: pickled once for the group's channels (a 60 s record's 16 MB -> 9)
+            stamps.setdefault(group, t)
+            signals[name] = (np.asarray(signal.samples), t, str(signal.unit or ""))
         return present, located, signals
     finally:
         mdf.close()
