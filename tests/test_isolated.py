@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import os
 import signal
+import struct
 
 import numpy as np
 import pytest
 
 from vehid_cli.core.errors import InputError
 from vehid_cli.core.errors import clip as quoted
-from vehid_cli.core.isolated import Damaged, in_child
+from vehid_cli.core.isolated import Damaged, _receive, in_child
 
 
 def _arrays(n):
@@ -23,6 +24,47 @@ def test_the_result_comes_back_from_the_child():
     out = in_child(_arrays, 1000)
     np.testing.assert_array_equal(out["t"], np.arange(1000) / 10.0)
     assert out["name"] == "ACC"
+
+
+def _shared_and_odd():
+    t = np.arange(50_000) / 1e3
+    return {"a": (np.sin(t), t), "b": (np.cos(t), t), "strided": np.arange(12.0)[::3], "empty": np.zeros(0),
+            "ints": np.arange(7, dtype=np.int32), "text": "µm/s²"}  # fmt: skip
+
+
+def test_arrays_come_back_equal_one_object_shared_and_strided_or_empty_ones_too():
+    out = in_child(_shared_and_odd)
+    t = np.arange(50_000) / 1e3
+    np.testing.assert_array_equal(out["a"][0], np.sin(t))
+    np.testing.assert_array_equal(out["b"][1], t)
+    assert out["a"][1] is out["b"][1]  # sent once, one object here as there
+    np.testing.assert_array_equal(out["strided"], [0.0, 3.0, 6.0, 9.0])
+    assert out["empty"].shape == (0,) and out["ints"].dtype == np.int32 and out["text"] == "µm/s²"
+
+
+def _piped(*chunks: bytes):
+    r, w = os.pipe()
+    for c in chunks:
+        os.write(w, c)
+    os.close(w)
+    return r
+
+
+def test_a_result_cut_short_or_declaring_more_than_the_budget_is_no_result():
+    head = struct.pack("<3Q", 2, 10, 100)  # two parts: 10 and 100 bytes
+    whole = _piped(head, b"p" * 10, b"b" * 100)
+    assert [bytes(p) for p in _receive(whole, 5.0, 1000)] == [b"p" * 10, b"b" * 100]
+    assert not _receive(_piped(head, b"p" * 10, b"b" * 50), 5.0, 1000)  # the child died while writing
+    assert not _receive(_piped(head[:12]), 5.0, 1000)
+    assert not _receive(_piped(), 5.0, 1000)
+    assert _receive(_piped(head), 5.0, 109) == []  # more than the child's memory budget: not a result of ours
+    assert _receive(_piped(struct.pack("<Q", 0)), 5.0, 1000) == []
+    r, w = os.pipe()
+    os.write(w, head)
+    try:
+        assert _receive(r, 0.2, 1000) is None  # the rest never comes: the timeout
+    finally:
+        os.close(w)
 
 
 def _crash(sig):

@@ -30,18 +30,21 @@ import os
 import pickle
 import select
 import signal
+import struct
 import subprocess
 import sys
 import time
 from collections.abc import Callable
 from typing import TypeVar
 
+from .allocator import release_free_pages
 from .errors import InputError, clip
 
 T = TypeVar("T")
 MEMORY_BUDGET = 4 << 30  # bytes of address space the child may add to what the parent has mapped
 FILE_FACTOR = 64  # ... or this many times the file's size, when larger (a file read whole, and its arrays)
 QUOTE = 200  # characters of a library's message quoted at most
+MAX_PARTS = 1 << 20  # parts of a result at most (the pickle and its arrays' buffers): more is not a result of ours
 
 
 class Damaged(Exception):
@@ -85,7 +88,7 @@ def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None =
             proc.stdin.close()
         except BrokenPipeError:  # the child died before reading its request: its status says how
             pass
-        data = _receive(proc.stdout.fileno(), timeout)
+        data = _receive(proc.stdout.fileno(), timeout, budget)
     except BaseException:  # interrupted (Ctrl-C, an alarm): the child goes too
         _kill(proc)
         raise
@@ -99,7 +102,7 @@ def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None =
         if status < 0:
             raise Damaged(f"the reader crashed ({_signal_name(-status)})")
         raise Damaged(f"the reader stopped without a result (exit status {status})")
-    kind, payload = pickle.loads(data)
+    kind, payload = pickle.loads(data[0], buffers=data[1:])
     if kind == "ok":
         return payload
     if kind == "input":
@@ -130,12 +133,17 @@ def _serve() -> None:
             result = ("input", (exc.detail, exc.source, exc.key))
         except BaseException as exc:  # noqa: BLE001 - the boundary of a parsing library: any failure is the file's
             result = ("damaged", describe(exc, budget))
-        try:
-            data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
+        release_free_pages()  # what the library freed (asammdf's working copies of a 60 s record: 16 MiB)
+        buffers: list[pickle.PickleBuffer] = []
+        try:  # the arrays' bytes out of band: written from their own memory, not copied into the pickle first
+            data = pickle.dumps(result, protocol=5, buffer_callback=buffers.append)
+            parts = [memoryview(data), *(b.raw() for b in buffers)]
         except Exception as exc:  # noqa: BLE001 - what the library returned cannot be carried back
-            data = pickle.dumps(("damaged", f"its content cannot be carried back ({describe(exc)})"))
+            parts = [memoryview(pickle.dumps(("damaged", f"its content cannot be carried back ({describe(exc)})")))]
         with os.fdopen(out, "wb") as fh:
-            fh.write(data)
+            fh.write(struct.pack(f"<{len(parts) + 1}Q", len(parts), *(p.nbytes for p in parts)))
+            for part in parts:
+                fh.write(part)
     finally:
         os._exit(0)
 
@@ -157,18 +165,45 @@ def _limit_memory(budget: int) -> None:
         pass
 
 
-def _receive(fd: int, timeout: float) -> bytes | None:
-    """Everything the child writes, until it closes the pipe; None when that takes more than `timeout` s."""
-    chunks, deadline = [], time.monotonic() + timeout
-    while True:
-        left = deadline - time.monotonic()
-        ready, _, _ = select.select([fd], [], [], max(0.0, left))
+def _receive(fd: int, timeout: float, most: int) -> list[bytearray] | None:
+    """The parts the child writes (`_serve`: their count and sizes, then the pickle and its out-of-band buffers), each
+    read into a buffer of its own size (no chunks joined: one copy of the result here); [] when the pipe closes before
+    they are all there (the child died) or they declare more than `most` bytes (the child's memory budget, which they
+    were made within), None when they take more than `timeout` s."""
+    deadline = time.monotonic() + timeout
+    head = _read_into(fd, bytearray(8), deadline)
+    if not head:
+        return head
+    (count,) = struct.unpack("<Q", head)
+    if not 1 <= count <= MAX_PARTS:
+        return []
+    sizes = _read_into(fd, bytearray(8 * count), deadline)
+    if not sizes:
+        return sizes
+    lengths = struct.unpack(f"<{count}Q", sizes)
+    if sum(lengths) > most:
+        return []
+    parts = []
+    for n in lengths:
+        part = _read_into(fd, bytearray(n), deadline) if n else bytearray()
+        if part is None or (n and not part):
+            return part
+        parts.append(part)
+    return parts
+
+
+def _read_into(fd: int, buf: bytearray, deadline: float) -> bytearray | None:
+    """`buf` filled from the pipe; an empty bytearray when the pipe closes first, None past the `deadline`."""
+    view, got = memoryview(buf), 0
+    while got < len(buf):
+        ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
         if not ready:
             return None
-        chunk = os.read(fd, 1 << 20)
-        if not chunk:
-            return b"".join(chunks)
-        chunks.append(chunk)
+        n = os.readv(fd, [view[got:]])
+        if n == 0:
+            return bytearray()
+        got += n
+    return buf
 
 
 def _kill(proc: subprocess.Popen) -> None:
