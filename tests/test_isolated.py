@@ -42,28 +42,35 @@ def test_arrays_come_back_equal_one_object_shared_and_strided_or_empty_ones_too(
     assert out["empty"].shape == (0,) and out["ints"].dtype == np.int32 and out["text"] == "µm/s²"
 
 
-def _piped(*chunks: bytes):
+def _received(*chunks: bytes, most: int = 1000):
+    """What `_receive` makes of `chunks` written to a pipe that is then closed."""
     r, w = os.pipe()
-    for c in chunks:
-        os.write(w, c)
-    os.close(w)
-    return r
+    try:
+        for c in chunks:
+            os.write(w, c)
+        os.close(w)
+        w = None
+        return _receive(r, 5.0, most)
+    finally:
+        os.close(r)
+        if w is not None:
+            os.close(w)
 
 
 def test_a_result_cut_short_or_declaring_more_than_the_budget_is_no_result():
     head = struct.pack("<3Q", 2, 10, 100)  # two parts: 10 and 100 bytes
-    whole = _piped(head, b"p" * 10, b"b" * 100)
-    assert [bytes(p) for p in _receive(whole, 5.0, 1000)] == [b"p" * 10, b"b" * 100]
-    assert not _receive(_piped(head, b"p" * 10, b"b" * 50), 5.0, 1000)  # the child died while writing
-    assert not _receive(_piped(head[:12]), 5.0, 1000)
-    assert not _receive(_piped(), 5.0, 1000)
-    assert _receive(_piped(head), 5.0, 109) == []  # more than the child's memory budget: not a result of ours
-    assert _receive(_piped(struct.pack("<Q", 0)), 5.0, 1000) == []
+    assert [bytes(p) for p in _received(head, b"p" * 10, b"b" * 100)] == [b"p" * 10, b"b" * 100]
+    assert not _received(head, b"p" * 10, b"b" * 50)  # the child died while writing
+    assert not _received(head[:12])
+    assert not _received()
+    assert _received(head, most=109) == []  # more than the child's memory budget: not a result of ours
+    assert _received(struct.pack("<Q", 0)) == []
     r, w = os.pipe()
     os.write(w, head)
     try:
         assert _receive(r, 0.2, 1000) is None  # the rest never comes: the timeout
     finally:
+        os.close(r)
         os.close(w)
 
 
