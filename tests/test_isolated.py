@@ -5,6 +5,7 @@ parent, which lives on and prints nothing of the child's."""
 from __future__ import annotations
 
 import os
+import pickle
 import signal
 import struct
 
@@ -13,7 +14,7 @@ import pytest
 
 from vehid_cli.core.errors import InputError
 from vehid_cli.core.errors import clip as quoted
-from vehid_cli.core.isolated import Damaged, _receive, in_child
+from vehid_cli.core.isolated import Damaged, _framed, _receive, in_child
 
 
 def _arrays(n):
@@ -42,7 +43,7 @@ def test_arrays_come_back_equal_one_object_shared_and_strided_or_empty_ones_too(
     assert out["empty"].shape == (0,) and out["ints"].dtype == np.int32 and out["text"] == "µm/s²"
 
 
-def _received(*chunks: bytes, most: int = 1000):
+def _received(*chunks: bytes, most: int = 1 << 20):
     """What `_receive` makes of `chunks` written to a pipe that is then closed."""
     r, w = os.pipe()
     try:
@@ -57,21 +58,49 @@ def _received(*chunks: bytes, most: int = 1000):
             os.close(w)
 
 
+def _loaded(got):
+    data, buffers = got
+    return pickle.loads(data, buffers=buffers)
+
+
 def test_a_result_cut_short_or_declaring_more_than_the_budget_is_no_result():
-    head = struct.pack("<3Q", 2, 10, 100)  # two parts: 10 and 100 bytes
-    assert [bytes(p) for p in _received(head, b"p" * 10, b"b" * 100)] == [b"p" * 10, b"b" * 100]
-    assert not _received(head, b"p" * 10, b"b" * 50)  # the child died while writing
-    assert not _received(head[:12])
-    assert not _received()
-    assert _received(head, most=109) == []  # more than the child's memory budget: not a result of ours
-    assert _received(struct.pack("<Q", 0)) == []
+    whole = b"".join(bytes(p) for p in _framed(("ok", [np.arange(5.0), np.arange(3, dtype=np.int8), "x"])))
+    out = _loaded(_received(whole))
+    np.testing.assert_array_equal(out[1][0], np.arange(5.0))
+    np.testing.assert_array_equal(out[1][1], [0, 1, 2])
+    for cut in (0, 7, 16, 24, len(whole) - 1):  # the child died while writing: in the header, the pickle, a buffer
+        assert _received(whole[:cut]) == ()
+    assert _received(whole, most=len(whole) - 100) == ()  # more than the child's memory budget: not a result of ours
+    assert _received(struct.pack("<2Q", 2**40, 10)) == ()
+    assert _received(struct.pack("<2Q", 0, 0)) == ()
     r, w = os.pipe()
-    os.write(w, head)
+    os.write(w, whole[:30])
     try:
-        assert _receive(r, 0.2, 1000) is None  # the rest never comes: the timeout
+        assert _receive(r, 0.2, 1 << 20) is None  # the rest never comes: the timeout
     finally:
         os.close(r)
         os.close(w)
+
+
+def _many():
+    small = [np.full(k % 5 + 1, k % 100, dtype=np.int8 if k % 2 else float) for k in range(20_000)]
+    large = [np.full(4099 + k, k, dtype=np.int8 if k % 2 else float) for k in range(6)]  # odd byte counts, out of band
+    return small + large
+
+
+def test_many_small_and_large_arrays_come_back_equal_aligned_and_writeable():
+    out = in_child(_many)
+    assert len(out) == 20_006 and all(np.all(a == k % 100) and a.size == k % 5 + 1 for k, a in enumerate(out[:20_000]))
+    assert all(np.all(a == k) and a.size == 4099 + k for k, a in enumerate(out[20_000:]))
+    assert all(a.flags.aligned and a.flags.writeable for a in out)
+
+
+def test_bytes_framed_as_a_result_that_do_not_unpickle_are_damaged(monkeypatch):
+    import vehid_cli.core.isolated as isolated
+
+    monkeypatch.setattr(isolated, "_receive", lambda fd, timeout, most: (bytearray(b"junk"), []))
+    with pytest.raises(Damaged, match="its result cannot be read"):
+        in_child(_arrays, 3)
 
 
 def _crash(sig):

@@ -47,7 +47,9 @@ T = TypeVar("T")
 MEMORY_BUDGET = 4 << 30  # bytes of address space the child may add to what the parent has mapped
 FILE_FACTOR = 64  # ... or this many times the file's size, when larger (a file read whole, and its arrays)
 QUOTE = 200  # characters of a library's message quoted at most
-MAX_PARTS = 1 << 20  # parts of a result at most (the pickle and its arrays' buffers): more is not a result of ours
+ALIGN = 64  # [bytes] each out-of-band buffer of a result starts at a multiple of this in the block that holds them
+IN_BAND = 4096  # [bytes] an array's buffer smaller than this is sent inside the pickle (its padding would cost more)
+WAIT = 10.0  # [s] the parent waits this long for a child that sent no result to exit, then kills it
 
 
 class Damaged(Exception):
@@ -100,12 +102,19 @@ def in_child(fn: Callable[..., T], *args, size: int = 0, timeout: float | None =
     if data is None:
         _kill(proc)
         raise Damaged(f"the reader did not finish within {timeout:.0f} s")
-    status = proc.wait()
+    try:
+        status = proc.wait(WAIT if not data else None)
+    except subprocess.TimeoutExpired:  # no result and still running: not a reader of ours
+        _kill(proc)
+        status = proc.returncode
     if not data:
         if status < 0:
             raise Damaged(f"the reader crashed ({_signal_name(-status)})")
         raise Damaged(f"the reader stopped without a result (exit status {status})")
-    kind, payload = pickle.loads(data[0], buffers=data[1:])
+    try:
+        kind, payload = pickle.loads(data[0], buffers=data[1])
+    except Exception as exc:  # noqa: BLE001 - bytes framed as a result that are not one
+        raise Damaged(f"its result cannot be read ({describe(exc)})") from None
     if kind == "ok":
         return payload
     if kind == "input":
@@ -137,14 +146,11 @@ def _serve() -> None:
         except BaseException as exc:  # noqa: BLE001 - the boundary of a parsing library: any failure is the file's
             result = ("damaged", describe(exc, budget))
         release_free_pages()  # what the library freed (asammdf's working copies of a 60 s record: 16 MiB)
-        buffers: list[pickle.PickleBuffer] = []
-        try:  # the arrays' bytes out of band: written from their own memory, not copied into the pickle first
-            data = pickle.dumps(result, protocol=5, buffer_callback=buffers.append)
-            parts = [memoryview(data), *(b.raw() for b in buffers)]
+        try:
+            parts = _framed(result)
         except Exception as exc:  # noqa: BLE001 - what the library returned cannot be carried back
-            parts = [memoryview(pickle.dumps(("damaged", f"its content cannot be carried back ({describe(exc)})")))]
+            parts = _framed(("damaged", f"its content cannot be carried back ({describe(exc)})"))
         with os.fdopen(out, "wb") as fh:
-            fh.write(struct.pack(f"<{len(parts) + 1}Q", len(parts), *(p.nbytes for p in parts)))
             for part in parts:
                 fh.write(part)
     finally:
@@ -168,31 +174,60 @@ def _limit_memory(budget: int) -> None:
         pass
 
 
-def _receive(fd: int, timeout: float, most: int) -> list[bytearray] | None:
-    """The parts the child writes (`_serve`: their count and sizes, then the pickle and its out-of-band buffers), each
-    read into a buffer of its own size (no chunks joined: one copy of the result here); [] when the pipe closes before
-    they are all there (the child died) or they declare more than `most` bytes (the child's memory budget, which they
-    were made within), None when they take more than `timeout` s."""
-    deadline = time.monotonic() + timeout
-    head = _read_into(fd, bytearray(8), deadline)
-    if not head:
-        return head
-    (count,) = struct.unpack("<Q", head)
-    if not 1 <= count <= MAX_PARTS:
-        return []
-    sizes = _read_into(fd, bytearray(8 * count), deadline)
-    if not sizes:
-        return sizes
-    lengths = struct.unpack(f"<{count}Q", sizes)
-    if sum(lengths) > most:
-        return []
-    parts = []
-    for n in lengths:
-        part = _read_into(fd, bytearray(n), deadline) if n else bytearray()
-        if part is None or (n and not part):
-            return part
-        parts.append(part)
+def _framed(result: object) -> list:
+    """What the child writes for `result`: a header (the number of out-of-band buffers, the pickle's size, each
+    buffer's size), the pickle (protocol 5) and the buffers of its arrays of IN_BAND bytes or more out of band, each
+    padded to ALIGN bytes: written from the arrays' own memory, not copied into the pickle first."""
+    buffers: list[pickle.PickleBuffer] = []
+
+    def out_of_band(b: pickle.PickleBuffer) -> bool:  # False: out of band; a small array stays in the pickle
+        if b.raw().nbytes < IN_BAND:
+            return True
+        buffers.append(b)
+        return False
+
+    data = pickle.dumps(result, protocol=5, buffer_callback=out_of_band)
+    raws = [b.raw() for b in buffers]
+    head = struct.pack(f"<{len(raws) + 2}Q", len(raws), len(data), *(r.nbytes for r in raws))
+    parts: list = [head, data]
+    for r in raws:
+        parts += [r, bytes(_padded(r.nbytes) - r.nbytes)]
     return parts
+
+
+def _padded(n: int) -> int:
+    return -(-n // ALIGN) * ALIGN
+
+
+def _receive(fd: int, timeout: float, most: int) -> tuple[bytearray, list[memoryview]] | tuple[()] | None:
+    """What the child writes (`_framed`): the pickle and its buffers, the buffers read into one block of their padded
+    sizes (views of it, each starting ALIGN-aligned within it): one copy of the result here, however many arrays it
+    holds. () when the pipe closes before it is all there (the child died) or it declares more than `most` bytes (the
+    child's memory budget, which it was made within), None when it takes more than `timeout` s."""
+    deadline = time.monotonic() + timeout
+    head = _read_into(fd, bytearray(16), deadline)
+    if not head:
+        return head if head is None else ()
+    count, size = struct.unpack("<2Q", head)
+    if 8 * count + size > most:
+        return ()
+    sizes = _read_into(fd, bytearray(8 * count), deadline) if count else bytearray()
+    if sizes is None or len(sizes) < 8 * count:
+        return sizes if sizes is None else ()
+    lengths = struct.unpack(f"<{count}Q", sizes)
+    offsets = [0]
+    for n in lengths:
+        offsets.append(offsets[-1] + _padded(n))
+    if size + offsets[-1] > most or size == 0:
+        return ()
+    data = _read_into(fd, bytearray(size), deadline)
+    block = _read_into(fd, bytearray(offsets[-1]), deadline) if offsets[-1] else bytearray()
+    if data is None or block is None:
+        return None
+    if not data or len(block) < offsets[-1]:
+        return ()
+    view = memoryview(block)
+    return data, [view[a : a + n] for a, n in zip(offsets, lengths, strict=False)]
 
 
 def _read_into(fd: int, buf: bytearray, deadline: float) -> bytearray | None:
