@@ -12,9 +12,9 @@ part of a reader: open, parse, copy the arrays out; a module-level function) in 
 - a crash (a signal), a hang (`timeout`) or any exception of the library becomes `Damaged`, which the reader
   turns into an InputError naming the file ("the file is damaged: the reader crashed (SIGSEGV)");
 - an InputError raised by `fn` itself reaches the parent as it was raised;
-- the result comes back as its pickle and its arrays' buffers out of band (protocol 5), each read into a buffer of
-  its own size: one copy of a record's arrays on either side, not three (pickle, chunks, joined bytes); a result cut
-  short is no result (`Damaged`).
+- the result comes back as its pickle and its arrays' buffers out of band (protocol 5, `_framed`), read into one
+  block here: one copy of a record's arrays on either side, not three (pickle, chunks, joined bytes); a result cut
+  short, or one that does not unpickle, is no result (`Damaged`).
 
 The child is a fresh interpreter (`sys.executable`, this process's `sys.path`), not a fork: it imports only the
 reader's module and its library (numpy, asammdf, ...). A fork would carry the whole of this process: with the CLI
