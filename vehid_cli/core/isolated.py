@@ -196,6 +196,7 @@ def _framed(result: object) -> list:
 
 
 def _padded(n: int) -> int:
+    """n bytes rounded up to a multiple of ALIGN."""
     return -(-n // ALIGN) * ALIGN
 
 
@@ -221,11 +222,11 @@ def _receive(fd: int, timeout: float, most: int) -> tuple[bytearray, list[memory
     if size + offsets[-1] > most or size == 0:
         return ()
     data = _read_into(fd, bytearray(size), deadline)
+    if not data:
+        return data if data is None else ()
     block = _read_into(fd, bytearray(offsets[-1]), deadline) if offsets[-1] else bytearray()
-    if data is None or block is None:
-        return None
-    if not data or len(block) < offsets[-1]:
-        return ()
+    if block is None or len(block) < offsets[-1]:
+        return block if block is None else ()
     view = memoryview(block)
     return data, [view[a : a + n] for a, n in zip(offsets, lengths, strict=False)]
 
