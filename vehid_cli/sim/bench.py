@@ -181,12 +181,11 @@ def simulate_damper(
     P, n = rows.shape[0], t.size
     dt = float(t[1] - t[0])
     u = np.zeros(n) if u is None else np.asarray(u, dtype=float)
+    x, v = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float)
     road = np.empty((n, 4 if model.uses_control else 2, P))  # the candidates last: the kernel's lanes
-    _spread(road, np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float))
+    _spread(road, x, v)
     for r in np.flatnonzero(rows[:, 2] > 0):  # backlash: the piston's motion through the play
-        road[:, 0, r], road[:, 1, r] = play(
-            np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float), rows[r, 2]
-        )
+        road[:, 0, r], road[:, 1, r] = play(x, v, rows[r, 2])
     if model.uses_control:
         delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4], out=road[:, 2:, :].transpose(2, 0, 1))
     road = refine(t, road, substeps, time_axis=0)  # finer integration of the same inputs
@@ -227,13 +226,12 @@ def _simulate_reference(
     P, n = rows.shape[0], t.size
     dt = float(t[1] - t[0])
     u = np.zeros(n) if u is None else np.asarray(u, dtype=float)
+    x, v = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float)
     channels = 4 if model.uses_control else 2
     road = np.empty((P, n, channels))
     road[:, :, 0], road[:, :, 1] = x, v
     for r in np.flatnonzero(rows[:, 2] > 0):  # backlash: the piston's motion through the play
-        road[r, :, 0], road[r, :, 1] = play(
-            np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float), rows[r, 2]
-        )
+        road[r, :, 0], road[r, :, 1] = play(x, v, rows[r, 2])
     if model.uses_control:
         road[:, :, 2:] = delayed_controls(t, u, v, rows[:, N_FRONT : N_FRONT + 4])
     road = refine(t, road, substeps)  # finer integration of the same inputs
