@@ -212,7 +212,7 @@ def _receive(fd: int, timeout: float, most: int) -> tuple[bytearray, list[memory
     count, size = struct.unpack("<2Q", head)
     if 8 * count + size > most:
         return ()
-    sizes = _read_into(fd, bytearray(8 * count), deadline) if count else bytearray()
+    sizes = _read_into(fd, bytearray(8 * count), deadline)
     if sizes is None or len(sizes) < 8 * count:
         return sizes if sizes is None else ()
     lengths = struct.unpack(f"<{count}Q", sizes)
@@ -224,7 +224,7 @@ def _receive(fd: int, timeout: float, most: int) -> tuple[bytearray, list[memory
     data = _read_into(fd, bytearray(size), deadline)
     if not data:
         return data if data is None else ()
-    block = _read_into(fd, bytearray(offsets[-1]), deadline) if offsets[-1] else bytearray()
+    block = _read_into(fd, bytearray(offsets[-1]), deadline)
     if block is None or len(block) < offsets[-1]:
         return block if block is None else ()
     view = memoryview(block)
@@ -232,7 +232,8 @@ def _receive(fd: int, timeout: float, most: int) -> tuple[bytearray, list[memory
 
 
 def _read_into(fd: int, buf: bytearray, deadline: float) -> bytearray | None:
-    """`buf` filled from the pipe; an empty bytearray when the pipe closes first, None past the `deadline`."""
+    """`buf` filled from the pipe (an empty one at once); an empty bytearray when the pipe closes first, None past the
+    `deadline`."""
     view, got = memoryview(buf), 0
     while got < len(buf):
         ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
