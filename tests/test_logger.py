@@ -437,3 +437,84 @@ def test_a_sample_that_overflows_in_si_is_refused_without_a_numpy_warning(tmp_pa
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # numpy's RuntimeWarning 'overflow encountered in multiply' was printed
         raises(path, str(path), "'acc' ('ACC')", "non-finite", "sample 8", channels={"acc": "ACC"}, units={"acc": "g"})
+
+
+def _spied_reader(monkeypatch) -> list:
+    """The `names` of each MDF4 read in a child (None: every channel, a read ahead), recorded in order."""
+    from vehid_cli.io.formats import mdf4
+
+    calls, real = [], mdf4.in_child
+    monkeypatch.setattr(
+        mdf4, "in_child", lambda fn, src, names, *a, **kw: calls.append(names) or real(fn, src, names, *a, **kw)
+    )
+    return calls
+
+
+def test_an_mdf4_file_read_ahead_gives_the_same_record_and_is_read_once(files, monkeypatch):
+    from vehid_cli.io.formats import mdf4
+    from vehid_cli.io.read import read_ahead
+
+    monkeypatch.setattr(mdf4, "AHEAD_MIN_FILE", 0)  # the test file is small
+    one = {"acc_rr": "ACC_RR_Z"}
+    before, before_one = read(files, "mf4"), read(files, "mf4", channels=one)
+    missing = raises((files, "mf4"), "NOPE", channels={"x": "NOPE"})
+    calls = _spied_reader(monkeypatch)
+    with read_ahead([files["mf4"], files["csv"]]):
+        assert calls == [None]  # every channel of the MDF4 file, in one child; the CSV is read where it is used
+        inside, inside_one = read(files, "mf4"), read(files, "mf4", channels=one)
+        assert raises((files, "mf4"), channels={"x": "NOPE"}) == missing
+        assert calls == [None]
+    read(files, "mf4", channels=one)
+    assert calls == [None, ["ACC_RR_Z"]]  # the block's end forgot the file
+    for a, b in ((before, inside), (before_one, inside_one)):
+        assert np.array_equal(a.t, b.t) and a.rates == b.rates and a.declared == b.declared
+        assert a.channels.keys() == b.channels.keys()
+        for name in a.channels:
+            assert np.array_equal(a.channels[name], b.channels[name], equal_nan=True)
+            assert np.array_equal(a.stamps[name], b.stamps[name])
+
+
+def test_a_small_large_or_damaged_mdf4_file_is_left_to_the_reader(files, tmp_path, monkeypatch):
+    from vehid_cli.io.formats import mdf4
+    from vehid_cli.io.read import read_ahead
+
+    assert files["mf4"].stat().st_size < mdf4.AHEAD_MIN_FILE
+    calls = _spied_reader(monkeypatch)
+    with read_ahead([files["mf4"]]):
+        assert calls == []  # small: its reader holds little beside its interpreter
+    monkeypatch.setattr(mdf4, "AHEAD_MIN_FILE", 0)
+    monkeypatch.setattr(mdf4, "AHEAD_BYTES", 1000)  # the file's records are larger
+    with read_ahead([files["mf4"]]):
+        read(files, "mf4", channels={"acc_rr": "ACC_RR_Z"})
+        assert calls == [None, ["ACC_RR_Z"]]  # tried whole, refused by its size: read where it is used
+    path = _damaged(files, "mf4", tmp_path, lambda d: d.__delitem__(slice(len(d) // 3, None)))
+    with read_ahead([path, tmp_path / "none.mf4"]):  # a damaged file, a missing one: nothing raised here
+        raises(path, str(path), "cannot read as ASAM MDF", "damaged", channels=CHANNELS)
+
+
+def test_the_commands_read_their_logger_files_before_the_compiled_kernels_are_imported(files, tmp_path):
+    """`vehid identify` and `vehid diagnose` read an MDF4 file ahead while numba is not imported: the reader child's
+    memory and numba's LLVM library one after the other (io.read.read_ahead)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    base = root / "configs" / "gokdag2015" / "base.yaml"
+    code = """
+import runpy, sys
+from vehid_cli.io.formats import mdf4
+real = mdf4.Mdf4.read_ahead
+def spy(self, path):
+    print("read ahead", path.name, "numba imported:", "numba" in sys.modules)
+    return real(self, path)
+mdf4.Mdf4.read_ahead = spy
+sys.argv = ["vehid", *sys.argv[1:]]
+runpy.run_module("vehid_cli", run_name="__main__")
+"""
+    for command in (["identify", str(base), "-o", str(tmp_path / "r.h5")], ["diagnose", str(base)]):
+        proc = subprocess.run([sys.executable, "-c", code, *command, "--data", str(files["mf4"])], cwd=root,
+                              capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(root)))  # fmt: skip
+        assert proc.returncode == 2, proc.stderr  # the paper's channels are not in this file: refused, after the read
+        assert f"read ahead {files['mf4'].name} numba imported: False" in proc.stdout, (command, proc.stdout)
+        assert "acc1" in proc.stderr or "channel" in proc.stderr, proc.stderr

@@ -88,7 +88,7 @@ def diagnose(
     The verdict starts with adequate, found, incomplete or inconclusive (data too short, noisy or unexcited).
     """
 
-    from ..systems import diagnose_config
+    from ..io.read import read_ahead
 
     if json_out is not None:
         check_writable(json_out, (".json",))
@@ -98,9 +98,12 @@ def diagnose(
         check_writable(save_config, (".yaml", ".yml"))
     if html is not None:
         check_writable(html, (".html", ".htm"))
-    with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left
-        progress = stage_hook(bar, {"candidates": "candidate", "fit": "fit"})
-        result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn, progress=progress)
+    with read_ahead([*(data or ()), *(validate or ())]):  # logger files read before the compiled kernels' imports
+        from ..systems import diagnose_config
+
+        with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left
+            progress = stage_hook(bar, {"candidates": "candidate", "fit": "fit"})
+            result = diagnose_config(config, set_ or (), data or None, validate or (), log=warn, progress=progress)
     _print_diagnosis(result)
     _write_outputs(result, config, data or [], validate or [], set_ or (), json_out, plots, save_config, html)
 

@@ -14,7 +14,8 @@ Every problem a user can fix is an `InputError` naming the file and the channel 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -90,6 +91,28 @@ def read_record(
     stamps = {ours: r.t - start for ours, r in raw.items()}
     stamps = {ours: s[(s >= t[0] - near) & (s <= t[-1] + near)] for ours, s in stamps.items()}
     return Record(t=t, channels=values, source=src, rates=rates, stamps=stamps, declared=declared)
+
+
+@contextmanager
+def read_ahead(paths: Iterable[str | Path]) -> Iterator[None]:
+    """The logger files `paths` read now and `read_record` served from memory until the block ends
+    (`LoggerFormat.read_ahead`: every channel of an MDF4 file; the formats read in this process keep nothing).
+
+    Why: a command reads its files before it imports the compiled kernels. MDF4 is read in a child interpreter
+    (asammdf and pandas: 110-120 MiB while it reads a 60 s record), and numba maps its LLVM library at import
+    (70-100 MiB resident, with the page cache's history): one after the other, their memory does not add up
+    (issue 26's 300 MiB). A file that cannot be read ahead is read, and reported, where it is used."""
+    formats = set()
+    for path in paths:
+        fmt = FORMATS.get(Path(path).suffix.lower())
+        if fmt is not None:
+            fmt.read_ahead(Path(path))
+            formats.add(fmt)
+    try:
+        yield
+    finally:
+        for fmt in formats:
+            fmt.forget()
 
 
 def _format_of(

@@ -62,6 +62,14 @@ class LoggerFormat:
         is an InputError naming the file and the channel."""
         raise NotImplementedError
 
+    def read_ahead(self, path: Path) -> None:
+        """Read the file at `path` now, to serve `read` from memory until `forget` (`io.read.read_ahead`: a command
+        reads its files before it loads the compiled kernels). A format read in this process has nothing to gain:
+        the default keeps nothing. Never raises: what cannot be read ahead is read, and reported, by `read`."""
+
+    def forget(self) -> None:
+        """Drop what `read_ahead` kept."""
+
     def write(
         self,
         path: Path,

@@ -3,6 +3,10 @@
 Reading: a channel by its name, with its own time stamps (the master channel of its channel group, in seconds)
 and the unit the file declares; a name in several channel groups is an InputError (the file is ambiguous).
 
+Reading ahead (`read_ahead`, `io.read.read_ahead`): every data channel of a file whose channel groups declare at most
+AHEAD_BYTES of records, read once and kept until `forget`; a file of less than AHEAD_MIN_FILE bytes is left to `read`
+(its reader holds little beside its interpreter, and a damaged file would be read twice).
+
 Writing (`.mf4` only): ASAM MDF 4.10; channels with the same time stamps share a channel group (its master is
 their time), each channel with its unit; `start` is the header's start time, `comment` the header comment.
 """
@@ -31,15 +35,22 @@ class Mdf4(LoggerFormat):
     writes = (".mf4",)
     rank = 20
 
+    def __init__(self) -> None:
+        self._ahead: dict[tuple, tuple[list[str], dict, dict]] = {}  # file_key -> `_load`'s result for every channel
+
     def read(
         self, path: Path, channels: Mapping[str, str], *, time: str | None, rate: float | None, variable: str | None
     ) -> dict[str, Raw]:
         src = str(path)
         size = path.stat().st_size
-        try:  # asammdf can abort the process on damaged bytes: it reads in a child (core.isolated)
-            present, located, signals = in_child(_load, src, list(channels.values()), size, size=size)
-        except Damaged as exc:
-            raise InputError(f"cannot read as ASAM MDF: the file is damaged: {exc.reason}", source=src) from None
+        kept = self._ahead.get(file_key(path))
+        if kept is not None:
+            present, located, signals = _subset(kept, list(channels.values()))
+        else:
+            try:  # asammdf can abort the process on damaged bytes: it reads in a child (core.isolated)
+                present, located, signals = in_child(_load, src, list(channels.values()), size, size=size)
+            except Damaged as exc:
+                raise InputError(f"cannot read as ASAM MDF: the file is damaged: {exc.reason}", source=src) from None
         raw = {}
         for ours, theirs in channels.items():
             if theirs not in present:
@@ -52,6 +63,22 @@ class Mdf4(LoggerFormat):
             t = numeric(stamps, src, f"the time stamps of channel '{theirs}'")
             raw[ours] = Raw(t, y, unit if isinstance(unit, str) else "")
         return raw
+
+    def read_ahead(self, path: Path) -> None:
+        """Every data channel of the file read now in the child and kept (module docstring); nothing kept when the
+        file is small, large, or cannot be read whole."""
+        try:
+            size = path.stat().st_size
+            if size < AHEAD_MIN_FILE or file_key(path) in self._ahead:
+                return
+            whole = in_child(_load, str(path), None, size, AHEAD_BYTES, size=size)
+        except (OSError, InputError, Damaged):
+            return
+        if whole is not None:
+            self._ahead[file_key(path)] = whole
+
+    def forget(self) -> None:
+        self._ahead.clear()
 
     def write(
         self,
@@ -82,10 +109,27 @@ class Mdf4(LoggerFormat):
                 mdf.close()
 
 
-def _load(src: str, names: list[str], size: int) -> tuple[list[str], dict, dict]:
+AHEAD_BYTES = 32 * 2**20  # the most records a file's channel groups may declare to be read ahead whole
+AHEAD_MIN_FILE = 2**20  # bytes: a smaller file is not read ahead
+
+
+def file_key(path: Path) -> tuple:
+    """What identifies a file's contents here: its resolved path, device, inode, size and modification time."""
+    st = path.stat()
+    return str(path.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def _subset(whole: tuple[list[str], dict, dict], names: list[str]) -> tuple[list[str], dict, dict]:
+    """`_load`'s result for `names`, from its result for every data channel (what `_load(names)` returns)."""
+    present, located, signals = whole
+    return present, {n: located.get(n, []) for n in names}, {n: signals[n] for n in names if n in signals}
+
+
+def _load(src: str, names: list[str] | None, size: int, most: int = 0) -> tuple[list[str], dict, dict] | None:
     """In the child: the data channels' names, where each name asked for is (group, index), and for each found in
     one group its (samples, time stamps, unit) as asammdf gives them; a channel group that declares more records
-    than the file can hold is refused before any is read."""
+    than the file can hold is refused before any is read. `names` None: every data channel, or None when the
+    channel groups declare more than `most` bytes of records."""
     from asammdf import MDF
 
     mdf = MDF(src)
@@ -96,6 +140,10 @@ def _load(src: str, names: list[str], size: int) -> tuple[list[str], dict, dict]
             for name, where in mdf.channels_db.items()
             if any(masters.get(g) != i for g, i in where)  # the master (time) channels are not data
         ]
+        if names is None:
+            if sum(_declared(mdf, g) for g in range(len(mdf.groups))) > most:
+                return None
+            names = present
         located = {n: [(g, i) for g, i in mdf.channels_db.get(n, ()) if masters.get(g) != i] for n in names}
         signals, stamps = {}, {}
         for name in names:
@@ -121,7 +169,7 @@ def _check_declared(mdf, group: int, size: int, src: str) -> None:
     """InputError when channel group `group` declares more bytes of records than the file holds, even deflated."""
     cg = mdf.groups[group].channel_group
     record = int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr)
-    declared = int(cg.cycles_nr) * record
+    declared = _declared(mdf, group)
     if declared > DEFLATE_RATIO * size + (1 << 20):
         raise InputError(
             f"channel group {group} declares {int(cg.cycles_nr)} samples of {record} bytes ({declared / 2**30:.3g} "
@@ -129,3 +177,9 @@ def _check_declared(mdf, group: int, size: int, src: str) -> None:
             f"file is damaged",
             source=src,
         )
+
+
+def _declared(mdf, group: int) -> int:
+    """The bytes of records channel group `group` declares (its record count times its record size)."""
+    cg = mdf.groups[group].channel_group
+    return int(cg.cycles_nr) * (int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr))
