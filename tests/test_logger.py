@@ -450,7 +450,7 @@ def _spied_reader(monkeypatch) -> list:
     return calls
 
 
-def test_an_mdf4_file_read_ahead_gives_the_same_record_and_is_read_once(files, monkeypatch):
+def test_an_mdf4_file_read_ahead_serves_its_first_read_with_the_same_record(files, monkeypatch):
     from vehid_cli.io.formats import mdf4
     from vehid_cli.io.read import read_ahead
 
@@ -461,11 +461,18 @@ def test_an_mdf4_file_read_ahead_gives_the_same_record_and_is_read_once(files, m
     calls = _spied_reader(monkeypatch)
     with read_ahead([files["mf4"], files["csv"]]):
         assert calls == [None]  # every channel of the MDF4 file, in one child; the CSV is read where it is used
-        inside, inside_one = read(files, "mf4"), read(files, "mf4", channels=one)
-        assert raises((files, "mf4"), channels={"x": "NOPE"}) == missing
+        inside = read(files, "mf4")
         assert calls == [None]
+        inside_one = read(files, "mf4", channels=one)  # served once: read again, as outside the block
+        assert calls == [None, ["ACC_RR_Z"]]
+    with read_ahead([files["mf4"]]):
+        assert raises((files, "mf4"), channels={"x": "NOPE"}) == missing
     read(files, "mf4", channels=one)
-    assert calls == [None, ["ACC_RR_Z"]]  # the block's end forgot the file
+    assert calls == [None, ["ACC_RR_Z"], None, ["ACC_RR_Z"]]
+    with read_ahead([files["mf4"]]):
+        pass
+    read(files, "mf4", channels=one)
+    assert calls == [None, ["ACC_RR_Z"], None, ["ACC_RR_Z"], None, ["ACC_RR_Z"]]  # the block's end forgot the file
     for a, b in ((before, inside), (before_one, inside_one)):
         assert np.array_equal(a.t, b.t) and a.rates == b.rates and a.declared == b.declared
         assert a.channels.keys() == b.channels.keys()

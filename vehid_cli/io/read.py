@@ -95,7 +95,7 @@ def read_record(
 
 @contextmanager
 def read_ahead(paths: Iterable[str | Path]) -> Iterator[None]:
-    """The logger files `paths` read now and `read_record` served from memory until the block ends
+    """The logger files `paths` read now, and `read_record`'s first read of each within the block served from memory
     (`LoggerFormat.read_ahead`: every channel of an MDF4 file; the formats read in this process keep nothing).
 
     Why: a command reads its files before it imports the compiled kernels. MDF4 is read in a child interpreter

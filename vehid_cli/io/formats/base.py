@@ -63,7 +63,7 @@ class LoggerFormat:
         raise NotImplementedError
 
     def read_ahead(self, path: Path) -> None:
-        """Read the file at `path` now, to serve `read` from memory until `forget` (`io.read.read_ahead`: a command
+        """Read the file at `path` now, to serve its next `read` from memory (`io.read.read_ahead`: a command
         reads its files before it loads the compiled kernels). A format read in this process has nothing to gain:
         the default keeps nothing. Never raises: what cannot be read ahead is read, and reported, by `read`."""
 

@@ -4,8 +4,9 @@ Reading: a channel by its name, with its own time stamps (the master channel of 
 and the unit the file declares; a name in several channel groups is an InputError (the file is ambiguous).
 
 Reading ahead (`read_ahead`, `io.read.read_ahead`): every data channel of a file whose channel groups declare at most
-AHEAD_BYTES of records, read once and kept until `forget`; a file of less than AHEAD_MIN_FILE bytes is left to `read`
-(its reader holds little beside its interpreter, and a damaged file would be read twice).
+AHEAD_BYTES of records, read once and kept for the file's first `read` (or until `forget`); a file of less than
+AHEAD_MIN_FILE bytes is left to `read` (its reader holds little beside its interpreter, and a damaged file would be
+read twice).
 
 Writing (`.mf4` only): ASAM MDF 4.10; channels with the same time stamps share a channel group (its master is
 their time), each channel with its unit; `start` is the header's start time, `comment` the header comment.
@@ -43,7 +44,7 @@ class Mdf4(LoggerFormat):
     ) -> dict[str, Raw]:
         src = str(path)
         size = path.stat().st_size
-        kept = self._ahead.get(file_key(path))
+        kept = self._ahead.pop(file_key(path), None)  # served once: not held beside what is made of it
         if kept is not None:
             present, located, signals = _subset(kept, list(channels.values()))
         else:
