@@ -500,7 +500,7 @@ def test_a_small_large_or_damaged_mdf4_file_is_left_to_the_reader(files, tmp_pat
 
 
 def test_the_commands_read_their_logger_files_before_the_compiled_kernels_are_imported(files, tmp_path):
-    """`vehid identify` and `vehid diagnose` read an MDF4 file ahead while numba is not imported: the reader child's
+    """`vehid identify`, `diagnose` and `check` read an MDF4 file ahead while numba is not imported: the reader child's
     memory and numba's LLVM library one after the other (io.read.read_ahead)."""
     import subprocess
     import sys
@@ -519,7 +519,11 @@ mdf4.Mdf4.read_ahead = spy
 sys.argv = ["vehid", *sys.argv[1:]]
 runpy.run_module("vehid_cli", run_name="__main__")
 """
-    for command in (["identify", str(base), "-o", str(tmp_path / "r.h5")], ["diagnose", str(base)]):
+    for command in (
+        ["identify", str(base), "-o", str(tmp_path / "r.h5")],
+        ["diagnose", str(base)],
+        ["check", str(base)],
+    ):
         proc = subprocess.run([sys.executable, "-c", code, *command, "--data", str(files["mf4"])], cwd=root,
                               capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(root)))  # fmt: skip
         assert proc.returncode == 2, proc.stderr  # the paper's channels are not in this file: refused, after the read

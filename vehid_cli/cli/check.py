@@ -51,11 +51,14 @@ def check(
     evidence and fix. The last line says whether identify would stop (a finding that makes any fit meaningless).
     """
     from ..core.jsonio import write_json
-    from ..systems import check_config
+    from ..io.read import read_ahead
 
     if json_out is not None:
         check_writable(json_out, (".json",))
-    system, checks = check_config(config, set_ or (), data or None)
+    with read_ahead(data or ()):  # logger files read before the compiled kernels' imports
+        from ..systems import check_config
+
+        system, checks = check_config(config, set_ or (), data or None)
     out.print(_table(system, checks))
     for f in checks.problems:
         fix = f"; fix: {f.fix}" if f.fix else ""
