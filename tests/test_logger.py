@@ -500,8 +500,9 @@ def test_a_small_large_or_damaged_mdf4_file_is_left_to_the_reader(files, tmp_pat
 
 
 def test_the_commands_read_their_logger_files_before_the_compiled_kernels_are_imported(files, tmp_path):
-    """`vehid identify`, `diagnose` and `check` read an MDF4 file ahead while numba is not imported: the reader child's
-    memory and numba's LLVM library one after the other (io.read.read_ahead)."""
+    """`vehid identify`, `diagnose` and `check` read an MDF4 file ahead (named by --data or by the config's
+    data.files) while numba is not imported, and serve the file's read from it: the reader child's memory and numba's
+    LLVM library one after the other (io.read.read_ahead)."""
     import subprocess
     import sys
     from pathlib import Path
@@ -511,21 +512,48 @@ def test_the_commands_read_their_logger_files_before_the_compiled_kernels_are_im
     code = """
 import runpy, sys
 from vehid_cli.io.formats import mdf4
-real = mdf4.Mdf4.read_ahead
+mdf4.AHEAD_MIN_FILE = 0  # the test file is small
+real, subset = mdf4.Mdf4.read_ahead, mdf4._subset
 def spy(self, path):
     print("read ahead", path.name, "numba imported:", "numba" in sys.modules)
     return real(self, path)
-mdf4.Mdf4.read_ahead = spy
+def served(*args):
+    print("served from the read ahead")
+    return subset(*args)
+mdf4.Mdf4.read_ahead, mdf4._subset = spy, served
 sys.argv = ["vehid", *sys.argv[1:]]
 runpy.run_module("vehid_cli", run_name="__main__")
 """
+    name = files["mf4"]
     for command in (
         ["identify", str(base), "-o", str(tmp_path / "r.h5")],
         ["diagnose", str(base)],
         ["check", str(base)],
     ):
-        proc = subprocess.run([sys.executable, "-c", code, *command, "--data", str(files["mf4"])], cwd=root,
-                              capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(root)))  # fmt: skip
-        assert proc.returncode == 2, proc.stderr  # the paper's channels are not in this file: refused, after the read
-        assert f"read ahead {files['mf4'].name} numba imported: False" in proc.stdout, (command, proc.stdout)
-        assert "acc1" in proc.stderr or "channel" in proc.stderr, proc.stderr
+        for data in (["--data", str(name)], ["--set", f"data.files=[{name}]"]):
+            proc = subprocess.run([sys.executable, "-c", code, *command, *data], cwd=root, capture_output=True,
+                                  text=True, env=dict(os.environ, PYTHONPATH=str(root)))  # fmt: skip
+            # the paper's channels are not in this file: refused after the read
+            assert proc.returncode == 2, proc.stderr
+            expected = [f"read ahead {name.name} numba imported: False", "served from the read ahead"]
+            assert proc.stdout.splitlines()[:2] == expected, (command, data, proc.stdout)
+            assert "channel 'acc1' is not in the file" in proc.stderr, proc.stderr
+
+
+def test_a_file_changed_after_its_read_ahead_is_read_again_and_a_bad_path_raises_nothing(files, tmp_path, monkeypatch):
+    from vehid_cli.io.formats import mdf4
+    from vehid_cli.io.read import read_ahead
+
+    monkeypatch.setattr(mdf4, "AHEAD_MIN_FILE", 0)
+    path = tmp_path / files["mf4"].name
+    path.write_bytes(files["mf4"].read_bytes())
+    one = {"acc_rr": "ACC_RR_Z"}
+    calls = _spied_reader(monkeypatch)
+    with read_ahead([path, tmp_path / "a\0b.mf4"]):  # a NUL byte: no file can have that name
+        write_logger_run(path, "mf4")  # rewritten (the same values: only the file's identity tells)
+        stat = path.stat()
+        os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+        read_record(path, one)
+        assert calls == [None, ["ACC_RR_Z"]]  # not served from what was read before the change
+        read_record(path, one)
+        assert calls == [None, ["ACC_RR_Z"], ["ACC_RR_Z"]]

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import re
 import signal
 import threading
 import time
@@ -36,16 +35,15 @@ from .. import __version__
 from ..core.errors import InputError
 from ..core.provenance import git_commit
 from ..sim.kernel import set_threads
+from .options import ADDRESS, check_executor_options
 
 S = TypeVar("S")
 T = TypeVar("T")
 R = TypeVar("R")
 
-EXECUTORS = ("local", "dask")
 CONNECT_TIMEOUT_S = float(os.environ.get("VEHID_DASK_TIMEOUT", "10"))  # reaching the scheduler [s]
 WORKER_TIMEOUT_S = 60.0  # waiting for the cluster's first worker [s]
 PARENT_POLL_S = 0.5  # how often a local pool worker checks that its parent is alive [s]
-ADDRESS = re.compile(r"(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9A-Fa-f:.]+\]|[^\s/:\[\]]+):\d{1,5}")
 
 
 class Executor(ABC):
@@ -310,26 +308,6 @@ class DaskExecutor(Executor):
 
 
 # ------------------------------------------------------------------------------------------ choosing
-
-
-def check_executor_options(kind: str = "local", *, jobs: int | None = None, scheduler: str | None = None) -> None:
-    """InputError for an inconsistent choice of executor options (before any work is done)."""
-    if kind not in EXECUTORS:
-        raise InputError(f"--executor must be one of {', '.join(EXECUTORS)}, got '{kind}'")
-    if kind == "local":
-        if scheduler is not None:
-            raise InputError("--scheduler is for --executor dask; the local executor needs no scheduler")
-        if jobs is not None and jobs < 1:
-            raise InputError(f"--jobs must be at least 1, got {jobs}")
-        return
-    if jobs is not None:
-        raise InputError("--jobs sets local worker processes; with --executor dask the cluster's workers run the runs")
-    if not scheduler:
-        raise InputError("--executor dask needs --scheduler tcp://HOST:PORT (the address `dask scheduler` prints)")
-    if not ADDRESS.fullmatch(scheduler):
-        raise InputError(
-            f"--scheduler expects an address tcp://HOST:PORT (as `dask scheduler` prints), got '{scheduler}'"
-        )
 
 
 def make_executor(kind: str = "local", *, jobs: int | None = None, scheduler: str | None = None) -> Executor:

@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .common import SetOption, check_writable, guarded, out
+from .common import SetOption, check_writable, guarded, load_config, out
 
 SYMBOL = {"ok": "ok", "warning": "WARN", "fail": "FAIL"}
 HEADER = {"dropout": "held", "offset": "offs", "trigger": "trig"}  # short headers: the table fits 80 columns
@@ -55,7 +55,8 @@ def check(
 
     if json_out is not None:
         check_writable(json_out, (".json",))
-    with read_ahead(data or ()):  # logger files read before the compiled kernels' imports
+    runs = data or load_config(config, set_ or ()).data_runs()
+    with read_ahead(runs):  # logger files read before the compiled kernels' imports
         from ..systems import check_config
 
         system, checks = check_config(config, set_ or (), data or None)

@@ -13,6 +13,7 @@ from .common import (
     check_output_dir,
     check_writable,
     guarded,
+    load_config,
     out,
     progress_bar,
     stage_hook,
@@ -98,7 +99,8 @@ def diagnose(
         check_writable(save_config, (".yaml", ".yml"))
     if html is not None:
         check_writable(html, (".html", ".htm"))
-    with read_ahead([*(data or ()), *(validate or ())]):  # logger files read before the compiled kernels' imports
+    runs = data or load_config(config, set_ or ()).data_runs()
+    with read_ahead([*runs, *(validate or ())]):  # logger files read before the compiled kernels' imports
         from ..systems import diagnose_config
 
         with progress_bar("diagnose") as bar:  # a bar on a terminal; elsewhere a line per step with the time left

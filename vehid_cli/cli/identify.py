@@ -120,18 +120,19 @@ def identify(
     command to resume an interrupted campaign (Ctrl-C, SIGTERM, a killed job).
     """
 
+    from ..campaign.options import check_executor_options
     from ..io.read import read_ahead
 
+    check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, campaign_overrides(set_, runs, seed, jobs))
     target = _results_target(config, cfg, data, output, json_out, save_config)
     with read_ahead(data or cfg.data_runs()):  # the logger files read before the compiled kernels are imported
-        from ..campaign.executor import check_executor_options, make_executor
+        from ..campaign.executor import make_executor
         from ..campaign.runner import run_campaign_to_file, saved_runs_note
         from ..core.jsonio import write_json
         from ..report.campaigns import campaign_notes, rich_tables
         from ..systems import system_class
 
-        check_executor_options(executor, jobs=jobs, scheduler=scheduler)
         with (
             interruptible(lambda: saved_runs_note(target), warn),
             make_executor(executor, jobs=jobs, scheduler=scheduler) as pool,

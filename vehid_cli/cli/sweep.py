@@ -104,7 +104,8 @@ def sweep(
     any number of sweeps or shards may share the output directory (each campaign runs under a lock).
     --executor dask --scheduler tcp://HOST:PORT runs every campaign's runs on a Dask cluster.
     """
-    from ..campaign.executor import check_executor_options, make_executor
+    from ..campaign.executor import make_executor
+    from ..campaign.options import check_executor_options
     from ..campaign.runner import run_campaign_to_file
     from ..campaign.sweep import campaign_attrs, check_no_conflicts, parse_shard, run_sweep, shard_of
 

@@ -103,14 +103,14 @@ def read_ahead(paths: Iterable[str | Path]) -> Iterator[None]:
     (70-100 MiB resident, with the page cache's history): one after the other, their memory does not add up
     (issue 26's 300 MiB). A file that cannot be read ahead is read, and reported, where it is used."""
     formats = set()
-    for path in paths:
-        fmt = FORMATS.get(Path(path).suffix.lower())
-        if fmt is not None:
-            fmt.read_ahead(Path(path))
-            formats.add(fmt)
     try:
+        for path in paths:
+            fmt = FORMATS.get(Path(path).suffix.lower())
+            if fmt is not None:
+                formats.add(fmt)
+                fmt.read_ahead(Path(path))
         yield
-    finally:
+    finally:  # an interrupted read-ahead too: nothing kept past the block
         for fmt in formats:
             fmt.forget()
 

@@ -3,10 +3,11 @@
 Reading: a channel by its name, with its own time stamps (the master channel of its channel group, in seconds)
 and the unit the file declares; a name in several channel groups is an InputError (the file is ambiguous).
 
-Reading ahead (`read_ahead`, `io.read.read_ahead`): every data channel of a file whose channel groups declare at most
-AHEAD_BYTES of records, read once and kept for the file's first `read` (or until `forget`); a file of less than
-AHEAD_MIN_FILE bytes is left to `read` (its reader holds little beside its interpreter, and a damaged file would be
-read twice).
+Reading ahead (`read_ahead`, `io.read.read_ahead`): every data channel of a file whose channels would come back as at
+most AHEAD_BYTES of float64 values and time stamps, read once and kept for the file's first `read` (or until
+`forget`); a file of less than AHEAD_MIN_FILE bytes is left to `read` (its reader holds little beside its interpreter,
+and a damaged file would be read twice), and so is a wider one (a logger's hundreds of CAN signals: reading them all
+would cost more memory and time than it saves; its child then only opens it).
 
 Writing (`.mf4` only): ASAM MDF 4.10; channels with the same time stamps share a channel group (its master is
 their time), each channel with its unit; `start` is the header's start time, `comment` the header comment.
@@ -37,15 +38,15 @@ class Mdf4(LoggerFormat):
     rank = 20
 
     def __init__(self) -> None:
-        self._ahead: dict[tuple, tuple[list[str], dict, dict]] = {}  # file_key -> `_load`'s result for every channel
+        self._ahead: dict[str, tuple[tuple, tuple]] = {}  # resolved path -> (its file_key, `_load`'s whole result)
 
     def read(
         self, path: Path, channels: Mapping[str, str], *, time: str | None, rate: float | None, variable: str | None
     ) -> dict[str, Raw]:
         src = str(path)
         size = path.stat().st_size
-        kept = self._ahead.pop(file_key(path), None)  # served once: not held beside what is made of it
-        if kept is not None:
+        key, kept = self._ahead.pop(str(path.resolve()), (None, None))  # served once: not held beside its record
+        if kept is not None and key == file_key(path):
             present, located, signals = _subset(kept, list(channels.values()))
         else:
             try:  # asammdf can abort the process on damaged bytes: it reads in a child (core.isolated)
@@ -67,18 +68,19 @@ class Mdf4(LoggerFormat):
 
     def read_ahead(self, path: Path) -> None:
         """Every data channel of the file read now in the child and kept (module docstring); nothing kept when the
-        file is small, large, or cannot be read whole."""
+        file is small, wide, cannot be read whole, or changed while it was read."""
         try:
-            size = path.stat().st_size
-            if size < AHEAD_MIN_FILE or file_key(path) in self._ahead:
+            key = file_key(path)
+            if key[2] < AHEAD_MIN_FILE:
                 return
-            whole = in_child(_load, str(path), None, size, AHEAD_BYTES, size=size)
-        except (OSError, InputError, Damaged):
+            whole = in_child(_load, str(path), None, key[2], AHEAD_BYTES, size=key[2])
+            if whole is not None and file_key(path) == key:
+                self._ahead[str(path.resolve())] = (key, whole)
+        except (OSError, ValueError, InputError, Damaged):  # ValueError: a path no file can have (a NUL byte)
             return
-        if whole is not None:
-            self._ahead[file_key(path)] = whole
 
     def forget(self) -> None:
+        """Drop what `read_ahead` kept and no `read` took."""
         self._ahead.clear()
 
     def write(
@@ -110,14 +112,14 @@ class Mdf4(LoggerFormat):
                 mdf.close()
 
 
-AHEAD_BYTES = 32 * 2**20  # the most records a file's channel groups may declare to be read ahead whole
+AHEAD_BYTES = 32 * 2**20  # the most a file's channels may come back as (float64 values and stamps) to be read ahead
 AHEAD_MIN_FILE = 2**20  # bytes: a smaller file is not read ahead
 
 
-def file_key(path: Path) -> tuple:
-    """What identifies a file's contents here: its resolved path, device, inode, size and modification time."""
+def file_key(path: Path) -> tuple[int, int, int, int]:
+    """What tells whether a file changed: its device, inode, size [bytes] and modification time [ns]."""
     st = path.stat()
-    return str(path.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
 
 def _subset(whole: tuple[list[str], dict, dict], names: list[str]) -> tuple[list[str], dict, dict]:
@@ -129,8 +131,8 @@ def _subset(whole: tuple[list[str], dict, dict], names: list[str]) -> tuple[list
 def _load(src: str, names: list[str] | None, size: int, most: int = 0) -> tuple[list[str], dict, dict] | None:
     """In the child: the data channels' names, where each name asked for is (group, index), and for each found in
     one group its (samples, time stamps, unit) as asammdf gives them; a channel group that declares more records
-    than the file can hold is refused before any is read. `names` None: every data channel, or None when the
-    channel groups declare more than `most` bytes of records."""
+    than the file can hold is refused before any is read. `names` None: every data channel, or None when they would
+    come back as more than `most` bytes (every channel's values and its group's time stamps as float64)."""
     from asammdf import MDF
 
     mdf = MDF(src)
@@ -142,7 +144,7 @@ def _load(src: str, names: list[str] | None, size: int, most: int = 0) -> tuple[
             if any(masters.get(g) != i for g, i in where)  # the master (time) channels are not data
         ]
         if names is None:
-            if sum(_declared(mdf, g) for g in range(len(mdf.groups))) > most:
+            if sum(8 * int(g.channel_group.cycles_nr) * len(g.channels) for g in mdf.groups) > most:
                 return None
             names = present
         located = {n: [(g, i) for g, i in mdf.channels_db.get(n, ()) if masters.get(g) != i] for n in names}
@@ -170,7 +172,7 @@ def _check_declared(mdf, group: int, size: int, src: str) -> None:
     """InputError when channel group `group` declares more bytes of records than the file holds, even deflated."""
     cg = mdf.groups[group].channel_group
     record = int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr)
-    declared = _declared(mdf, group)
+    declared = int(cg.cycles_nr) * record
     if declared > DEFLATE_RATIO * size + (1 << 20):
         raise InputError(
             f"channel group {group} declares {int(cg.cycles_nr)} samples of {record} bytes ({declared / 2**30:.3g} "
@@ -178,9 +180,3 @@ def _check_declared(mdf, group: int, size: int, src: str) -> None:
             f"file is damaged",
             source=src,
         )
-
-
-def _declared(mdf, group: int) -> int:
-    """The bytes of records channel group `group` declares (its record count times its record size)."""
-    cg = mdf.groups[group].channel_group
-    return int(cg.cycles_nr) * (int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr))
