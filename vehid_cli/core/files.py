@@ -14,6 +14,7 @@ import stat
 import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 from .errors import DiskFull, InputError, WriteFailed
 
@@ -173,6 +174,26 @@ def write_error(path: str | Path, exc: OSError) -> OSError:
     if exc.errno in REFUSED:
         return WriteFailed(path, exc.errno, exc.strerror or os.strerror(exc.errno))
     return exc
+
+
+class FileIdentity(NamedTuple):
+    """What tells, without reading it, that a file is the one read before, unchanged: its absolute path, device,
+    inode, size [bytes], and modification and change times [ns]."""
+
+    path: str
+    device: int
+    inode: int
+    size: int
+    modified_ns: int
+    changed_ns: int
+
+
+def file_identity(path: str | Path) -> FileIdentity:
+    """The file's `FileIdentity` (one os.stat; its OSError, or ValueError for a name with a NUL byte, passes)."""
+    info = os.stat(path)
+    return FileIdentity(
+        os.path.abspath(path), info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns
+    )
 
 
 def read_regular(path: str | Path, limit: int, what: str) -> bytes:

@@ -28,7 +28,7 @@ from pathlib import Path
 import h5py
 
 from .errors import InputError, quote
-from .files import write_bytes
+from .files import FileIdentity, file_identity, write_bytes
 from .h5snapshot import Tree, read_tree
 from .provenance import provenance
 from .result import Result
@@ -143,7 +143,7 @@ def check_integrity(path: str | Path) -> str | None:
     return stored
 
 
-_TREES: dict[tuple, tuple[str | None, Tree]] = {}  # the files this process read, by identity and modification
+_TREES: dict[FileIdentity, tuple[str | None, Tree]] = {}  # the files this process read, by identity and modification
 
 
 def read_results(path: str | Path, what: str) -> tuple[str | None, Tree]:
@@ -153,12 +153,11 @@ def read_results(path: str | Path, what: str) -> tuple[str | None, Tree]:
     passes through."""
     source = str(path)
     try:
-        info = os.stat(path)
+        key = file_identity(path)
     except FileNotFoundError:
         raise
     except OSError as exc:
         raise InputError(f"cannot read the file ({exc.strerror})", source=source) from None
-    key = (os.path.abspath(source), info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns)
     if key not in _TREES:
         checksum = check_integrity(path)
         tree = read_tree(path, what)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...core.errors import InputError
-from ...core.files import atomic_path
+from ...core.files import FileIdentity, atomic_path, file_identity
 from ...core.isolated import Damaged, in_child
 from .base import LoggerFormat, Raw, groups, missing, numeric, register
 
@@ -38,19 +38,19 @@ class Mdf4(LoggerFormat):
     rank = 20
 
     def __init__(self) -> None:
-        self._ahead: dict[str, tuple[tuple, tuple]] = {}  # resolved path -> (its file_key, `_load`'s whole result)
+        self._ahead: dict[str, tuple[FileIdentity, tuple]] = {}  # path -> (its identity, `_load`'s whole result)
 
     def read(
         self, path: Path, channels: Mapping[str, str], *, time: str | None, rate: float | None, variable: str | None
     ) -> dict[str, Raw]:
         src = str(path)
-        size = path.stat().st_size
-        key, kept = self._ahead.pop(str(path.resolve()), (None, None))  # served once: not held beside its record
-        if kept is not None and key == file_key(path):
+        key = file_identity(path)
+        seen, kept = self._ahead.pop(key.path, (None, None))  # served once: not held beside its record
+        if kept is not None and seen == key:
             present, located, signals = _subset(kept, list(channels.values()))
         else:
             try:  # asammdf can abort the process on damaged bytes: it reads in a child (core.isolated)
-                present, located, signals = in_child(_load, src, list(channels.values()), size, size=size)
+                present, located, signals = in_child(_load, src, list(channels.values()), key.size, size=key.size)
             except Damaged as exc:
                 raise InputError(f"cannot read as ASAM MDF: the file is damaged: {exc.reason}", source=src) from None
         raw = {}
@@ -70,12 +70,12 @@ class Mdf4(LoggerFormat):
         """Every data channel of the file read now in the child and kept (module docstring); nothing kept when the
         file is small, wide, cannot be read whole, or changed while it was read."""
         try:
-            key = file_key(path)
-            if key[2] < AHEAD_MIN_FILE:
+            key = file_identity(path)
+            if key.size < AHEAD_MIN_FILE:
                 return
-            whole = in_child(_load, str(path), None, key[2], AHEAD_BYTES, size=key[2])
-            if whole is not None and file_key(path) == key:
-                self._ahead[str(path.resolve())] = (key, whole)
+            whole = in_child(_load, str(path), None, key.size, AHEAD_BYTES, size=key.size)
+            if whole is not None and file_identity(path) == key:
+                self._ahead[key.path] = (key, whole)
         except (OSError, ValueError, InputError, Damaged):  # ValueError: a path no file can have (a NUL byte)
             return
 
@@ -114,12 +114,6 @@ class Mdf4(LoggerFormat):
 
 AHEAD_BYTES = 32 * 2**20  # the most a file's channels may come back as (float64 values and stamps) to be read ahead
 AHEAD_MIN_FILE = 2**20  # bytes: a smaller file is not read ahead
-
-
-def file_key(path: Path) -> tuple[int, int, int, int]:
-    """What tells whether a file changed: its device, inode, size [bytes] and modification time [ns]."""
-    st = path.stat()
-    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
 
 def _subset(whole: tuple[list[str], dict, dict], names: list[str]) -> tuple[list[str], dict, dict]:
