@@ -9,7 +9,7 @@ from tests.conftest import BASE_CONFIG
 from vehid_cli.config import load_config
 from vehid_cli.core.streams import run_streams
 from vehid_cli.identify.experiment import build_experiment
-from vehid_cli.identify.objectives import Objective, objective_families
+from vehid_cli.identify.objectives import Objective, mean_square, objective_families, sum_of_squares
 from vehid_cli.models.noise import add_noise, estimate_noise_sigma, noise_sigma, sigma_from_level
 
 
@@ -102,3 +102,49 @@ def test_residual_jacobian_is_the_residuals_response_to_the_outputs(offsets):
     for j in range(D):
         moved = {f: (out[f] + sens[f][..., j])[None] for f in out}
         np.testing.assert_allclose(obj.residuals(moved)[0] - r0, J[:, j], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("n", [0, 5, 129, 16385, 16391, 100003, 960000])
+@pytest.mark.parametrize("rows", [None, 1, 3])
+def test_sum_of_squares_is_numpys_bit_for_bit(n, rows):
+    """sum_of_squares and mean_square give np.sum(r**2, axis=-1) and np.mean(r**2, axis=-1) bit for bit (a
+    pairwise sum split where NumPy splits it), on contiguous rows and on views of a larger array at any offset; the
+    test fails if the squares' subtrees are cut anywhere else (e.g. at n // 2 unrounded)."""
+    rng = np.random.default_rng(n)
+    big = rng.standard_normal((4, n + 7)) * rng.uniform(0.01, 100.0, n + 7)
+    views = [big[0, :n].copy(), big[1, 3 : n + 3]] if rows is None else [big[:rows, :n].copy(), big[1:, 5 : n + 5]]
+    for r in views:
+        np.testing.assert_array_equal(sum_of_squares(r), np.sum(r**2, axis=-1))
+        with np.errstate(all="ignore"):
+            np.testing.assert_array_equal(mean_square(r), np.mean(r**2, axis=-1))
+
+
+@pytest.mark.parametrize("observed", [False, True])
+def test_residuals_made_over_the_outputs_are_the_same_numbers(observed, monkeypatch):
+    """costs_and_residuals with `overwrite` (the errors made in the simulation's arrays: here, as the exact
+    sensitivities give them, strided column blocks of one array, gathered a few rows at a time) gives the costs and
+    residuals of the plain call bit for bit, with profiled offsets and observed masks, and leaves the reference
+    untouched; Eq. 8, which reads the outputs again, does not overwrite them."""
+    from vehid_cli.identify import objectives
+
+    monkeypatch.setattr(objectives, "GATHER_ROWS", 64)  # several blocks of the 500 samples, the last one short
+    rng = np.random.default_rng(3)
+    ref = {"acc": rng.standard_normal((500, 3)), "disp": rng.standard_normal((500, 2))}
+    mask = {f: rng.uniform(size=v.shape) > 0.3 for f, v in ref.items()} if observed else None
+    sigma = {f: rng.uniform(0.5, 2.0, v.shape[1]) for f, v in ref.items()}
+    Y = np.concatenate([ref["acc"], ref["disp"]], axis=1) + 0.1 * rng.standard_normal((500, 5)) + 0.3
+    sim = {"acc": Y[:, :3], "disp": Y[:, 3:]}  # strided views, as Experiment.exact_sensitivities returns them
+    before = {f: v.copy() for f, v in ref.items()}
+    wls = Objective("wls", ref, sigma, observed=mask, offsets=True)
+    want = wls.costs_and_residuals({f: v[None].copy() for f, v in sim.items()})
+    scratch = Y.copy()
+    got = wls.costs_and_residuals({"acc": scratch[None, :, :3], "disp": scratch[None, :, 3:]}, overwrite=True)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    assert not np.array_equal(scratch, Y)  # written over: no copy of the record made
+    assert all(np.array_equal(ref[f], before[f]) for f in ref)
+    f1 = Objective("f1", {"disp": ref["disp"]}, {"disp": sigma["disp"]}, observed=None, offsets=False)
+    kept = {"disp": sim["disp"][None].copy()}
+    costs = f1.costs_and_residuals(kept, overwrite=True)[0]
+    np.testing.assert_array_equal(costs, f1.costs({"disp": sim["disp"][None]}))
+    np.testing.assert_array_equal(kept["disp"][0], sim["disp"])

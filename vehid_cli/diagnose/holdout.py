@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ..identify.objectives import mean_square
 from ..optimizers.base import Problem
 
 BLOCK = 100  # samples per hold-out block
@@ -34,13 +35,13 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
         with np.errstate(all="ignore"):
             if rows is not None and problem.kept is not None and len(X) > 1 and len(X) * keep.size * 8 > IN_PLACE_BYTES:
                 r = problem.kept(X, rows)  # a long record's batch: its kept entries only, no (P, R) array
-                return mean_squares(r), r
+                return mean_square(r), r
             _, r = problem.residuals(X)
             if r.nbytes <= IN_PLACE_BYTES:
                 r = r if keep is None else r[:, keep]
                 return np.mean(r**2, axis=1), r
             r = r if rows is None else kept_in_place(r, rows)  # a long record's: no second (P, R) array
-            return mean_squares(r), r
+            return mean_square(r), r
 
     def linearised(x: NDArray) -> tuple[float, NDArray, NDArray] | None:
         got = problem.linearised(x)
@@ -50,7 +51,7 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
         if keep is not None:
             r, jac = r[keep], jac[keep]
         with np.errstate(all="ignore"):
-            return float(np.mean(r**2)), r, jac
+            return float(mean_square(r)), r, jac
 
     def normal(x: NDArray) -> tuple[float, NDArray, NDArray, NDArray] | None:
         got = problem.normal(x) if rows is None else problem.normal(x, rows)
@@ -59,7 +60,7 @@ def masked(problem: Problem, keep: NDArray | None) -> Problem:
         _, r, H, g = got
         r = r if keep is None else r[keep]
         with np.errstate(all="ignore"):
-            return float(np.mean(r**2)), r, H, g
+            return float(mean_square(r)), r, H, g
 
     def gram(X: NDArray, scale: NDArray, entries: NDArray | None = None) -> NDArray | None:
         at = rows if entries is None else (entries if rows is None else rows[entries])
@@ -81,11 +82,6 @@ def kept_in_place(r: NDArray, rows: NDArray) -> NDArray:
     return r[:, :n]
 
 
-MEAN_ROWS = 2  # residual vectors squared at a time by `mean_squares`
-IN_PLACE_BYTES = 16 * 2**20  # residuals above this (a long record's) are masked in place and squared a few rows at a
-# time: the same numbers to round-off (NumPy's sums depend on the rows' alignment in memory), not bit for bit
-
-
-def mean_squares(r: NDArray) -> NDArray:
-    """np.mean(r**2, axis=1) of r (P, R) to round-off, MEAN_ROWS rows squared at a time: no (P, R) square beside r."""
-    return np.concatenate([np.mean(r[i : i + MEAN_ROWS] ** 2, axis=1) for i in range(0, r.shape[0], MEAN_ROWS)])
+IN_PLACE_BYTES = 16 * 2**20  # residuals above this (a long record's) are masked in place and squared a part at a time
+# (`mean_square`, no (P, R) array of squares): the same numbers to round-off (r[:, keep] is in Fortran order, whose
+# rows NumPy sums in another order), not bit for bit

@@ -49,6 +49,7 @@ class MeasuredRun:
     observed: dict[str, NDArray] | None  # family -> (n, k) bool: the channel's own samples (None: every sample)
     source: str
     raw: dict[str, NDArray] | None = None  # family -> (n, k) the channels as read [SI], before offsets are removed
+    # (the outputs' own arrays when none are)
     units: dict[str, tuple[str, str]] | None = None  # channel -> (the unit it was read in, where that came from)
 
     @property
@@ -92,7 +93,7 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
     )  # fmt: skip
     check_units(config, record, units, path)
     record = rewired(record, data.invert, data.swap)
-    raw = {f: np.column_stack([record.channel(n) for n in layout.names(f)]) for f in families}
+    as_read = record
     if data.offsets == "remove":
         record = remove_offset(record, sensors, "first_second")
     outputs, observed = {}, {}
@@ -101,6 +102,10 @@ def read_run(config: Config, path: str | Path, families: tuple[str, ...]) -> Mea
         outputs[family] = np.column_stack([record.channel(n) for n in names])
         observed[family] = np.column_stack([_observed(record, n) for n in names])
         _enough(record, names, observed[family])
+    # the channels as read: the same arrays as the outputs unless offsets were removed (a long record's channels
+    # are tens of MB per copy)
+    raw = dict(outputs) if record is as_read else {f: np.column_stack([as_read.channel(n) for n in layout.names(f)])
+                                             for f in families}  # fmt: skip
     every = all(mask.all() for mask in observed.values())
     road = _road(config, record, road_names)
     origin = {n: (units[n], "data.units" if n in data.units else "data.units (its family)") for n in units}

@@ -31,6 +31,45 @@ def objective_families(objective: str, sensors: str, present: tuple[str, ...] = 
     return tuple(f for f in wanted if f in present)
 
 
+SQUARED_AT_ONCE = 1 << 14  # entries of a row squared at a time by `sum_of_squares` (128 kB per row)
+
+
+def sum_of_squares(r: NDArray) -> NDArray:
+    """np.sum(r**2, axis=-1), bit for bit, without its (..., R) array of squares (a long record's residuals are tens
+    of MB per copy). NumPy adds a row pairwise: above 128 entries it splits it at half its length rounded down to a
+    multiple of 8 and adds the two halves' sums; the squares are made here one such subtree at a time and the
+    subtrees added in NumPy's order."""
+    n = r.shape[-1]
+    if n <= SQUARED_AT_ONCE:
+        return np.add.reduce(np.square(r), axis=-1)
+    half = n // 2
+    half -= half % 8
+    return sum_of_squares(r[..., :half]) + sum_of_squares(r[..., half:])
+
+
+def mean_square(r: NDArray) -> NDArray:
+    """np.mean(r**2, axis=-1), bit for bit, without the array of squares (`sum_of_squares`)."""
+    return sum_of_squares(r) / r.shape[-1]
+
+
+GATHER_ROWS = 4096  # time samples of a strided error flattened at a time by `_gather`
+
+
+def _gather(r: NDArray, flat: NDArray, out: NDArray) -> None:
+    """out (..., m) = r (..., n, k) at the time-major flat indices `flat` (m, increasing) into its (n, k) block. A
+    strided r (an error made over a simulation's columns) is flattened GATHER_ROWS samples at a time, not copied
+    whole; mode "clip" because the indices are in range and NumPy's default takes into a buffered copy of `out`."""
+    lead, (n, k) = r.shape[:-2], r.shape[-2:]
+    if r.flags.c_contiguous:
+        np.take(r.reshape(lead + (n * k,)), flat, axis=-1, out=out, mode="clip")
+        return
+    rows = np.append(np.arange(0, n, GATHER_ROWS), n)
+    edges = np.searchsorted(flat, rows * k)
+    for i0, i1, lo, hi in zip(rows[:-1], rows[1:], edges[:-1], edges[1:], strict=True):
+        block = r[..., i0:i1, :].reshape(lead + ((i1 - i0) * k,))
+        np.take(block, flat[lo:hi] - i0 * k, axis=-1, out=out[..., lo:hi], mode="clip")
+
+
 @dataclass(frozen=True)
 class Objective:
     """An objective bound to its reference data: costs and weighted residuals of a batch of simulated channels.
@@ -89,9 +128,10 @@ class Objective:
         """R: the number of weighted residuals."""
         return sum(int(self._keep[f].size) if f in self._keep else ref.size for f, ref in self.reference.items())
 
-    def error(self, family: str, sim: NDArray) -> NDArray:
-        """ref - sim (..., n, k), without its per-channel mean over the observed samples when offsets are profiled."""
-        d = self.reference[family] - sim
+    def error(self, family: str, sim: NDArray, overwrite: bool = False) -> NDArray:
+        """ref - sim (..., n, k), without its per-channel mean over the observed samples when offsets are profiled;
+        written over `sim` with `overwrite` (the caller's simulation, not read again: no third copy of a record)."""
+        d = np.subtract(self.reference[family], sim, out=sim) if overwrite else self.reference[family] - sim
         return self._centre(family, d) if self.offsets else d
 
     def _centre(self, family: str, d: NDArray) -> NDArray:
@@ -99,8 +139,8 @@ class Objective:
         if self.observed is None:
             d -= np.mean(d, axis=-2, keepdims=True)
             return d
-        m = self.observed[family]
-        d -= np.sum(d * m, axis=-2, keepdims=True) / self._counts[family]
+        # summed where observed: the same sums as of d * m, bit for bit, without a product the size of d
+        d -= np.sum(d, axis=-2, keepdims=True, where=self.observed[family]) / self._counts[family]
         return d
 
     @cached_property
@@ -117,14 +157,14 @@ class Objective:
     def costs(self, outputs: Mapping[str, NDArray]) -> NDArray:
         """Cost of each simulated set of channels in the batch (...,); `outputs`: family -> (..., n, k)."""
         if self.name == "wls":
-            return np.mean(self.residuals(outputs) ** 2, axis=-1)
+            return mean_square(self.residuals(outputs))
         return self._eq8(outputs)
 
     def parts(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
         """Numerator and denominator of the cost (wls: sum of squared residuals and their count): several runs'
         costs combine as the sum of numerators over the sum of denominators."""
         if self.name == "wls":
-            return np.sum(self.residuals(outputs) ** 2, axis=-1), np.asarray(float(self.size))
+            return sum_of_squares(self.residuals(outputs)), np.asarray(float(self.size))
         return self._eq8_parts(outputs)
 
     def _eq8_parts(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
@@ -140,30 +180,31 @@ class Objective:
         return num / den
 
     def residuals(
-        self, outputs: Mapping[str, NDArray], out: NDArray | None = None, entries: NDArray | None = None
-    ) -> NDArray:
+        self, outputs: Mapping[str, NDArray], out: NDArray | None = None, entries: NDArray | None = None,
+        overwrite: bool = False,
+    ) -> NDArray:  # fmt: skip
         """Weighted residuals (ref - sim) / sigma of all observed channel samples, flattened (..., R), each family's
         written straight into its columns (no list of parts concatenated: a long record's residuals are tens of MB
         per copy); into `out` (..., R) when given (a batch's rows, `task.chunked_residuals`), which is returned.
         With `entries` (increasing indices into the R entries), only those, (..., entries.size): a long record's
-        batch on its kept entries (`task.kept_residuals`), the same numbers as the whole vector's."""
+        batch on its kept entries (`task.kept_residuals`), the same numbers as the whole vector's. With `overwrite`
+        the errors are made in the outputs' arrays (a caller done with its simulation)."""
         first = at = 0
         for family in self.reference:
-            r = self.error(family, outputs[family])
+            r = self.error(family, outputs[family], overwrite)  # (..., n, k); strided when made over the outputs
             r /= self.sigma[family]  # in place
-            r = r.reshape(r.shape[:-2] + (-1,))
             keep = self._keep.get(family)
-            size = r.shape[-1] if keep is None else keep.size
+            size = r.shape[-2] * r.shape[-1] if keep is None else keep.size
             if entries is not None:  # this family's share of the entries, as indices into its own
                 local = entries[np.searchsorted(entries, first) : np.searchsorted(entries, first + size)] - first
                 keep = local if keep is None else keep[local]
             width = size if keep is None else keep.size
             if out is None:
-                out = np.empty(r.shape[:-1] + (self.size if entries is None else entries.size,))
+                out = np.empty(r.shape[:-2] + (self.size if entries is None else entries.size,))
             if keep is None:
-                out[..., at : at + width] = r
+                np.reshape(out[..., at : at + width], r.shape, copy=False)[...] = r
             else:
-                np.take(r, keep, axis=-1, out=out[..., at : at + width])
+                _gather(r, keep, out[..., at : at + width])
             first += size
             at += width
         return out if out is not None else np.zeros(0)
@@ -238,10 +279,12 @@ class Objective:
             return None
         return NormalSums(self, dim, self.kept_masks(entries) if entries is not None else None)
 
-    def costs_and_residuals(self, outputs: Mapping[str, NDArray]) -> tuple[NDArray, NDArray]:
-        """Both from one simulation (the wls residuals computed once)."""
-        residuals = self.residuals(outputs)
-        costs = np.mean(residuals**2, axis=-1) if self.name == "wls" else self._eq8(outputs)
+    def costs_and_residuals(self, outputs: Mapping[str, NDArray], overwrite: bool = False) -> tuple[NDArray, NDArray]:
+        """Both from one simulation (the wls residuals computed once); with `overwrite` a wls objective makes its
+        errors in the outputs' arrays (a caller done with them; Eq. 8 reads them again)."""
+        wls = self.name == "wls"
+        residuals = self.residuals(outputs, overwrite=overwrite and wls)
+        costs = mean_square(residuals) if wls else self._eq8(outputs)
         return costs, residuals
 
 

@@ -28,7 +28,7 @@ from .crlb import CramerRao, bound_from_information, cramer_rao, information, su
 from .experiment import Experiment, build_experiment, measurement_noise
 from .forward import forward_gram
 from .measured import experiment_of, read_run
-from .objectives import Objective, objective_families
+from .objectives import Objective, mean_square, objective_families
 
 
 @dataclass(frozen=True)
@@ -214,7 +214,7 @@ class Task:
                 got = self.experiment.exact_sensitivities(names, x)
                 if got is None:
                     return None
-                costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()})
+                costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()}, True)
                 return float(costs[0]), residuals[0], objective.residual_jacobian(got[1])
 
         def normal(x: NDArray, entries: NDArray | None = None) -> tuple[float, NDArray, NDArray, NDArray] | None:
@@ -225,7 +225,7 @@ class Task:
                 got = self.experiment.exact_sensitivities(names, x, sink=sums)
                 if got is None:
                     return None
-                costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()})
+                costs, residuals = objective.costs_and_residuals({f: v[None] for f, v in got[0].items()}, True)
                 return float(costs[0]), residuals[0], *sums.result()
 
         exact = not self.corrections and self.experiment.exact_applies(names)
@@ -359,7 +359,7 @@ def chunked_residuals(
         rows = objective.residuals(outputs, out=residuals[start:stop])
         if objective.name == "wls":
             del outputs  # the chunk's channels, before the square of its residuals
-            costs[start:stop] = np.mean(rows**2, axis=-1)
+            costs[start:stop] = mean_square(rows)
         else:
             costs[start:stop] = objective.costs(outputs)
     return costs, residuals
