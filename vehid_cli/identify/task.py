@@ -130,11 +130,12 @@ class Task:
         for family in self.families:
             for k, name in enumerate(exp.layout.names(family)):
                 own = self._own(family, k)
-                y, p = reference[family][own, k], prediction[family][own, k]
+                rows = slice(None) if own.all() else own  # sampled at every grid sample: views of t and raw, no copies
+                y, p = reference[family][rows, k], prediction[family][rows, k]
                 out.append(Channel(
-                    name=name, family=family, column=k, kind=kinds.get(name, family), t=exp.t[own], y=y - y.mean(),
+                    name=name, family=family, column=k, kind=kinds.get(name, family), t=exp.t[rows], y=y - y.mean(),
                     pred=p - p.mean(), sigma=float(self.sigma[family][k]),
-                    raw=(raw[family] if family in raw else reference[family])[own, k], pred_mean=float(p.mean()),
+                    raw=(raw[family] if family in raw else reference[family])[rows, k], pred_mean=float(p.mean()),
                     unit=units.get(name, ""), offsets_free=free,
                 ))  # fmt: skip
         return tuple(out)
