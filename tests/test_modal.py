@@ -190,6 +190,35 @@ def test_long_records_run_fewer_cars_at_once():
         assert size >= 1 and (size == 1 or size * n * 18 * 8 <= modal.SCRATCH_BYTES)
 
 
+@pytest.mark.parametrize("batch", [1, 3, 20])
+def test_time_blocks_give_the_same_numbers(batch, monkeypatch):
+    """A record run in time blocks (each started from the state its predecessor stored for its last sample) gives
+    the numbers of one block over the whole record, bit for bit, with a road per car and blocks of 2 samples up;
+    and a long record's block of coordinates stays within BLOCK_BYTES (a 60 s record's were 10 MB per car)."""
+    t = time_grid(2.0, 1e-3)
+    cars = random_cars(batch, seed=batch + 40)
+    mats = assemble(cars)
+    rng = np.random.default_rng(batch)
+    roads = [paper_road(t) + 0.01, 0.01 * rng.standard_normal((batch, t.size, 4)).cumsum(axis=1) / 30]
+    groups = MIXED_LAYOUT.column_groups
+    for road in roads:
+        monkeypatch.setattr(modal, "BLOCK_BYTES", 2**40)
+        whole = simulate_columns(mats, road, 1e-3, groups, "exact", MIXED_LAYOUT.points(cars))
+        for size in (16 * 20 * 8 * 8, 4000, 37_000):  # 2 samples of 8 cars, then a few, then uneven blocks
+            monkeypatch.setattr(modal, "BLOCK_BYTES", size)
+            got = simulate_columns(mats, road, 1e-3, groups, "exact", MIXED_LAYOUT.points(cars))
+            for a, b in zip(got, whole, strict=True):
+                np.testing.assert_array_equal(a, b)
+    seen = []
+    original = modal._modal_recursion
+    monkeypatch.setattr(modal, "BLOCK_BYTES", 4 * 2**20)
+    monkeypatch.setattr(
+        modal, "_modal_recursion", lambda e, g, x0, u, out: (seen.append(out.nbytes), original(e, g, x0, u, out))
+    )
+    simulate_columns(mats, np.repeat(paper_road(t), 30, axis=0)[:60_000] + 0.01, 1e-3, groups, "exact")
+    assert len(seen) > 1 and max(seen) <= modal.BLOCK_BYTES
+
+
 def _lapack_condition(A: np.ndarray) -> np.ndarray:
     """||V||_1 ||V^-1||_1 (P,) of LAPACK's unit eigenvectors: the condition number the modal path tests."""
     V = np.linalg.eig(A)[1]

@@ -52,22 +52,18 @@ def mean_square(r: NDArray) -> NDArray:
     return sum_of_squares(r) / r.shape[-1]
 
 
-GATHER_ROWS = 4096  # time samples of a strided error flattened at a time by `_gather`
+GATHER_ROWS = 4096  # time samples of an error gathered at a time by `_gather`
 
 
-def _gather(r: NDArray, flat: NDArray, out: NDArray) -> None:
-    """out (..., m) = r (..., n, k) at the time-major flat indices `flat` (m, increasing) into its (n, k) block. A
-    strided r (an error made over a simulation's columns) is flattened GATHER_ROWS samples at a time, not copied
-    whole; mode "clip" because the indices are in range and NumPy's default takes into a buffered copy of `out`."""
-    lead, (n, k) = r.shape[:-2], r.shape[-2:]
-    if r.flags.c_contiguous:
-        np.take(r.reshape(lead + (n * k,)), flat, axis=-1, out=out, mode="clip")
-        return
-    rows = np.append(np.arange(0, n, GATHER_ROWS), n)
-    edges = np.searchsorted(flat, rows * k)
-    for i0, i1, lo, hi in zip(rows[:-1], rows[1:], edges[:-1], edges[1:], strict=True):
-        block = r[..., i0:i1, :].reshape(lead + ((i1 - i0) * k,))
-        np.take(block, flat[lo:hi] - i0 * k, axis=-1, out=out[..., lo:hi], mode="clip")
+def _gather(r: NDArray, mask: NDArray, out: NDArray) -> None:
+    """out (..., m) = r[..., mask]: r (..., n, k) at the True entries of `mask` (n, k), time-major, GATHER_ROWS
+    samples at a time: no index array of the record's size, and a strided r (an error made over a simulation's
+    columns) never flattened whole."""
+    at = 0
+    for i0 in range(0, r.shape[-2], GATHER_ROWS):
+        part = r[..., i0 : i0 + GATHER_ROWS, :][..., mask[i0 : i0 + GATHER_ROWS]]
+        out[..., at : at + part.shape[-1]] = part
+        at += part.shape[-1]
 
 
 @dataclass(frozen=True)
@@ -89,21 +85,24 @@ class Objective:
         return tuple(self.reference)
 
     @cached_property
-    def _keep(self) -> dict[str, NDArray]:
-        """Flat indices (time-major) of the observed entries of each family's (n, k) block."""
-        return {f: np.flatnonzero(m) for f, m in (self.observed or {}).items()}
+    def _masks(self) -> dict[str, NDArray]:
+        """family -> (n, k) bool: the observed entries of the families some of whose samples are not (a mask that
+        is all True is left out: every sample is an entry). Masks, not flat indices: a long record's indices would
+        be 8 bytes an entry, held for the whole fit."""
+        return {f: m for f, m in (self.observed or {}).items() if not m.all()}
 
     def entries(self, family: str) -> NDArray | None:
         """Flat indices (time-major, into the family's (n, k) block) of the residual entries of `family`, in the
-        residual vector's order; None when every sample of every channel is one."""
-        return self._keep.get(family)
+        residual vector's order; None when every sample of every channel is one. Made at each call."""
+        mask = self._masks.get(family)
+        return None if mask is None else np.flatnonzero(mask)
 
     def sample_times(self) -> NDArray:
         """(R,) the time sample (row of the reference) of each weighted residual entry, in `residuals`' order."""
         parts = []
         for family, ref in self.reference.items():
             n, k = ref.shape[-2:]
-            flat = self._keep.get(family)
+            flat = self.entries(family)
             parts.append((np.arange(n * k) if flat is None else flat) // k)
         return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
 
@@ -113,7 +112,7 @@ class Objective:
         parts, first = [], 0
         for family, ref in self.reference.items():
             n, k = ref.shape[-2:]
-            flat = self._keep.get(family)
+            flat = self.entries(family)
             parts.append(first + (np.arange(n * k) if flat is None else flat) % k)
             first += k
         return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
@@ -126,7 +125,13 @@ class Objective:
     @property
     def size(self) -> int:
         """R: the number of weighted residuals."""
-        return sum(int(self._keep[f].size) if f in self._keep else ref.size for f, ref in self.reference.items())
+        return sum(self._sizes.values())
+
+    @cached_property
+    def _sizes(self) -> dict[str, int]:
+        """family -> its number of weighted residuals (its observed entries)."""
+        return {f: int(np.count_nonzero(self._masks[f])) if f in self._masks else ref.shape[-2] * ref.shape[-1]
+                for f, ref in self.reference.items()}  # fmt: skip
 
     def error(self, family: str, sim: NDArray, overwrite: bool = False) -> NDArray:
         """ref - sim (..., n, k), without its per-channel mean over the observed samples when offsets are profiled;
@@ -193,18 +198,19 @@ class Objective:
         for family in self.reference:
             r = self.error(family, outputs[family], overwrite)  # (..., n, k); strided when made over the outputs
             r /= self.sigma[family]  # in place
-            keep = self._keep.get(family)
-            size = r.shape[-2] * r.shape[-1] if keep is None else keep.size
-            if entries is not None:  # this family's share of the entries, as indices into its own
+            mask, size = self._masks.get(family), self._sizes[family]
+            width = size
+            if entries is not None:  # this family's share of the entries, as a mask of its (n, k) block
                 local = entries[np.searchsorted(entries, first) : np.searchsorted(entries, first + size)] - first
-                keep = local if keep is None else keep[local]
-            width = size if keep is None else keep.size
+                chosen = np.zeros(r.shape[-2] * r.shape[-1], dtype=bool)
+                chosen[local if mask is None else np.flatnonzero(mask)[local]] = True
+                mask, width = chosen.reshape(r.shape[-2:]), local.size
             if out is None:
                 out = np.empty(r.shape[:-2] + (self.size if entries is None else entries.size,))
-            if keep is None:
+            if mask is None:
                 np.reshape(out[..., at : at + width], r.shape, copy=False)[...] = r
             else:
-                _gather(r, keep, out[..., at : at + width])
+                _gather(r, mask, out[..., at : at + width])
             first += size
             at += width
         return out if out is not None else np.zeros(0)
@@ -225,7 +231,7 @@ class Objective:
             for c in range(k if self.offsets else 0):  # the residual's mean over each channel's samples is
                 dc = s[:, c] / neg[c]  # profiled out: so is its derivative (channel by channel, (n, D) at a time)
                 mean[c] = dc.mean(axis=0) if m is None else np.sum(dc * m[:, c, None], axis=0) / np.sum(m[:, c])
-            keep = self._keep.get(family)
+            keep = self.entries(family)
             size = n * k if keep is None else keep.size
             block = out[first : first + size]
             if keep is None:  # rows time-major, like the residuals

@@ -387,8 +387,9 @@ def _gemm_columns(groups: list[NDArray], n_out: int) -> tuple[NDArray | None, li
     return np.array(columns, dtype=int), views
 
 
-SCRATCH_BYTES = 32 * 2**20  # a block's modal coordinates over the whole record, at most (long records: fewer cars)
+SCRATCH_BYTES = 32 * 2**20  # a block's states over the whole record, at most (the state-space path: fewer cars)
 CARS_PER_BLOCK = 8  # cars whose recursions run together (see _modal_blocks)
+BLOCK_BYTES = 4 * 2**20  # a block's modal coordinates, at most: 8 cars over 3000 samples, a long record in time blocks
 
 
 def _block_size(n: int, width: int) -> int:
@@ -430,23 +431,34 @@ def _modal_blocks(decay: NDArray, a: NDArray, b: NDArray, z0: NDArray, u: NDArra
     car), but all of a batch's modal coordinates at once (100 cars: 43 MB) fall out of cache between the
     recursion that writes them and the projection that reads them: batch 100 ran 2x slower per car than batch
     20 did. CARS_PER_BLOCK = 8 (56 lanes, 3.5 MB for 3000 samples) was the fastest of 2 to 100 at 8 and 29
-    columns. Each car's numbers are the same whatever the block, and the padding's zero rows of the projection
-    add exact zeros: the same numbers as without it."""
+    columns. A long record runs in time blocks of BLOCK_BYTES (a 60 s record's coordinates are 10 MB per car), each
+    started from the state its predecessor stored for its last sample. Each car's numbers are the same whatever the
+    blocks, and the padding's zero rows of the projection add exact zeros: the same numbers as without it."""
     P = out.shape[0]
     g, x0, padded = _shifted(decay, a, b, z0, u, proj)
     m = decay.size // P
+    mp = (padded.shape[1] - b.shape[0]) // 2
     n, width = u.shape[1], padded.shape[1]
-    count = -(-P // _block_size(n, width))
+    count = -(-P // min(P, CARS_PER_BLOCK))
     size = -(-P // count)  # blocks of nearly equal size: 20 cars run as 7, 7, 6 rather than 8, 8, 4
-    scratch = np.empty((min(P, size), n, width))
+    rows = max(2, min(n, BLOCK_BYTES // (8 * width * size)))  # samples per block: a long record's in several
+    buffer = np.empty(size * rows * width)  # a smaller last block in the same memory: a new 3 MB array each call
+    # cost its page faults (20 cars as 7, 7, 6 ran 2x slower per car than 21 as 7, 7, 7)
     for start in range(0, P, size):
         stop = min(P, start + size)
         lanes = slice(start * m, stop * m)
-        block = scratch[: stop - start]  # a smaller last block in the same memory: a new 3 MB array each call
-        # cost its page faults (20 cars as 7, 7, 6 ran 2x slower per car than 21 as 7, 7, 7)
         ub = u if u.shape[0] == 1 else u[start:stop]
-        _modal_recursion(decay[lanes], g[:, lanes], x0[lanes], ub, block)
-        np.matmul(block, padded[start:stop], out=out[start:stop])
+        x, k0 = x0[lanes], 0
+        while True:  # each time block ends on the next one's first sample, whose state starts that block
+            k1 = min(n, k0 + rows)
+            block = buffer[: (stop - start) * (k1 - k0) * width].reshape(stop - start, k1 - k0, width)
+            _modal_recursion(decay[lanes], g[:, lanes], x, np.ascontiguousarray(ub[:, k0:k1]), block)
+            np.matmul(block, padded[start:stop], out=out[start:stop, k0:k1])
+            if k1 == n:
+                break
+            x = np.empty(x.shape, dtype=complex)  # the state at k1 - 1 as the recursion stored it: the same numbers
+            x.real, x.imag = block[:, -1, :m].reshape(-1), block[:, -1, mp : mp + m].reshape(-1)
+            k0 = k1 - 1
 
 
 def _kept_modes(A: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
