@@ -97,3 +97,24 @@ def test_the_windows_linear_car_is_fitted_on_its_exact_twin():
         assert r.size == r0.shape[1] == wcar.task.residual_samples - int((~wcar.split.keep).sum())
         assert abs(cost - c0[0]) < 1e-4 * c0[0]  # the integrators agree to rk4's error at 1 kHz
         assert subject.linear_for(task.names + ("hysteresis.alpha_f",)) is None
+
+
+def test_single_points_hold_the_newest_vectors_within_their_limits(monkeypatch):
+    """The fits' held residual vectors (their validation J read from them): the newest always kept, at most
+    MAX_POINTS and MAX_BYTES of them, a point evaluated again moved to the newest, and all of them forgotten by
+    clear() (before a long record's missing-force estimate)."""
+    from vehid_cli.systems.vehicle.diagnosis import SinglePoints
+
+    monkeypatch.setattr(SinglePoints, "MAX_POINTS", 3)
+    monkeypatch.setattr(SinglePoints, "MAX_BYTES", 5 * 800)  # five vectors of 100 doubles
+    held = SinglePoints()
+    for i in range(5):
+        held._put((("kf",), np.array([float(i)]).tobytes()), np.full(100, float(i)))
+    assert [held.get(("kf",), np.array([float(i)])) is not None for i in range(5)] == [False, False, True, True, True]
+    held._put((("kf",), np.array([2.0]).tobytes()), np.full(100, 2.0))  # 2 again: now the newest, 3 the oldest
+    held._put((("kf",), np.array([9.0]).tobytes()), np.full(100, 9.0))
+    assert held.get(("kf",), np.array([3.0])) is None and held.get(("kf",), np.array([2.0]))[0] == 2.0
+    held._put((("kf",), np.array([7.0]).tobytes()), np.full(10_000, 7.0))  # alone over MAX_BYTES: still kept
+    assert held.get(("kf",), np.array([7.0])) is not None and held.get(("kf",), np.array([9.0])) is None
+    held.clear()
+    assert held.get(("kf",), np.array([7.0])) is None

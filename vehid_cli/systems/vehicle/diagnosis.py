@@ -109,6 +109,8 @@ class SinglePoints:
     candidates' fits record from several threads."""
 
     MAX_BYTES = 8 * 2**20  # a 60 s record's vector is 6 MB: one held (the newest is always kept)
+    MAX_POINTS = 8  # and at most this many: a window's small vectors, beyond the last points of the fits under way
+    # (two threads), were held by the hundred KB for nothing
 
     def __init__(self) -> None:
         self._store: OrderedDict[tuple, NDArray] = OrderedDict()
@@ -130,8 +132,15 @@ class SinglePoints:
         with self._lock:
             self._store.pop(key, None)
             self._store[key] = r
-            while len(self._store) > 1 and sum(v.nbytes for v in self._store.values()) > self.MAX_BYTES:
+            while len(self._store) > 1 and (
+                len(self._store) > self.MAX_POINTS or sum(v.nbytes for v in self._store.values()) > self.MAX_BYTES
+            ):
                 self._store.popitem(last=False)
+
+    def clear(self) -> None:
+        """Forget every vector (no fit's validation J will be asked for again)."""
+        with self._lock:
+            self._store.clear()
 
     def get(self, names: tuple[str, ...], x: NDArray) -> NDArray | None:
         """The whole residual vector the training problem over `names` computed at x, if still held."""
@@ -389,6 +398,8 @@ def diagnose(
         estimate = functools.partial(unexplained_force, head.task, head.ref, head.split.keep, fit, files)
         if quality.ok and screen is None:
             estimate = beside.submit(estimate).result
+        elif screen is not None:  # read after the last report: the fits' held vectors (up to 16 MB) let go first
+            estimate = functools.partial(_released, (car.points, head.points), estimate)
         return close(
             subject, fit, before, car.report, quality, alpha=alpha, max_rounds=max_rounds,
             candidate_budget=candidate_budget, refit_budget=refit_budget, say=say, t_start=t_start,
@@ -397,6 +408,15 @@ def diagnose(
             data_files=tuple(map(str, files)) if car.joint else (), extra_notes=notes,
             checks=tuple(found.to_json()), unit=config.unit, progress=progress,
         )  # fmt: skip
+
+
+def _released(
+    points: Sequence[SinglePoints], then: Callable[[], tuple[Unexplained, tuple[str, ...]]]
+) -> tuple[Unexplained, tuple[str, ...]]:
+    """`then()` once the fits' held residual vectors are forgotten."""
+    for held in points:
+        held.clear()
+    return then()
 
 
 def screening(
