@@ -424,11 +424,15 @@ FIT_GRAM_BYTES = 12 * 2**20  # a fit matrix A above this (a long record's window
 
 @dataclass(frozen=True)
 class _Converged:
-    """The fixed-point iteration's end: the last fit, the unknowns' total re-fit from x, the corrections made."""
+    """The fixed-point iteration's end: the last fit, the unknowns' total re-fit from x, the corrections made; and
+    at x, the kept residual's chi² per sample and the fit without the force (its RSS and degrees of freedom)."""
 
     fit: ForceFit
     dx: NDArray
     corrections: int
+    chi2_before: float
+    rss0: float
+    edf0: float
 
 
 def _iterate(
@@ -436,7 +440,12 @@ def _iterate(
 ) -> _Converged:
     """Fit the force on the fitted trajectory corrected by the estimate's own response and the unknowns' shift
     (superposition), re-estimate on the corrected trajectory until it stops moving (at most `iterations` times);
-    when the unknowns' step moves the trajectory, a Gauss-Newton step: re-simulate there."""
+    when the unknowns' step moves the trajectory, a Gauss-Newton step: re-simulate there. `lin`: the linearisation at
+    x, this function's to let go (the caller holds no other reference)."""
+    rk0 = lin.r[keep]
+    chi2_before = float(np.mean(rk0**2))
+    rss0, edf0 = _fit_without_force(lin.Jm[keep], rk0)
+    del rk0
     x_cur = x.copy()
     corr_d = np.zeros_like(lin.d)
     corr_v = np.zeros_like(lin.v)
@@ -460,7 +469,7 @@ def _iterate(
             x_cur = np.clip(x_cur + dx, fitted.lo, fitted.hi)
             fit = lin = None  # this fit's columns and the last linearisation freed before the car is simulated again
             lin = fitted.linearise(x_cur)
-    return _Converged(fit, np.clip(x_cur + fit.dx, fitted.lo, fitted.hi) - x, done)
+    return _Converged(fit, np.clip(x_cur + fit.dx, fitted.lo, fitted.hi) - x, done, chi2_before, rss0, edf0)
 
 
 @dataclass(frozen=True)
@@ -559,21 +568,19 @@ def estimate_unexplained(
     if x.size != len(names):
         raise ValueError(f"{len(names)} names but {x.size} values")
     fitted = _FittedCar.of(task, reference, names, nuisance)
-    lin = fitted.linearise(x)
-    R_all = lin.r.size
+    R_all = fitted.objective.size
     keep = np.ones(R_all, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
     if keep.shape != (R_all,):
         raise ValueError(f"keep must have {R_all} entries (family, time, channel), got {keep.shape}")
     R = int(keep.sum())
-    rk0 = lin.r[keep]
-    rss0, edf0 = _fit_without_force(lin.Jm[keep], rk0)
-    end = _iterate(fitted, lin, x, keep, n_knots, iterations, criterion)
-    test = _f_test(end.fit, rss0, edf0, R)
+    # the first linearisation handed over, not held here: _iterate lets it go when it linearises again
+    end = _iterate(fitted, fitted.linearise(x), x, keep, n_knots, iterations, criterion)
+    test = _f_test(end.fit, end.rss0, end.edf0, R)
     axles = _axle_estimates(end.fit, names, test.sigma2, grid_points)
     p = end.fit.p
     dx_ci = Z95 * np.sqrt(np.maximum(np.diag(test.sigma2 * end.fit.sol.cov)[:p], 0.0))
     return Unexplained(
-        front=axles[0], rear=axles[1], chi2_before=float(np.mean(rk0**2)), chi2_after=test.rss1 / R,
+        front=axles[0], rear=axles[1], chi2_before=end.chi2_before, chi2_after=test.rss1 / R,
         edf=float(test.edf_force), edf_total=float(end.fit.sol.edf), df_test=float(test.df_test), F=float(test.F),
         p_value=test.p_value, sigma2=float(test.sigma2), samples=R, iterations=end.corrections, dx=end.dx, names=names,
         x=x, dx_ci=dx_ci,
