@@ -207,8 +207,8 @@ class Objective:
                 mask, width = chosen.reshape(r.shape[-2:]), local.size
             if out is None:
                 out = np.empty(r.shape[:-2] + (self.size if entries is None else entries.size,))
-            if mask is None:
-                np.reshape(out[..., at : at + width], r.shape, copy=False)[...] = r
+            if mask is None:  # through an (..., n, k) view of out's columns (splitting the last axis: always a view)
+                out[..., at : at + width].reshape(r.shape)[...] = r
             else:
                 _gather(r, mask, out[..., at : at + width])
             first += size
