@@ -349,3 +349,27 @@ def test_a_sweep_of_a_long_value_names_its_file_within_the_limit(tmp_path):
     value = "0." + "1" * 300
     (planned,) = plan_sweep(BASE_CONFIG, [], parse_vary([f"noise.level={value}"]), tmp_path)
     assert len(planned.path.name) < 100 and planned.path.name.startswith("level-0.111")
+
+
+def test_identify_spawns_its_processes_before_the_compiled_kernels_are_imported(tmp_path):
+    """`vehid identify` spawns git (the results' provenance) and `uname -p` (h5py's import asks for the processor)
+    while the process is small: numba not imported. Spawned later (vfork), they showed the 200 MiB parent's pages a
+    second time in the process tree's summed RSS until they exec'd (the 60 s record's peak read 359-396 MiB in one
+    run of three or twelve)."""
+    code = """
+import runpy, subprocess, sys
+real = subprocess.run
+def spy(args, *a, **k):
+    print(*args[:1], *args[3:4], "numba imported:", "numba" in sys.modules)
+    return real(args, *a, **k)
+subprocess.run = spy
+sys.argv = ["vehid", *sys.argv[1:]]
+runpy.run_module("vehid_cli", run_name="__main__")
+"""
+    args = ["identify", str(BASE_CONFIG), "--runs", "1", "-o", str(tmp_path / "r.h5"), "--set", "simulation.duration=1"]
+    proc = subprocess.run([sys.executable, "-c", code, *args], cwd=ROOT, capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    spawned = [line for line in proc.stdout.splitlines() if "numba imported" in line]
+    assert spawned == ["git rev-parse numba imported: False", "git status numba imported: False",
+                       "uname numba imported: False"], proc.stdout  # fmt: skip

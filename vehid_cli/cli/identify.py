@@ -121,11 +121,13 @@ def identify(
     """
 
     from ..campaign.options import check_executor_options
+    from ..core.provenance import ask_early
     from ..io.read import read_ahead
 
     check_executor_options(executor, jobs=jobs, scheduler=scheduler)
     cfg = load_config(config, campaign_overrides(set_, runs, seed, jobs))
     target = _results_target(config, cfg, data, output, json_out, save_config)
+    ask_early()  # git's commit and the processor (h5py's import) asked before numba's LLVM library is mapped
     with read_ahead(data or cfg.data_runs()):  # the logger files read before the compiled kernels are imported
         from ..campaign.executor import make_executor
         from ..campaign.runner import run_campaign_to_file, saved_runs_note

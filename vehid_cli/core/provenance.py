@@ -32,6 +32,15 @@ def git_commit() -> str:
         return "unknown"
 
 
+def ask_early() -> None:
+    """What a command would otherwise spawn a process for once it is large, asked now (and cached) while it is small:
+    the git commit (the results' provenance) and the processor `platform.uname()` gives (h5py reads it at import:
+    `uname -p`). A process spawned by vfork from one of 200 MiB shows those pages a second time in the process tree's
+    summed RSS until it has exec'd (the 60 s record's `identify` read 359-396 MiB in one run of three or twelve)."""
+    git_commit()
+    _ = platform.uname().processor  # cached on the uname result that h5py's import asks for again
+
+
 def provenance() -> dict[str, str]:
     """Flat string attributes for a results file."""
     info = {
