@@ -294,3 +294,16 @@ def test_a_known_parameters_fit_starts_where_its_earlier_estimate_or_its_configu
     np.testing.assert_array_equal(lower_start(problem, x0, {"kf": 4.0}), [1.0, 3.0])  # clipped, and still better
     np.testing.assert_array_equal(lower_start(problem, np.array([1.0, 1.8]), {"kf": 3.0}), [1.0, 1.8])
     assert calls == [2, 2, 2]
+
+
+def test_the_reports_share_the_runs_measured_data(tmp_path):
+    """The declared model's and the final model's residual analyses lay the run's data out once (a long record's is
+    several MB per copy): the same array, with NaN nowhere (every channel sampled at every grid sample)."""
+    data = tmp_path / "kf.csv"
+    sim = ["simulate", str(BASE), "-o", str(data), "--seed", "5", "--set", "vehicle.kf=54000",
+           "--set", "noise.level=0.05", "--set", "simulation.duration=2"]  # fmt: skip
+    assert CliRunner().invoke(app, sim).exit_code == 0
+    d = diagnose(load_config(BASE, ["simulation.duration=2"]), data)
+    assert d.selected and d.after is not d.before
+    assert d.after.analysis.measured is d.before.analysis.measured
+    assert np.all(np.isfinite(d.before.analysis.measured))

@@ -234,11 +234,16 @@ def fingerprint_channels(layout, p: dict[str, float], names: tuple[str, ...]) ->
     return tuple(out)
 
 
-def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 20, bins: int = 12):
+def analyse(
+    task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 20, bins: int = 12,
+    measured: NDArray | None = None,
+):  # fmt: skip
     """Residual analysis of the car `names` = x on the task's experiment (one run) against `reference`.
 
     The residual is the task's objective's (offsets profiled out when they are identified), per channel of the
-    layout; a channel slower than the grid is analysed at its own samples (NaN elsewhere in `residual`)."""
+    layout; a channel slower than the grid is analysed at its own samples (NaN elsewhere in `residual`). `measured`:
+    an earlier analysis's of the same run and reference (the data as laid out here), shared rather than made again
+    (a long record's is several MB)."""
     exp = task.experiment
     objective = task.objective(reference)
     every = {n: np.asarray(v, dtype=float) for n, v in zip(names, x, strict=True)}
@@ -256,16 +261,16 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
     parts, channels, data, units = [], [], [], []
     for family in reference:
         r = objective.error(family, sim[family]) / task.sigma[family]
-        y = np.array(reference[family], dtype=float)
         if task.observed is not None:
             r = np.where(task.observed[family], r, np.nan)
-            y = np.where(task.observed[family], y, np.nan)
         parts.append(r)
-        data.append(y)
+        if measured is None:
+            y = np.array(reference[family], dtype=float)
+            data.append(y if task.observed is None else np.where(task.observed[family], y, np.nan))
         channels += list(exp.layout.names(family))
         units += [UNIT[family]] * r.shape[1]
     residual = np.concatenate(parts, axis=1)
-    del parts, sim, r, y  # copies beside the residual (a long record's: several MB each)
+    del parts, sim, r  # copies beside the residual (a long record's: several MB each)
     n = residual.shape[0]
     full = bool(np.all(np.isfinite(residual)))
     own = [np.isfinite(residual[:, j]) for j in range(residual.shape[1])]
@@ -289,7 +294,7 @@ def analyse(task, reference: dict[str, NDArray], names, x: NDArray, lags: int = 
     chi2_per_sample = float(np.mean(square) if full else np.nanmean(square))
     chi2_channel = np.mean(square, axis=0) if full else np.nanmean(square, axis=0)
     del square
-    measured = np.concatenate(data, axis=1)
+    measured = np.concatenate(data, axis=1) if measured is None else measured
     del data  # before the spectrum's segments: a long record's copies are several MB each
     return ResidualAnalysis(
         channels=tuple(channels),

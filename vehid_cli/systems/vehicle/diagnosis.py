@@ -161,6 +161,7 @@ class CarLoop:
     analyse_residuals: bool = True
     twin: Task | None = None  # the task on the exact integrator when the declared model is the linear car (exact_twin)
     points: SinglePoints = field(default_factory=SinglePoints, repr=False, compare=False)
+    measured: dict[int, NDArray] = field(default_factory=dict, repr=False, compare=False)  # run -> its analyses' data
 
     @property
     def joint(self) -> bool:
@@ -212,11 +213,13 @@ class CarLoop:
 
     def analyses(self, t: Task | JointTask, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
         """The residual analysis of each run (its file and its analysis)."""
-        if not self.joint:
-            return ((str(self.files[0]), analyse(t, self.ref, f.names, f.x)),)
-        return tuple(
-            (str(file), analyse(tk, r, f.names, f.x)) for file, tk, r in zip(self.files, t.tasks, self.ref, strict=True)
-        )
+        runs = [(t, self.ref)] if not self.joint else list(zip(t.tasks, self.ref, strict=True))
+        out = []
+        for i, (file, (tk, r)) in enumerate(zip(self.files, runs, strict=False)):
+            an = analyse(tk, r, f.names, f.x, measured=self.measured.get(i))  # the run's data laid out once, shared
+            self.measured.setdefault(i, an.measured)
+            out.append((str(file), an))
+        return tuple(out)
 
     def report(self, f: Fit, effs: Sequence[str]) -> ModelReport:
         """The fit `f` with the effects `effs`: intervals, J, validation J, NRE and its bound (truth known), the
