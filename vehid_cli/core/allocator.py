@@ -31,7 +31,7 @@ MMAP_THRESHOLD = 32 * 2**20  # [bytes] blocks below this come from the heap (gli
 TRIM_THRESHOLD = 64 * 2**20  # [bytes] free heap kept mapped for reuse (glibc's default starts at 128 kB)
 LONG_MMAP_THRESHOLD = 4 * 2**20  # [bytes] the same for a long record (`hand_back_freed_memory`)
 LONG_TRIM_THRESHOLD = 8 * 2**20
-LONG_ARENA_MAX = 2  # malloc arenas at most for a long record (glibc's default: 8 per core), each keeping its own
+LONG_ARENA_MAX = 1  # malloc arenas for a long record (glibc's default: 8 per core): one, which every thread shares
 
 
 def keep_freed_memory() -> bool:
