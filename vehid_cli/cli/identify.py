@@ -148,10 +148,8 @@ def identify(
             )  # fmt: skip
     if json_out is not None:
         write_json(json_out, campaign.to_json())
-    for table in rich_tables([campaign], [str(target)]):
-        out.print(table)
-    for note in campaign_notes(campaign):
-        out.print(note)
+    for shown in (*rich_tables([campaign], [str(target)]), *campaign_notes(campaign)):  # the tables, then the notes
+        out.print(shown)
     out.print(f"wrote {target}" + (f" and {json_out}" if json_out else ""))
     if save_config is not None:
         _save_config(config, campaign_overrides(set_, runs, seed, jobs), campaign, target, save_config)
