@@ -66,6 +66,16 @@ def _gather(r: NDArray, mask: NDArray, out: NDArray) -> None:
         at += part.shape[-1]
 
 
+def _placed(mask: NDArray | None, part: NDArray, shape: tuple[int, ...]) -> NDArray:
+    """(n, k) bool: `part` (one flag per entry of a family, in the residuals' time-major order) at the entries' places,
+    the True ones of `mask` (None: every sample); bool arrays only, no index array of the record's size."""
+    if mask is None:
+        return part.reshape(shape).copy()
+    out = np.zeros(shape, dtype=bool)
+    out[mask] = part  # a boolean index assigns in C order: time-major, the entries' order
+    return out
+
+
 @dataclass(frozen=True)
 class Objective:
     """An objective bound to its reference data: costs and weighted residuals of a batch of simulated channels.
@@ -202,9 +212,9 @@ class Objective:
             width = size
             if entries is not None:  # this family's share of the entries, as a mask of its (n, k) block
                 local = entries[np.searchsorted(entries, first) : np.searchsorted(entries, first + size)] - first
-                chosen = np.zeros(r.shape[-2] * r.shape[-1], dtype=bool)
-                chosen[local if mask is None else np.flatnonzero(mask)[local]] = True
-                mask, width = chosen.reshape(r.shape[-2:]), local.size
+                chosen = np.zeros(size, dtype=bool)
+                chosen[local] = True
+                mask, width = _placed(mask, chosen, r.shape[-2:]), local.size
             if out is None:
                 out = np.empty(r.shape[:-2] + (self.size if entries is None else entries.size,))
             if mask is None:  # through an (..., n, k) view of out's columns (splitting the last axis: always a view)
@@ -263,16 +273,9 @@ class Objective:
             chosen[entries] = True
         out, first = {}, 0
         for family, ref in self.reference.items():
-            n, k = ref.shape[-2:]
-            own = self.entries(family)  # flat indices of the family's entries, or None: all n k
-            size = n * k if own is None else own.size
+            size = self._sizes[family]
             part = np.ones(size, dtype=bool) if chosen is None else chosen[first : first + size]
-            if own is None:
-                mask = part.copy()
-            else:
-                mask = np.zeros(n * k, dtype=bool)
-                mask[own] = part
-            out[family] = mask.reshape(n, k)
+            out[family] = _placed(self._masks.get(family), part, ref.shape[-2:])
             first += size
         return out
 
