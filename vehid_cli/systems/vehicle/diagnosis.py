@@ -213,9 +213,10 @@ class CarLoop:
 
     def analyses(self, t: Task | JointTask, f: Fit) -> tuple[tuple[str, ResidualAnalysis], ...]:
         """The residual analysis of each run (its file and its analysis)."""
-        runs = [(t, self.ref)] if not self.joint else list(zip(t.tasks, self.ref, strict=True))
+        runs = list(zip(t.tasks, self.ref, strict=True)) if self.joint else [(t, self.ref)]
+        files = self.files if self.joint else self.files[:1]
         out = []
-        for i, (file, (tk, r)) in enumerate(zip(self.files, runs, strict=False)):
+        for i, (file, (tk, r)) in enumerate(zip(files, runs, strict=True)):
             an = analyse(tk, r, f.names, f.x, measured=self.measured.get(i))  # the run's data laid out once, shared
             self.measured.setdefault(i, an.measured)
             out.append((str(file), an))
