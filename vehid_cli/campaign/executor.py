@@ -174,6 +174,13 @@ class LocalExecutor(Executor):
             # The pool's manager thread then marks every pending future broken and, on CPython 3.11, raises for one
             # already cancelled (InvalidStateError, or KeyError in a race with its own clean-up): a traceback on
             # stderr from a pool we stopped on purpose. Silence that thread until the pool is shut down.
+            # The queue that feeds the workers is not joined either: its feeder thread may be blocked writing to the
+            # pipe of the workers just stopped (a full pipe no one reads), and CPython up to 3.11.3 (Debian 12's
+            # python3 is 3.11.2) joins it while shutting the broken pool down, which then never returns (the
+            # later 3.11 releases cancel that join themselves).
+            call_queue = getattr(pool, "_call_queue", None)
+            if call_queue is not None:
+                call_queue.cancel_join_thread()
             with _silenced(getattr(pool, "_executor_manager_thread", None)):
                 for process in list(getattr(pool, "_processes", {}).values()):
                     process.terminate()
