@@ -136,12 +136,13 @@ def cannot_win(
     rest: list[Candidate], scores: Scores, fitted: list[Ranked], current: Fit, current_v: tuple,
     critical: Callable[[int], float], R: int,
 ) -> tuple[list[Candidate], list[Ranked]]:  # fmt: skip
-    """The screened effects of `rest` that cannot win the round: WIN_FACTOR x their score (an effect's LR has been
-    up to 1.2 x its score at its starts) plus the critical LR of its test below the LR of the best accepted known
-    parameter or sensor correction (BEATERS) among the `fitted` tests. The best is then that one whatever their fits
-    would give (parsimony and the rivalry of `undistinguished` compare an effect with the best only when the best is
-    an effect), so they are not fitted; their tests report the score as the LR. Returns the candidates to fit and
-    those tests."""
+    """The screened effects of `rest` that cannot win the round: WIN_FACTOR x their score (an effect's fitted LR has
+    been up to 1.78 x its score over the library's effect and mis-set parameter cases: a shape parameter moving far
+    from the starts the score is taken at; tests/test_score_prescreen.py) plus the critical LR of its test below the
+    LR of the best accepted known parameter or sensor correction (BEATERS) among the `fitted` tests. The best is then
+    that one whatever their fits would give (parsimony and the rivalry of `undistinguished` compare an effect with the
+    best only when the best is an effect), so they are not fitted; their tests report the score as the LR. Returns the
+    candidates to fit and those tests."""
     best = max((r.statistic for r in fitted if r.accepted and r.kind in BEATERS), default=0.0)
     keep, beaten = [], []
     for c in rest:
