@@ -132,11 +132,12 @@ def test_the_stop_rule_compares_the_factored_lr_with_the_best_parameter():
     assert not stop(2.5) and not stop(2.0)  # not yet below the base: no LR reached, the fit goes on
 
 
-CASES = {  # issue 26's kf and cr mis-set, its Bouc-Wen hysteresis at 13 mm, a backlash, and acc2 upside down
+CASES = {  # issue 26's kf and cr mis-set, its Bouc-Wen hysteresis at 13 mm and the library's, a backlash, acc2 flipped
     "kf-cr": (BASE_CONFIG, ["vehicle.kf=54000", "vehicle.cr=2975"]),
     "hysteresis": (ROOT / "configs" / "effects" / "hysteresis.yaml",
                    ["vehicle.effects.hysteresis.beta=3e3", "vehicle.effects.hysteresis.gamma=3e3"]),
     "backlash": (ROOT / "configs" / "effects" / "backlash.yaml", []),
+    "hysteresis-library": (ROOT / "configs" / "effects" / "hysteresis.yaml", []),  # backlash's LR grows 2.4 x there
     "acc2-flipped": (BASE_CONFIG, []),
 }  # fmt: skip
 BEATEN_BY = {"parameter": ("sensor",), "effect": ("parameter", "sensor")}  # what a stopped fit falls short of
