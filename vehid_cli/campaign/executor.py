@@ -175,9 +175,9 @@ class LocalExecutor(Executor):
             # already cancelled (InvalidStateError, or KeyError in a race with its own clean-up): a traceback on
             # stderr from a pool we stopped on purpose. Silence that thread until the pool is shut down.
             # The queue that feeds the workers is not joined either: its feeder thread may be blocked writing to the
-            # pipe of the workers just stopped (a full pipe no one reads), and CPython up to 3.11.3 (Debian 12's
-            # python3 is 3.11.2) joins it while shutting the broken pool down, which then never returns (the
-            # later 3.11 releases cancel that join themselves).
+            # pipe of the workers just stopped (a full pipe no one reads), and the pool's shutdown joins it. CPython
+            # 3.11.7 first closes that pipe's reading end (gh-94777), so the write fails; 3.11.2 (Debian 12's
+            # python3) does not, and the shutdown then never returned.
             call_queue = getattr(pool, "_call_queue", None)
             if call_queue is not None:
                 call_queue.cancel_join_thread()
