@@ -97,7 +97,7 @@ def response_columns(
     without the (R, K) array when no offsets are profiled and every family's entries are whole (else that array is
     made and its kept rows copied). The same numbers either way."""
     n, K = U.shape[0], U.shape[2]
-    direct = keep is not None and not objective.offsets and all(objective.entries(f) is None for f in sigma)
+    direct = keep is not None and not objective.offsets and all(objective.whole(f) for f in sigma)
     if keep is not None and not direct:
         S = response_columns(objective, car, U, sigma)
         A = np.empty((int(np.count_nonzero(keep)), first + K))
@@ -105,10 +105,8 @@ def response_columns(
         for start in range(0, rows.size, COPY_ROWS):
             A[start : start + COPY_ROWS, first:] = S[rows[start : start + COPY_ROWS]]
         return A
-    sizes = {}
-    for f in sigma:
-        rows = objective.entries(f)
-        sizes[f] = n * car.out_s[f].shape[0] if rows is None else rows.size
+    entries = {f: objective.entries(f) for f in sigma}  # each family's entries' indices (None: whole), made once
+    sizes = {f: n * car.out_s[f].shape[0] if rows is None else rows.size for f, rows in entries.items()}
     if direct:
         A = np.empty((int(np.count_nonzero(keep)), first + K))
         for rows, Y in _kept_rows(car, U, sigma, keep):
@@ -118,8 +116,7 @@ def response_columns(
     Ys, first = {}, 0
     for f in sigma:  # each family's (n, k, K) responses: a view of its rows of S when every entry is kept
         k = car.out_s[f].shape[0]
-        whole = objective.entries(f) is None
-        Ys[f] = S[first : first + sizes[f]].reshape(n, k, K) if whole else np.empty((n, k, K))
+        Ys[f] = S[first : first + sizes[f]].reshape(n, k, K) if entries[f] is None else np.empty((n, k, K))
         first += sizes[f]
     for k0, s in responses_blocks(car, U):
         b = s.shape[0]
@@ -130,7 +127,7 @@ def response_columns(
         Y = Ys.pop(f)
         if objective.offsets:
             objective.project(f, np.moveaxis(Y, -1, 0))  # in place, through the (K, n, k) view
-        rows = objective.entries(f)
+        rows = entries.pop(f)
         if rows is not None:
             S[first : first + sizes[f]] = Y.reshape(-1, K)[rows]
         first += sizes[f]
@@ -154,7 +151,7 @@ def response_gram(
     block by block when `response_columns` writes it so (no offsets, every family's entries whole; else A is made
     and reduced). A long window's A is 15 MB (30 400 kept entries x 61 columns); the same sums to round-off."""
     p = J.shape[1]
-    direct = not objective.offsets and all(objective.entries(f) is None for f in sigma)
+    direct = not objective.offsets and all(objective.whole(f) for f in sigma)
     if not direct:
         A = fit_matrix(objective, car, U, sigma, keep, J)
         return A.T @ A, A.T @ r

@@ -101,11 +101,15 @@ class Objective:
         be 8 bytes an entry, held for the whole fit."""
         return {f: m for f, m in (self.observed or {}).items() if not m.all()}
 
+    def whole(self, family: str) -> bool:
+        """Whether every sample of every channel of `family` is a residual entry (`entries` is None), without
+        making the entries' indices."""
+        return family not in self._masks
+
     def entries(self, family: str) -> NDArray | None:
         """Flat indices (time-major, into the family's (n, k) block) of the residual entries of `family`, in the
-        residual vector's order; None when every sample of every channel is one. Made at each call."""
-        mask = self._masks.get(family)
-        return None if mask is None else np.flatnonzero(mask)
+        residual vector's order; None when every sample of every channel is one (`whole`). Made at each call."""
+        return None if self.whole(family) else np.flatnonzero(self._masks[family])
 
     def sample_times(self) -> NDArray:
         """(R,) the time sample (row of the reference) of each weighted residual entry, in `residuals`' order."""
