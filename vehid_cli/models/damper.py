@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from ..core.jit import cached_njit
+
 # ------------------------------------------------------------------------------------------ front end
 
 FRONT = ("k1", "x0", "gap", "T_comp_rise", "T_comp_fall", "T_reb_rise", "T_reb_fall", "v_switch")
@@ -66,7 +68,7 @@ def _logistic(x):  # pragma: no cover - compiled
     return 1.0 / (1.0 + math.exp(-2.0 * x))
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def play(x, v, gap):  # pragma: no cover - compiled
     """Backlash on prescribed motion: the piston (x_b, v_b) follows x through a play of width gap, resting
     after each reversal until the gap is taken up (the play operator, exact; x_b starts centred)."""
@@ -106,19 +108,19 @@ def _finish(x, p, f_out, force):  # pragma: no cover - compiled
 # ------------------------------------------------------------------------------------------ force laws
 
 
-@numba.njit(cache=True, error_model="numpy")
+@cached_njit(error_model="numpy")
 def viscous_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """F = c0 v + gas. params: front, c0."""
     _finish(d[0], p, f_out, p[P0] * d[1])
 
 
-@numba.njit(cache=True, error_model="numpy")
+@cached_njit(error_model="numpy")
 def gas_spring_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """F = k1 (x - x0) only."""
     _finish(d[0], p, f_out, 0.0)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@cached_njit(error_model="numpy")
 def bingham_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """F = c0 v + fc tanh(v / v_eps) + gas (viscous plus smoothed Coulomb friction). params: front, c0, fc, v_eps."""
     vb = d[1]
@@ -135,7 +137,7 @@ def _bouc_wen(xb, vb, y, zz, c0, k0, c1, alpha, beta, gamma, delta):  # pragma: 
     return c0 * w + k0 * (xb - y) + alpha * zz, ydot, zdot
 
 
-@numba.njit(cache=True, error_model="numpy")
+@cached_njit(error_model="numpy")
 def bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """Spencer's extended Bouc-Wen; states z[0] = y (internal displacement), z[1] = z (hysteretic).
     params: front, c0, k0, c1, alpha, beta, gamma, delta."""
@@ -162,7 +164,7 @@ def _table_1d(nodes, values, m, u):  # pragma: no cover - compiled
     return (1 - t) * values[j] + t * values[j + 1]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@cached_njit(error_model="numpy")
 def generalized_bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """Bouc-Wen whose 7 parameters are tables over u, one set for compression and one for rebound, blended
     by Eq. 4-5. params: front, m, u_nodes (m), comp set (7 x m, parameter-major), rebound set (7 x m)."""
@@ -188,7 +190,7 @@ def generalized_bouc_wen_law(d, dd, z, p, f_out, zd):  # pragma: no cover - comp
     _finish(d[0], p, f_out, force)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@cached_njit(error_model="numpy")
 def force_map_law(d, dd, z, p, f_out, zd):  # pragma: no cover - compiled
     """Eq. 6: F = table(v, u) + gas, bilinear in velocity and delayed control input (held outside the grid).
     params: front, nv, nu, v_nodes (nv), u_nodes (nu), forces (nv x nu, velocity-major)."""

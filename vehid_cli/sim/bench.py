@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.jit import cached_njit
 from ..models.damper import N_FRONT, DamperModel, play
 from .prescribed import integrate_bench, integrate_lanes
 
@@ -55,7 +55,7 @@ def delayed_controls(t: NDArray, u: NDArray, v: NDArray, delays: NDArray, out: N
     return out
 
 
-@numba.njit(cache=True, error_model="numpy")
+@cached_njit(error_model="numpy")
 def _ramps(t, at, jumps, rising, which, delays, u0, dt, out):  # pragma: no cover - compiled
     """Each candidate p's delayed command out[k, 0, p] (the initial command u0 plus each jump as a one-sample ramp
     from its effective time at + delay - dt, never before an earlier change's: in order) and the direction of the
@@ -199,7 +199,7 @@ def simulate_damper(
     return _checked(t, forces[:, ::substeps])
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _spread(road, x, v):  # pragma: no cover - compiled
     """road[:, 0, p] = x and road[:, 1, p] = v for every candidate p, as a NumPy broadcast assignment writes them
     (its inner loops one row of 20 candidates long): 79 -> 58 us for 3001 samples, one process."""

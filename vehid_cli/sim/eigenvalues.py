@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
+
+from ..core.jit import cached_njit
 
 RADIX = 2.0  # balancing scales by powers of the floating-point radix: no rounding
 MAX_ITERATIONS = 30  # QR iterations per eigenvalue before the matrix is handed to LAPACK
@@ -37,7 +38,7 @@ def eigenvalues(A: NDArray) -> NDArray:
     return lam
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _eigenvalues(A, lam, ok):  # pragma: no cover - compiled
     """lam[p] <- the eigenvalues of A[p] (P, n, n); ok[p] False (lam[p] unset) where A[p] is not finite or the QR
     iteration did not converge."""
@@ -60,7 +61,7 @@ def _eigenvalues(A, lam, ok):  # pragma: no cover - compiled
             lam[p, i] = complex(wr[i], wi[i])
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _balance(a, n):  # pragma: no cover - compiled
     """Balance a[1:, 1:] in place (EISPACK balanc without permutations): row i divided and column i multiplied by a
     power of two until the off-diagonal norms of each row and its column are within a factor of two. A similarity
@@ -96,7 +97,7 @@ def _balance(a, n):  # pragma: no cover - compiled
                     a[j, i] *= f
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _hessenberg(a, n):  # pragma: no cover - compiled
     """Reduce a[1:, 1:] to upper Hessenberg form in place by Gaussian elimination with pivoting (EISPACK elmhes),
     a similarity transform; the multipliers are left below the subdiagonal (``_francis`` clears what it reads)."""
@@ -125,7 +126,7 @@ def _hessenberg(a, n):  # pragma: no cover - compiled
                     a[j, m] += y * a[j, i]
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _francis(a, n, wr, wi):  # pragma: no cover - compiled
     """The eigenvalues wr + i wi (n,) of the upper Hessenberg a[1:, 1:] by Francis' double-shift QR iteration (EISPACK
     hqr), a destroyed. Deflates at a negligible subdiagonal entry (one whose addition to its diagonal neighbours'
@@ -186,7 +187,7 @@ def _francis(a, n, wr, wi):  # pragma: no cover - compiled
     return True
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _double_shift_step(a, l, nn, x, y, w):  # pragma: no cover - compiled
     """One implicit double-shift QR step on the active block a[l:nn+1, l:nn+1] with the shifts whose sum and product
     are x + y and x y - w (the trailing 2 x 2 block's eigenvalues): it starts at the lowest row m where two

@@ -38,10 +38,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..core.jit import cached_njit
 from .newmark import newmark_loop
 from .rk4 import rk4_loop
 
@@ -49,14 +49,14 @@ RK4, NEWMARK = 0, 1
 METHODS = {"rk4": RK4, "newmark": NEWMARK}
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def no_force(d, dd, z, params, f_out, zd_out):  # pragma: no cover - compiled
     """The linear structure itself: no strut force, no internal state."""
     for i in range(f_out.shape[0]):
         f_out[i] = 0.0
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def cubic_spring(d, dd, z, params, f_out, zd_out):  # pragma: no cover - compiled
     """f_i = k3 d_i^3 [N] in every strut, params = [k3 (N/m³)]: a hardening spring beside the linear one."""
     k3 = params[0]

@@ -33,10 +33,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.jit import cached_njit
 from ..models.fullcar import N_CORNERS, N_DOF, FullCarMatrices
 from .eigenvalues import eigenvalues
 from .expm import expm
@@ -74,7 +74,7 @@ def _padded_modes(m: int) -> int:
     return -(-m // LANE_GROUP) * LANE_GROUP
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _modal_recursion(e, g, x0, u, out):  # pragma: no cover - compiled
     """Run the modal recursions of P cars; out (P, n, 2 mp + 4) gets [Re x (mp), Im x (mp), y (4)] at each step,
     each car's rows contiguous, mp = ``_padded_modes(m)`` (the padding lanes stay 0).
@@ -133,7 +133,7 @@ def _modal_recursion(e, g, x0, u, out):  # pragma: no cover - compiled
                 xr[l] = xr_new
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _statespace_recursion(Phi, G1, G2, s0, u, out):  # pragma: no cover - compiled
     """out (P, n, ns + 4) gets [s[k], y[k]] of s[k+1] = Phi s[k] + G1 y[k] + G2 (y[k+1] - y[k]), car by car."""
     P, ns = s0.shape
@@ -165,7 +165,7 @@ def _statespace_recursion(Phi, G1, G2, s0, u, out):  # pragma: no cover - compil
                 s[i] = snew[i]
 
 
-@numba.njit(cache=True, nogil=True)
+@cached_njit(nogil=True)
 def propagate(Phi, s):  # pragma: no cover - compiled
     """s[k + 1] += Phi s[k] for k = 0 .. b - 2, in place: the free recursion of the states s (b, ns, K) of K input
     histories at once, each sample's driven part already in s. Phi s[k] is summed over j in order before it is

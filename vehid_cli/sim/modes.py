@@ -5,11 +5,12 @@ system and the rows of their inverse from its quadratic eigenproblem (``_quadrat
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from ..core.jit import cached_njit
 
-@numba.njit(cache=True)
+
+@cached_njit()
 def _upper_first(lam_p, order):  # pragma: no cover - compiled
     """The modes' order: those with Im(lam) >= 0 first, then the rest, each in the order given (a stable argsort of
     Im(lam) < 0), written into `order`; returns how many come first."""
@@ -26,7 +27,7 @@ def _upper_first(lam_p, order):  # pragma: no cover - compiled
     return kept
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _pick_modes(lam, V, W, lam_k, w_k, V_k, W_k, cond):  # pragma: no cover - compiled
     """Fill lam_k, w_k, V_k, W_k (see ``_kept_modes``) car by car: the modes with Im(lam) >= 0 in LAPACK's order,
     then padding (weight 0: the dropped modes in LAPACK's order, as a stable argsort of ~keep puts them);
@@ -59,19 +60,19 @@ def _pick_modes(lam, V, W, lam_k, w_k, V_k, W_k, cond):  # pragma: no cover - co
 SYMMETRY_TOL = 1e-14  # |X - X^T| / max|X| below which the left null vectors are taken for the right ones
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _cabs1(z):  # pragma: no cover - compiled
     """|Re z| + |Im z|: the pivots' and the scalings' measure (LAPACK's too), without hypot's cost."""
     return abs(z.real) + abs(z.imag)
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _abs2(z):  # pragma: no cover - compiled
     """|z|^2."""
     return z.real * z.real + z.imag * z.imag
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _lu_solve(Q, piv, b, transposed):  # pragma: no cover - compiled
     """Solve Q x = b (or Q^T x = b) in place in b, Q holding the LU factors of ``_quadratic_vectors`` (row swaps
     piv)."""
@@ -102,7 +103,7 @@ def _lu_solve(Q, piv, b, transposed):  # pragma: no cover - compiled
             b[piv[i]] = t
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _null_vector(Q, piv, x, transposed):  # pragma: no cover - compiled
     """x (d,) <- the (left, when `transposed`) null vector of Q = LU (`piv`): two steps of inverse iteration from
     ones, each scaled to a largest |Re| + |Im| of 1."""
@@ -116,7 +117,7 @@ def _null_vector(Q, piv, x, transposed):  # pragma: no cover - compiled
             x[r] /= big
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _quadratic_vectors(lam, M, C, K, lam_k, w_k, V_k, W_k, cond):  # pragma: no cover - compiled
     """Fill lam_k, w_k, V_k, W_k, cond (``_pick_modes``' layout) from the eigenvalues lam (P, 2 d) of the second-order
     systems (M, C, K) (P, d, d): the null vectors of Q(lam) = lam^2 M + lam C + K by two steps of inverse iteration

@@ -11,7 +11,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .rk4 import _cache_key, _KeyedCache
+from ..core.jit import KeyedCache
+from .rk4 import _cache_key
 
 
 @numba.njit(cache=False, nogil=True)  # takes a force law as argument: not cacheable (numba#9237)
@@ -115,7 +116,7 @@ def lanes_loop(law, nz: int, nu: int, nw: int = 0):
 
     key = _cache_key(law, "numpy", nz, nu, nw, loop_files=(__file__, _cache_key.__code__.co_filename))
     if key is not None:
-        run._cache = _KeyedCache(run.py_func, key)  # numba's on-disk cache, under our own key
+        run._cache = KeyedCache(run.py_func, key)  # numba's on-disk cache, under our own key
     return run
 
 

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import numba
 
+from ..core.jit import cached_njit
 
-@numba.njit(cache=True, inline="always")
+
+@cached_njit(inline="always")
 def strut_motion(q, v, y, yd, Dr, Er, d, dd):  # pragma: no cover - compiled
     """Strut deflections and rates of one system: d = D q + E y, dd = D v + E yd (written into d, dd), D and
     E as (columns, values, counts) of their nonzeros (``_nonzero_rows``, the values of this system).
@@ -30,7 +32,7 @@ def strut_motion(q, v, y, yd, Dr, Er, d, dd):  # pragma: no cover - compiled
         dd[s_] = sd
 
 
-@numba.njit(cache=True, inline="always")
+@cached_njit(inline="always")
 def linear_rates(q, v, y, f, Mr, CT, KT, Br, Dr, rhs, a):  # pragma: no cover - compiled
     """Acceleration a = M^-1 rhs [m/s², rad/s²] of one system, rhs = B y - C v - K q - D' f its generalised
     force [N, N m] at state q, v, road y and strut forces f [N].

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numba
 import numpy as np
-from numba.core.caching import FunctionCache
 
+from ..core.jit import KeyedCache
 from . import rates as rates_module
 from .rates import linear_rates, strut_motion
 
@@ -33,18 +33,6 @@ def _inlined(force):
     if py_func is None or not set(options) <= INLINE_OPTIONS or options.get("boundscheck"):
         return force, error_model
     return numba.njit(inline="always", error_model=error_model)(py_func), error_model
-
-
-class _KeyedCache(FunctionCache):
-    """numba's on-disk function cache keyed by our own digest instead of the closure's pickled cells (which
-    hold freshly made dispatchers, so numba's own key differs in every process and the cache never hits)."""
-
-    def __init__(self, py_func, key: str):
-        super().__init__(py_func)
-        self._key = key
-
-    def _index_key(self, sig, codegen):
-        return (sig, codegen.magic_tuple(), (hashlib.sha256(self._py_func.__code__.co_code).hexdigest(), self._key))
 
 
 def _cache_key(force, error_model: str, *sizes: int, loop_files: tuple[str, ...] = ()) -> str | None:
@@ -196,5 +184,5 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
                 state[p, 2 * nq + i] = z[i]
 
     if key is not None:
-        run._cache = _KeyedCache(run.py_func, key)  # numba's on-disk cache, under our own key
+        run._cache = KeyedCache(run.py_func, key)  # numba's on-disk cache, under our own key
     return run

@@ -26,10 +26,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.jit import cached_njit
 from ..models.fullcar import N_DOF
 from .lumped import lumped_state_space, sample_slopes
 from .modal import _kept_modes, _phi12
@@ -55,7 +55,7 @@ def _dphi12(x: NDArray, phi12: tuple[NDArray, NDArray] | None = None) -> tuple[N
     return d1, d2
 
 
-@numba.njit(cache=True)
+@cached_njit()
 def _sensitivity_recursion(e, zs, ws, cz, drive, zout, wout):  # pragma: no cover - compiled
     """Each mode's recursion z[k+1] = e z[k] + drive_z[k] (lane l = p m + j: mode j of candidate p; e (P m,))
     and, driven by it, D lanes per mode w[k+1] = e w[k] + drive_w[k] + cz z[k] (lane q = (p D + d) m + j; cz

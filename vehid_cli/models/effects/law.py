@@ -113,8 +113,8 @@ def _source(effects: Sequence[Effect], slots: Mapping[str, int], kind: str) -> s
     """The Python source of a composed law: every effect's force body in `order`, in one function, as the car's
     struts (`kind` "strut") or the bench (`kind` "bench") use it."""
     ordered = sorted(effects, key=lambda e: e.order)
-    head = ["import math", "", "import numba", "import numpy as np", "", "",
-            '@numba.njit(cache=True, error_model="numpy")']  # fmt: skip
+    head = ["import math", "", "import numpy as np", "", "from vehid_cli.core.jit import cached_njit", "", "",
+            '@cached_njit(error_model="numpy")']  # fmt: skip
     if kind == "bench":
         bodies = [line for e in ordered if e.bench for line in _body(e, slots)]
         lines = [
