@@ -24,7 +24,8 @@ has its own (`sim/prescribed.py`). `integrate` here prepares the arrays and runs
 Both evaluate the same rates (`sim/rates.py`: ``strut_motion``, the law, ``linear_rates``) with the same arithmetic as
 dense loops over M^-1, B, C, K, D and E, in the same order, so results do not depend on the speed-ups:
 M^-1, B, D and E enter as their nonzeros (the car's M^-1 is diagonal, B has one entry per wheel, a strut
-touches four coordinates), C and K transposed so that the rows' sums advance together. (Bit for bit with
+touches four coordinates; RK4's loop is compiled for their pattern, the values read per system), C and K
+transposed so that the rows' sums advance together. (Bit for bit with
 finite numbers; a diverging candidate still turns NaN everywhere, through the dense C and K sums.)
 """
 
@@ -43,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..core.jit import cached_njit
 from .newmark import newmark_loop
-from .rk4 import rk4_loop
+from .rk4 import nonzero_pattern, rk4_loop
 
 RK4, NEWMARK = 0, 1
 METHODS = {"rk4": RK4, "newmark": NEWMARK}
@@ -202,7 +203,7 @@ def _run_rk4(b: _Batch, dt: float, force, out: KernelResult, start: int = 0) -> 
     """The RK4 loop over the batch from sample `start` (out.state: where it resumes, then where it ended), split into
     contiguous parts over threads."""
     nq, ns, nu = b.M.shape[-1], b.Dr[0].shape[0], b.u.shape[2]
-    run = rk4_loop(force, nq, ns, nu)
+    run = rk4_loop(force, nq, ns, nu, nonzero_pattern(b.Mr, b.Br, b.Dr, b.Er))
 
     def rows(s: slice) -> None:
         def part(X):

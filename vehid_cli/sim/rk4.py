@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from numpy.typing import NDArray
 
 from ..core.jit import KeyedCache
 from . import rates as rates_module
@@ -35,11 +36,11 @@ def _inlined(force):
     return numba.njit(inline="always", error_model=error_model)(py_func), error_model
 
 
-def _cache_key(force, error_model: str, *sizes: int, loop_files: tuple[str, ...] = ()) -> str | None:
+def _cache_key(force, error_model: str, *sizes: object, loop_files: tuple[str, ...] = ()) -> str | None:
     """A digest of what the compiled loop for `force` depends on: this file (or the loop's own files,
     `loop_files`), the source file that defines the law (its helpers too), what a composed law says it is made of
-    (its `cache_salt`: the sources of the pieces it was composed from), the error model and the sizes; None when the
-    law's source cannot be read (then the loop is compiled afresh in each process)."""
+    (its `cache_salt`: the sources of the pieces it was composed from), the error model, the sizes and the nonzero
+    pattern; None when the law's source cannot be read (then the loop is compiled afresh in each process)."""
     try:
         law_file = inspect.getsourcefile(force.py_func)
         if not law_file:
@@ -54,12 +55,30 @@ def _cache_key(force, error_model: str, *sizes: int, loop_files: tuple[str, ...]
     return hashlib.sha256(b"\0".join(parts)).hexdigest()
 
 
+Pattern = tuple[tuple[tuple[tuple[int, ...], ...], tuple[int, ...]], ...]  # (columns, counts) of M^-1, B, D, E
+
+
+def nonzero_pattern(*rows: tuple) -> Pattern:
+    """The nonzero pattern (columns, counts) of each of the kernel's (columns, values, counts) matrices, as tuples: the
+    key a loop is compiled for (``rk4_loop``)."""
+    return tuple((tuple(map(tuple, cols.tolist())), tuple(counts.tolist())) for cols, _, counts in rows)
+
+
+def _constants(cols: tuple, counts: tuple) -> tuple[NDArray, NDArray]:
+    """A pattern's columns (R, w) and counts (R,) as the int64 arrays the rates index."""
+    n = np.array(counts, dtype=np.int64)
+    return (np.array(cols, dtype=np.int64).reshape(n.size, -1) if n.size else np.zeros((0, 1), np.int64)), n
+
+
 @functools.cache
-def rk4_loop(force, nq: int, ns: int, nu: int):
-    """The RK4 time loop compiled for one force law, n_q coordinates, n_s struts and n_u road channels.
+def rk4_loop(force, nq: int, ns: int, nu: int, pattern: Pattern):
+    """The RK4 time loop compiled for one force law, n_q coordinates, n_s struts, n_u road channels and the nonzero
+    pattern of M^-1, B, D and E (``nonzero_pattern``; the values stay arguments).
 
     The law is inlined at its four evaluations per step (``_inlined``) and the sizes are compile-time
-    constants, so the small loops of the step unroll (twice as fast as with the sizes read from the arrays).
+    constants, so the small loops of the step unroll (twice as fast as with the sizes read from the arrays); so are
+    the nonzeros' columns and counts, so that the sparse sums unroll with their indices known (a third faster than
+    with them read from the arrays: the loop of `pattern`'s matrices only reads their values).
     Returns run(Mr, CT, KT, Br, Dr, Er, u, dt, params, state, k_start, out_q, out_v, out_a, out_f, out_z),
     arguments as ``newmark_loop``'s but for the state: `state` (P, 2 n_q + n_z) holds [q, v, z] of each system at
     sample max(k_start - 1, 0) on entry and at the last sample written on return, so that a record is integrated
@@ -70,7 +89,9 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
     numba (loaded in about 0.2 s instead of compiled in about six). (The law is part of the code: a law passed as
     an argument, as Newmark's loop takes it, cannot be inlined.)"""
     law, error_model = _inlined(force)
-    key = _cache_key(force, error_model, nq, ns, nu)
+    key = _cache_key(force, error_model, nq, ns, nu, pattern)
+    # compile-time constants of the loop (numba freezes the arrays a function closes over)
+    (MC, MN), (BC, BN), (DC, DN), (EC, EN) = (_constants(cols, counts) for cols, counts in pattern)
 
     @numba.njit(inline="always", error_model=error_model)
     def rates(q, v, z, y, yd, Mr, CT, KT, Br, Dr, Er, par, d, dd, f, zd, rhs, a):  # pragma: no cover
@@ -104,13 +125,13 @@ def rk4_loop(force, nq: int, ns: int, nu: int):
         a, zd = kv[0], kz[0]
         road_drives_struts = False
         for i in range(ns):
-            if Er[2][i] > 0:
+            if EN[i] > 0:
                 road_drives_struts = True
         for p in range(P):
             r = 0 if u.shape[0] == 1 else p
             par = params[p]
-            Mp, Bp = (Mr[0], Mr[1][p], Mr[2]), (Br[0], Br[1][p], Br[2])
-            Dp, Ep = (Dr[0], Dr[1][p], Dr[2]), (Er[0], Er[1][p], Er[2])
+            Mp, Bp = (MC, Mr[1][p], MN), (BC, Br[1][p], BN)  # the pattern's constants, this system's values
+            Dp, Ep = (DC, Dr[1][p], DN), (EC, Er[1][p], EN)
             CTp, KTp = CT[p], KT[p]
             for i in range(nq):
                 q[i] = state[p, i]
