@@ -13,6 +13,7 @@ import pytest
 
 from vehid_cli.config import load_config
 from vehid_cli.diagnose.attribution import (
+    SCREEN_TOL,
     Z95,
     Ranked,
     candidate_fit,
@@ -75,15 +76,25 @@ def test_linear_fit_reaches_the_trust_region_fit_on_the_diagnosis_problem(extra)
     assert np.all(np.abs(got.x - want.x) < 0.05 * sd), np.abs(got.x - want.x) / sd
 
 
-def test_linear_fit_gives_way_on_a_search_bound():
-    """A known parameter driven onto its bound: LM clips its steps there, so it leaves the fit to the trust region."""
+def test_linear_fit_on_a_search_bound_is_finished_by_the_trust_region_on_the_exact_integrator():
+    """A known parameter driven onto its bound: LM clips its steps there, so the trust region (which handles the
+    bounds) finishes the fit on the exact integrator; it reaches the rk4 trust region's fit (the LR to far less than
+    0.01, the estimate to a small fraction of its standard deviation) at a fraction of its simulations."""
     task, ref, keep = case("vehicle.kf=54000", "vehicle.cr=2975")
     t = task.with_unknowns(["kR"])
     problem = masked(t.problem(ref), keep)
     linear = masked(exact_twin(t).problem(ref), keep)
-    trf = lsq_fit(problem, t.nominal, 600)
+    trf = lsq_fit(problem, t.nominal, 600, tol=SCREEN_TOL)
     assert np.isclose(trf.x[-1], problem.upper[-1], rtol=1e-9)  # the case tests something: kR ends on its bound
-    assert linear_fit(problem, linear, t.nominal, 100) is None
+    rk4_runs = []
+    counted = dataclasses.replace(problem, cost=lambda X: rk4_runs.append(len(X)) or problem.cost(X))
+    got = linear_fit(counted, linear, t.nominal, 100)
+    assert got is not None and np.isclose(got.x[-1], problem.upper[-1], rtol=1e-9)
+    assert rk4_runs == [1]  # only its J on the rk4 integrator
+    assert abs(int(keep.sum()) * (got.J - trf.J)) < 1e-2, (got.J, trf.J)
+    sd = fit_intervals(problem, trf, trf.J) / Z95
+    free = np.arange(got.x.size - 1)  # (kR, on its bound, has no interval to compare with)
+    assert np.all(np.abs(got.x - trf.x)[free] < 0.05 * sd[free]), np.abs(got.x - trf.x) / sd
 
 
 def test_intervals_from_exact_sensitivities_are_the_central_differences_ones():

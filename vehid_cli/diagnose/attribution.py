@@ -187,24 +187,30 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
     its exact sensitivities (a few evaluations where finite differences take (D + 1) per step), from x0; its J is
     `problem`'s at that point (one more evaluation), so that it compares with the other fits on `problem`'s
     integrator: above `problem`'s own minimum by the square of the integrators' difference (for the car at 1 kHz
-    and rk4 about 1e-5 of the LR). None when the linearisation does not hold there, J is not finite or an unknown
-    ends on its search bound (Levenberg–Marquardt clips its steps into the box, which stalls the others' convergence
-    there): the caller fits on `problem` instead, by the trust region that handles the bounds."""
+    and rk4 about 1e-5 of the LR). Where an unknown ends on its search bound (Levenberg–Marquardt clips its steps into
+    the box, which stalls the others' convergence there) the trust region, which handles the bounds, finishes the fit
+    on `linear` (to SCREEN_TOL, as a candidate's fit on `problem` would be). None when the linearisation does not hold
+    there or J is not finite: the caller fits on `problem` instead."""
     run = Search(linear, np.random.default_rng(0), budget)
     try:
         x = gauss_newton(run, np.clip(np.asarray(x0, dtype=float), linear.lower, linear.upper), interior=True)
     except BudgetExhausted:
         x = run.best_x
-    if x is None or run.best_x is None:
+    if run.best_x is None:
         return None
-    x, lo, hi = run.best_x, linear.lower, linear.upper
-    if np.any(np.minimum(x - lo, hi - x) <= BOUND_SHARE * (hi - lo)):
+    best, lo, hi, evaluations = run.best_x, linear.lower, linear.upper, run.evaluations
+    on_bound = bool(np.any(np.minimum(best - lo, hi - best) <= BOUND_SHARE * (hi - lo)))
+    if x is None and not on_bound:  # no linearisation there
         return None
+    x = best
+    if on_bound:
+        bounded = lsq_fit(linear, x, max(budget - evaluations, 1), tol=SCREEN_TOL)
+        x, evaluations = bounded.x, evaluations + bounded.evaluations
     with np.errstate(all="ignore"):
-        J = float(problem.cost(run.best_x[None, :])[0])
+        J = float(problem.cost(x[None, :])[0])
     if not np.isfinite(J):
         return None
-    return Fit(tuple(problem.names), run.best_x, J, run.evaluations + 1)
+    return Fit(tuple(problem.names), x, J, evaluations + 1)
 
 
 def fit_free(problem: Problem, x0: NDArray, free: NDArray, budget: int, tol: float = 1e-12) -> Fit:
