@@ -196,21 +196,15 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
         x = gauss_newton(run, np.clip(np.asarray(x0, dtype=float), linear.lower, linear.upper), interior=True)
     except BudgetExhausted:
         x = run.best_x
-    if run.best_x is None:
+    best, lo, hi = run.best_x, linear.lower, linear.upper
+    on_bound = best is not None and bool(np.any(np.minimum(best - lo, hi - best) <= BOUND_SHARE * (hi - lo)))
+    if best is None or (x is None and not on_bound):  # no linearisation there
         return None
-    best, lo, hi, evaluations = run.best_x, linear.lower, linear.upper, run.evaluations
-    on_bound = bool(np.any(np.minimum(best - lo, hi - best) <= BOUND_SHARE * (hi - lo)))
-    if x is None and not on_bound:  # no linearisation there
-        return None
-    x = best
-    if on_bound:
-        bounded = lsq_fit(linear, x, max(budget - evaluations, 1), tol=SCREEN_TOL)
-        x, evaluations = bounded.x, evaluations + bounded.evaluations
+    bounded = lsq_fit(linear, best, max(budget - run.evaluations, 1), tol=SCREEN_TOL) if on_bound else None
+    x, evaluations = (best, run.evaluations) if bounded is None else (bounded.x, run.evaluations + bounded.evaluations)
     with np.errstate(all="ignore"):
         J = float(problem.cost(x[None, :])[0])
-    if not np.isfinite(J):
-        return None
-    return Fit(tuple(problem.names), x, J, evaluations + 1)
+    return Fit(tuple(problem.names), x, J, evaluations + 1) if np.isfinite(J) else None
 
 
 def fit_free(problem: Problem, x0: NDArray, free: NDArray, budget: int, tol: float = 1e-12) -> Fit:
