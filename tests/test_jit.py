@@ -84,3 +84,16 @@ def test_a_failed_quick_load_falls_back_to_numbas_refresh_and_load(monkeypatch):
     cache = jit.QuickLoadCache(_reference)
     assert cache.load_overload((), cpu_target.target_context) is None  # nothing cached for it: a miss either way
     assert calls == [()] and refreshed == [()]  # the quick load failed once, numba's own load was asked
+
+
+def test_the_compile_options_key_the_cache_and_compiled_functions_release_the_gil():
+    """numba keys its index by the bytecode only: a function whose options changed (not its file) would load the old
+    machine code. Ours are keyed by the options too; and they run without the GIL (candidate fits run in threads)."""
+    codegen = cpu_target.target_context.codegen()
+    sig = ("float64",)
+    with_gil = jit.QuickLoadCache(_reference, {"nogil": False})._index_key(sig, codegen)
+    without = jit.QuickLoadCache(_reference, {"nogil": True})._index_key(sig, codegen)
+    assert with_gil != without
+    assert with_gil[:-1] == without[:-1]  # numba's own key is the same: only the options tell them apart
+    assert jit.cached_njit()(_reference).targetoptions["nogil"] is True
+    assert jit.cached_njit(nogil=False)(_reference).targetoptions["nogil"] is False

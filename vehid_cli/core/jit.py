@@ -17,8 +17,16 @@ from numba.core.runtime import rtsys
 
 
 class QuickLoadCache(FunctionCache):
-    """numba's on-disk function cache (same files, same index), loading without refreshing the target first; if a
-    load fails that way, numba's own (refresh, then load) is tried before giving up."""
+    """numba's on-disk function cache (same files), loading without refreshing the target first; if a load fails that
+    way, numba's own (refresh, then load) is tried before giving up. Its index is also keyed by the compile options
+    (`options`): numba's is not, so a function whose options changed but not its file loaded the old machine code."""
+
+    def __init__(self, py_func, options: dict | None = None):
+        super().__init__(py_func)
+        self._options = repr(sorted((options or {}).items()))
+
+    def _index_key(self, sig, codegen):
+        return (*super()._index_key(sig, codegen), self._options)
 
     def load_overload(self, sig, target_context):
         rtsys.initialize(target_context)  # the runtime the compiled code allocates with (idempotent)
@@ -36,19 +44,22 @@ class KeyedCache(QuickLoadCache):
 
     def __init__(self, py_func, key: str):
         super().__init__(py_func)
-        self._key = key
+        self._key = key  # (the loops' options are in their sources, which the key digests)
 
     def _index_key(self, sig, codegen):
         return (sig, codegen.magic_tuple(), (hashlib.sha256(self._py_func.__code__.co_code).hexdigest(), self._key))
 
 
 def cached_njit(**options) -> Callable:
-    """``numba.njit(cache=True, **options)`` with the cache a ``QuickLoadCache``: the decorator of every compiled
-    function of the package that does not take a function as an argument (those are not cacheable, numba#9237)."""
+    """``numba.njit(cache=True, nogil=True, **options)`` with the cache a ``QuickLoadCache``: the decorator of every
+    compiled function of the package that does not take a function as an argument (those are not cacheable,
+    numba#9237). Without the GIL by default: the diagnosis fits its candidates in threads, and a compiled loop that
+    held it (the exact linear car's modal recursions, its sensitivities) ran them one at a time."""
+    options = {"nogil": True, **options}
 
     def decorate(fn):
         dispatcher = numba.njit(**options)(fn)
-        dispatcher._cache = QuickLoadCache(dispatcher.py_func)
+        dispatcher._cache = QuickLoadCache(dispatcher.py_func, options)
         return dispatcher
 
     return decorate

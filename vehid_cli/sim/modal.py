@@ -165,7 +165,7 @@ def _statespace_recursion(Phi, G1, G2, s0, u, out):  # pragma: no cover - compil
                 s[i] = snew[i]
 
 
-@cached_njit(nogil=True)
+@cached_njit()
 def propagate(Phi, s):  # pragma: no cover - compiled
     """s[k + 1] += Phi s[k] for k = 0 .. b - 2, in place: the free recursion of the states s (b, ns, K) of K input
     histories at once, each sample's driven part already in s. Phi s[k] is summed over j in order before it is
