@@ -96,6 +96,13 @@ def test_linear_fit_on_a_search_bound_is_finished_by_the_trust_region_on_the_exa
     free = np.arange(got.x.size - 1)  # (kR, on its bound, has no interval to compare with)
     assert np.all(np.abs(got.x - trf.x)[free] < 0.05 * sd[free]), np.abs(got.x - trf.x) / sd
 
+    def normal(x):  # the same problem as a long record's: its normal equations only
+        cost, r, jac = linear.linearised(x)
+        return cost, r, jac.T @ jac, jac.T @ r
+
+    summed = dataclasses.replace(linear, linearised=None, normal=normal)
+    assert linear_fit(problem, summed, t.nominal, 100) is None  # no (R, D) Jacobian made: the caller's blocked fit
+
 
 def test_intervals_from_exact_sensitivities_are_the_central_differences_ones():
     """fit_intervals with the linear car's exact-integrator twin (J'J from one simulation with sensitivities) against

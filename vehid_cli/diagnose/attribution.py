@@ -190,7 +190,8 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
     and rk4 about 1e-5 of the LR). Where an unknown ends on its search bound (Levenberg–Marquardt clips its steps into
     the box, which stalls the others' convergence there) the trust region, which handles the bounds, finishes the fit
     on `linear` (to SCREEN_TOL, as a candidate's fit on `problem` would be). None when the linearisation does not hold
-    there or J is not finite: the caller fits on `problem` instead."""
+    there, J is not finite, or a long record's unknown ends on a bound (its `linear` has the summed normal equations
+    only; the trust region would hold its R x D Jacobian): the caller fits on `problem` instead."""
     run = Search(linear, np.random.default_rng(0), budget)
     try:
         x = gauss_newton(run, np.clip(np.asarray(x0, dtype=float), linear.lower, linear.upper), interior=True)
@@ -198,7 +199,7 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
         x = run.best_x
     best, lo, hi = run.best_x, linear.lower, linear.upper
     on_bound = best is not None and bool(np.any(np.minimum(best - lo, hi - best) <= BOUND_SHARE * (hi - lo)))
-    if best is None or (x is None and not on_bound):  # no linearisation there
+    if best is None or (x is None and not on_bound) or (on_bound and linear.linearised is None):
         return None
     bounded = lsq_fit(linear, best, max(budget - run.evaluations, 1), tol=SCREEN_TOL) if on_bound else None
     x, evaluations = (best, run.evaluations) if bounded is None else (bounded.x, run.evaluations + bounded.evaluations)
