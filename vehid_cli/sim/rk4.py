@@ -18,7 +18,7 @@ from ..core.jit import KeyedCache
 from . import rates as rates_module
 from .rates import linear_rates, strut_motion
 
-INLINE_OPTIONS = {"nopython", "error_model", "boundscheck", "cache"}  # a law compiled with only these is inlined
+INLINE_OPTIONS = {"nopython", "error_model", "boundscheck", "cache", "nogil"}  # a law with only these is inlined
 
 
 def _inlined(force):
@@ -39,8 +39,9 @@ def _inlined(force):
 def _cache_key(force, error_model: str, *sizes: object, loop_files: tuple[str, ...] = ()) -> str | None:
     """A digest of what the compiled loop for `force` depends on: this file (or the loop's own files,
     `loop_files`), the source file that defines the law (its helpers too), what a composed law says it is made of
-    (its `cache_salt`: the sources of the pieces it was composed from), the error model, the sizes and the nonzero
-    pattern; None when the law's source cannot be read (then the loop is compiled afresh in each process)."""
+    (its `cache_salt`: the sources of the pieces it was composed from), the error model, the law's compile options
+    (they decide whether it is inlined), the sizes and the nonzero pattern; None when the law's source cannot be read
+    (then the loop is compiled afresh in each process)."""
     try:
         law_file = inspect.getsourcefile(force.py_func)
         if not law_file:
@@ -51,7 +52,8 @@ def _cache_key(force, error_model: str, *sizes: object, loop_files: tuple[str, .
     except (AttributeError, OSError, TypeError):
         return None
     parts.append(str(getattr(force, "cache_salt", "")).encode())
-    parts.append(repr((error_model, sizes, numba.__version__)).encode())
+    options = sorted(getattr(force, "targetoptions", {}).items())  # (whether `_inlined` inlines the law)
+    parts.append(repr((error_model, sizes, options, numba.__version__)).encode())
     return hashlib.sha256(b"\0".join(parts)).hexdigest()
 
 
