@@ -182,7 +182,7 @@ def lsq_fit(problem: Problem, x0: NDArray, budget: int, seed: int = 0, tol: floa
     return Fit(tuple(problem.names), x, float(run.best_cost), run.evaluations)
 
 
-def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> Fit | None:
+def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int, bounds: bool = True) -> Fit | None:
     """The fit of a linear-car model by Levenberg–Marquardt on `linear`, the same problem on the exact integrator with
     its exact sensitivities (a few evaluations where finite differences take (D + 1) per step), from x0; its J is
     `problem`'s at that point (one more evaluation), so that it compares with the other fits on `problem`'s
@@ -190,8 +190,9 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
     and rk4 about 1e-5 of the LR). Where an unknown ends on its search bound (Levenberg–Marquardt clips its steps into
     the box, which stalls the others' convergence there) the trust region, which handles the bounds, finishes the fit
     on `linear` (to SCREEN_TOL, as a candidate's fit on `problem` would be). None when the linearisation does not hold
-    there, J is not finite, or a long record's unknown ends on a bound (its `linear` has the summed normal equations
-    only; the trust region would hold its R x D Jacobian): the caller fits on `problem` instead."""
+    there, J is not finite, or an unknown ends on a bound of a long record's (its `linear` has the summed normal
+    equations only; the trust region would hold its R x D Jacobian) or with `bounds` False (a fit that may be stopped:
+    the stop counts Levenberg–Marquardt's steps): the caller fits on `problem` instead."""
     run = Search(linear, np.random.default_rng(0), budget)
     try:
         x = gauss_newton(run, np.clip(np.asarray(x0, dtype=float), linear.lower, linear.upper), interior=True)
@@ -199,7 +200,7 @@ def linear_fit(problem: Problem, linear: Problem, x0: NDArray, budget: int) -> F
         x = run.best_x
     best, lo, hi = run.best_x, linear.lower, linear.upper
     on_bound = best is not None and bool(np.any(np.minimum(best - lo, hi - best) <= BOUND_SHARE * (hi - lo)))
-    if best is None or (x is None and not on_bound) or (on_bound and linear.linearised is None):
+    if best is None or (x is None and not on_bound) or (on_bound and (linear.linearised is None or not bounds)):
         return None
     bounded = lsq_fit(linear, best, max(budget - run.evaluations, 1), tol=SCREEN_TOL) if on_bound else None
     x, evaluations = (best, run.evaluations) if bounded is None else (bounded.x, run.evaluations + bounded.evaluations)
@@ -335,7 +336,7 @@ def parameter_fit(
     if stop is None:
         return linear_fit(problem, linear, x0, budget)
     try:
-        return linear_fit(problem, stoppable(linear, 1 + STOP_STEPS, stop), x0, budget)
+        return linear_fit(problem, stoppable(linear, 1 + STOP_STEPS, stop), x0, budget, bounds=False)
     except Stopped as s:
         return Fit(tuple(problem.names), s.x, s.J, s.evaluations, stopped=True)
 
