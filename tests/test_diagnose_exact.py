@@ -102,6 +102,7 @@ def test_linear_fit_on_a_search_bound_is_finished_by_the_trust_region_on_the_exa
 
     summed = dataclasses.replace(linear, linearised=None, normal=normal)
     assert linear_fit(problem, summed, t.nominal, 100) is None  # no (R, D) Jacobian made: the caller's blocked fit
+    assert linear_fit(problem, linear, t.nominal, 100, bounds=False) is None  # stoppable: the caller fits it
 
 
 def test_intervals_from_exact_sensitivities_are_the_central_differences_ones():
