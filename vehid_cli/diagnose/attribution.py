@@ -47,10 +47,10 @@ from ..core.allocator import release_if_handing_back
 from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm, CarScale
 from ..models.faults import Channel, fault_of
-from ..optimizers.base import BudgetExhausted, Problem, Search
+from ..optimizers.base import BudgetExhausted, Problem, Search, forward_jacobian
 from ..optimizers.lsq import BOUND_SHARE, gauss_newton, polish
 from ..sim.kernel import available_cores
-from .jacobians import exact_normal, forward_jacobian, forward_normal, restricted
+from .jacobians import exact_normal, forward_normal, restricted
 from .starts import lower_start, screen_starts
 from .stops import STOP_STEPS, Stopped, cannot_win_after, stoppable
 from .tails import chi2_isf, chi2_sf

@@ -1,13 +1,13 @@
-"""The forward-difference Jacobian of a problem's residuals at a point, and the problem over some of its unknowns:
-what the candidate fits, their intervals and the score screening share (a long record's J'J summed without J); and
-J'J from a problem's exact sensitivities where it has them (the linear car's)."""
+"""The problem over some of its unknowns, and J'J at a point: of the forward-difference Jacobian
+(`optimizers.base.forward_jacobian`; a long record's summed without J) and from a problem's exact sensitivities where
+it has them (the linear car's): what the candidate fits, their intervals and the score screening share."""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..optimizers.base import Problem
+from ..optimizers.base import Problem, forward_jacobian, forward_points
 
 
 def restricted(problem: Problem, x: NDArray, free: NDArray) -> Problem:
@@ -27,30 +27,11 @@ def restricted(problem: Problem, x: NDArray, free: NDArray) -> Problem:
                    names, gram=gram)  # fmt: skip
 
 
-def forward_jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
-    """The Jacobian (R, D) of the problem's residuals at x (forward differences, one batch) and the residual (R,)."""
-    X, step = _forward_points(problem, x)
-    _, R = problem.residuals(X)
-    with np.errstate(over="ignore", invalid="ignore"):  # a step into an unstable model: inf columns, not a warning
-        R[1:] -= R[0][None, :]  # in place: a long record's (D + 1, R) residuals are tens of MB per copy
-        R[1:] /= step[:, None]
-    return R[1:].T, R[0]
-
-
-def _forward_points(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
-    """The points (D + 1, D) of a forward-difference Jacobian at x (x, then a step along each unknown, inward at the
-    upper bound) and the steps (D,)."""
-    width = problem.upper - problem.lower
-    h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
-    step = np.where(x + h <= problem.upper, h, -h)
-    return np.vstack([x[None, :], x[None, :] + np.diag(step)]), step
-
-
 def forward_normal(problem: Problem, x: NDArray) -> NDArray:
     """J'J (D, D) of `forward_jacobian`'s J at x: summed over a long record without J (`Problem.gram`) where the
     problem has that, else from J."""
     if problem.gram is not None:
-        X, step = _forward_points(problem, x)
+        X, step = forward_points(problem, x)
         with np.errstate(all="ignore"):
             G = problem.gram(X, step, None)
         if G is not None:

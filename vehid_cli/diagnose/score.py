@@ -12,8 +12,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from ..optimizers.base import Problem
-from .attribution import BEATERS, SCORE_SKIP, Candidate, Fit, Ranked, forward_jacobian, restricted, screenable
+from ..optimizers.base import Problem, forward_jacobian
+from .attribution import BEATERS, SCORE_SKIP, Candidate, Fit, Ranked, restricted, screenable
 from .tails import chi2_sf
 
 Scores = dict[str, tuple[float, tuple[str, ...]]]  # effect -> its score statistic and the unknowns it adds

@@ -294,3 +294,22 @@ def register(cls: type[Optimizer]) -> type[Optimizer]:
     """Class decorator: make an algorithm available by its ``name`` (SPEC section 3)."""
     REGISTRY[cls.name] = cls
     return cls
+
+
+def forward_jacobian(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
+    """The Jacobian (R, D) of the problem's residuals at x (forward differences, one batch) and the residual (R,)."""
+    X, step = forward_points(problem, x)
+    _, R = problem.residuals(X)
+    with np.errstate(over="ignore", invalid="ignore"):  # a step into an unstable model: inf columns, not a warning
+        R[1:] -= R[0][None, :]  # in place: a long record's (D + 1, R) residuals are tens of MB per copy
+        R[1:] /= step[:, None]
+    return R[1:].T, R[0]
+
+
+def forward_points(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
+    """The points (D + 1, D) of a forward-difference Jacobian at x (x, then a step along each unknown, inward at the
+    upper bound) and the steps (D,)."""
+    width = problem.upper - problem.lower
+    h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
+    step = np.where(x + h <= problem.upper, h, -h)
+    return np.vstack([x[None, :], x[None, :] + np.diag(step)]), step
