@@ -30,8 +30,9 @@ from ..core.files import atomic_path, read_regular, remove_stale_temporaries, wr
 from ..core.locking import exclusive
 from ..core.provenance import git_commit
 from ..core.store import check_integrity, open_results
+from ..identify.convergence import optimum_offset
 from ..identify.crlb import CramerRao
-from ..identify.records import Campaign, RunRecord, summarise
+from ..identify.records import BOUND_TOL, Campaign, RunRecord, summarise
 from ..identify.source import DataFiles, DataSource
 from ..systems import System, build_system
 from .executor import Executor, LocalExecutor
@@ -269,18 +270,33 @@ def _free_unknowns(system: System, bound: CramerRao, allowed: bool) -> str | Non
 def single_fit_bound(system: System, record: RunRecord) -> tuple[CramerRao, list[str]]:
     """The interval of one fit on measured data: the bound at the estimate for the assumed noise, widened by
     sqrt(chi²) when the residual is larger than that noise (the residual's own variance: what `diagnose` uses
-    too), with a note saying so."""
+    too), with a note saying so; and a note when the estimate is not at its fit's optimum (`not_at_optimum`)."""
     bound = system.bound(record.estimate)
     R = max(system.residual_samples, 1)
     limit = 1.0 + 5.0 * np.sqrt(2.0 / R)
+    notes = []
     if np.isfinite(record.chi2) and record.chi2 > limit:
         factor = float(np.sqrt(record.chi2))
-        note = (
+        notes.append(
             f"the residual is {record.chi2:.3g} x the assumed noise power: the 95 % intervals are the bound's widened "
             f"by sqrt(chi2) = {factor:.3g} (the residual's own variance, as vehid diagnose reports them)"
         )
-        return bound.widened(factor), [note]
-    return bound, []
+        bound = bound.widened(factor)
+    offset = not_at_optimum(system, record, bound)
+    return bound, notes + ([offset] if offset else [])
+
+
+def not_at_optimum(system: System, record: RunRecord, bound: CramerRao) -> str | None:
+    """What a user must know when one fit's estimate is not at the optimum of its fit (identify/convergence.py: a
+    Gauss–Newton step from it of half a standard deviation or more), or None: the unknowns on a bound held."""
+    box, x = system.box, record.estimate
+    held = np.minimum(x - box.lower, box.upper - x) <= BOUND_TOL * (box.upper - box.lower)
+    with np.errstate(all="ignore"):  # an estimate where the model diverges: no step, no note
+        offset = optimum_offset(system.problem(system.reference(0)), x, bound.sd, held)
+    if offset is None:
+        return None
+    config = system.config
+    return offset.describe(config.units(box.names), config.identify.algorithm.name, system.objective_label(config))
 
 
 def check_same_campaign(output: Path, config: AnyConfig, data_file: DataFiles) -> None:
