@@ -288,7 +288,7 @@ def single_fit_bound(system: System, record: RunRecord) -> tuple[CramerRao, list
 
 def not_at_optimum(system: System, record: RunRecord, bound: CramerRao) -> str | None:
     """What a user must know when one fit's estimate is not at the optimum of its fit (identify/convergence.py: a
-    Gauss–Newton step from it of half a standard deviation or more), or None: the unknowns on a bound held."""
+    Gauss–Newton step from it of a standard deviation or more), or None: the unknowns on a bound held."""
     box, x = system.box, record.estimate
     held = np.minimum(x - box.lower, box.upper - x) <= BOUND_TOL * (box.upper - box.lower)
     with np.errstate(all="ignore"):  # an estimate where the model diverges: no step, no note
