@@ -37,13 +37,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..core.allocator import release_if_handing_back
+from ..core.pools import as_done, shared_pool
 from ..core.result import Result
 from ..models.effects import LIBRARY, CandidateForm, CarScale
 from ..models.faults import Channel, fault_of
@@ -492,14 +492,13 @@ def run_all(one: Callable[[Candidate], Ranked], candidates: list[Candidate], pri
     first, so that none runs alone at the end: expected_seconds), in the candidates' order; done(n) after each."""
     n = min(available_cores() if threads is None else max(1, threads), len(candidates))
     if n > 1:
-        with ThreadPoolExecutor(n) as pool:  # the longest fits first, so that none runs alone at the end
-            order = sorted(range(len(candidates)), key=lambda i: -expected_seconds(candidates[i], prior))
-            futures = {pool.submit(one, candidates[i]): i for i in order}
-            results: list[Ranked | None] = [None] * len(candidates)
-            for k, future in enumerate(as_completed(futures), start=1):
-                results[futures[future]] = future.result()
-                done(k)
-            out = [r for r in results if r is not None]
+        pool = shared_pool("candidates", n)  # threads started once per process (core/pools.py)
+        order = sorted(range(len(candidates)), key=lambda i: -expected_seconds(candidates[i], prior))  # longest first
+        results: list[Ranked | None] = [None] * len(candidates)
+        for k, (j, ranked) in enumerate(as_done(pool, one, [candidates[i] for i in order]), start=1):
+            results[order[j]] = ranked
+            done(k)
+        out = [r for r in results if r is not None]
         release_if_handing_back()  # the threads' arenas keep what their fits freed (a long record's: ~30 MiB)
     else:
         out = []
