@@ -48,22 +48,19 @@ class OptimumOffset:
             for j in self.far
         )
         if algorithm in LEAST_SQUARES and objective in NORM_COSTS:
-            why, advice = (
-                f"{algorithm} kept the point of lowest {objective} cost it passed",
-                "identify with "
-                "identify.objective=wls: its cost is the least-squares one, so the fit ends at the optimum",
-            )
+            why = f"{algorithm} kept the point of lowest {objective} cost it passed"
+            advice = "identify with identify.objective=wls: its cost is the least-squares one, so the fit ends there"
         else:
-            why, advice = (
-                f"{algorithm} stopped",
-                "raise identify.algorithm.iterations (or identify.budget), or "
-                "identify with lsq and identify.objective=wls, which end at the optimum",
+            why = f"{algorithm} stopped"
+            advice = (
+                "raise identify.algorithm.iterations (or identify.budget), or identify with lsq and "
+                "identify.objective=wls, which end at the optimum"
             )
         return (
             f"the estimate is not at the least-squares optimum of its fit: one Gauss–Newton step from it moves "
             f"{moves}; the 95 % intervals (the bound at the estimate) are around where {why}, not around the "
             f"optimum: {advice}"
-        )  # fmt: skip
+        )
 
 
 def optimum_offset(problem: Problem, x: NDArray, sd: NDArray, held: NDArray) -> OptimumOffset | None:

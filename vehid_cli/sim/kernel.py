@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.jit import cached_njit
-from ..core.pools import shared_pool
+from ..core.pools import as_done, shared_pool
 from .newmark import newmark_loop
 from .rk4 import nonzero_pattern, rk4_loop
 
@@ -133,8 +133,9 @@ def in_parallel(P: int, rows) -> None:
         rows(slice(0, P))
         return
     bounds = np.linspace(0, P, k + 1).astype(int)
-    pool = shared_pool("kernel", k)  # threads started once per process (core/pools.py)
-    list(pool.map(rows, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]))
+    parts = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    for _ in as_done(shared_pool("kernel", k), rows, parts):  # threads started once per process (core/pools.py)
+        pass
 
 
 @dataclass(frozen=True)
