@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.conftest import BASE_CONFIG, VEHICLE_DATA, needs_shared
+from tests.conftest import BASE_CONFIG, VEHICLE_DATA, needs_shared, vehid
 from vehid_cli.campaign.runner import run_campaign
 from vehid_cli.config import load_config
 from vehid_cli.identify.convergence import optimum_offset
@@ -82,3 +82,18 @@ def test_one_fit_says_when_its_search_stopped_short_of_the_optimum(algorithm, st
     assert bool(said) is stopped_short, campaign.warnings
     if stopped_short:
         assert "Ix by +" in said[0] and f"where {algorithm} stopped" in said[0]
+
+
+def test_the_warning_is_handed_on_with_the_campaign_file(tmp_path):
+    """`vehid identify` writes the warning into its campaign file and `vehid report` says it again under the table,
+    on the terminal and in a report written with -o."""
+    data = needs_shared(VEHICLE_DATA / "bump_run_linear.csv")
+    target = tmp_path / "abc.h5"
+    res = vehid("identify", BASE_CONFIG, "--data", data, "--set", "identify.algorithm.name=abc", "-o", target)
+    assert res.returncode == 0, res.stderr
+    said = "the estimate is not at the least-squares optimum"
+    assert said in res.stdout
+    shown = vehid("report", target)
+    assert shown.returncode == 0 and said in shown.stdout and "Ix by +" in shown.stdout
+    written = tmp_path / "report.txt"
+    assert vehid("report", target, "-o", written).returncode == 0 and said in written.read_text()

@@ -107,7 +107,7 @@ def report(
     of different experiments (config keys other than the method keys and a sweep's varied keys), data files
     or code versions are refused unless --allow-mixed is given.
     """
-    from ..report.campaigns import collect, load_published, render, rich_tables, sweep_notes
+    from ..report.campaigns import collect, load_published, render, report_notes, rich_tables, sweep_notes
     from ..report.compare import check_comparable
 
     tables = html is None or fmt is not None or output is not None  # --html alone writes the page only
@@ -130,7 +130,7 @@ def report(
         out.print(f"wrote {html}")
     if tables:
         if fmt == "table":
-            text = _tables(output, rich_tables(campaigns, files))
+            text = _tables(output, [*rich_tables(campaigns, files), *report_notes(campaigns, files)])
         else:
             text = render(campaigns, files, fmt, load_published(published) if published else None)
         _emit(text, output)

@@ -181,6 +181,15 @@ def campaign_notes(c: Campaign) -> list[str]:
     return notes
 
 
+def report_notes(campaigns: list[Campaign], files: list[str]) -> list[str]:
+    """`campaign_notes` of every campaign (rich markup), each after its file's name when there are several: what
+    `vehid identify` said under the tables, said again by `vehid report` to whoever the file was handed to."""
+    if len(campaigns) == 1:
+        return campaign_notes(campaigns[0])
+    named = zip(campaigns, files, strict=True)
+    return [f"{escape(Path(f).name)}: {note}" for c, f in named for note in campaign_notes(c)]
+
+
 def plain_text(tables: list, width: int = 160) -> str:
     """Rich tables as plain text (for a report written to a file)."""
     with open(os.devnull, "w") as sink:
