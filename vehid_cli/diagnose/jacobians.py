@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..optimizers.base import Problem, forward_jacobian, forward_points
+from ..optimizers.base import Problem, exact_normal_equations, forward_jacobian, forward_points
 
 
 def restricted(problem: Problem, x: NDArray, free: NDArray) -> Problem:
@@ -42,11 +42,7 @@ def forward_normal(problem: Problem, x: NDArray) -> NDArray:
 
 
 def exact_normal(linear: Problem, x: NDArray) -> NDArray | None:
-    """J'J (D, D) at x from the problem's exact sensitivities (one simulation of the response and its derivatives,
-    where forward differences take D + 1; a long record's summed without J); None where it has none there."""
-    with np.errstate(all="ignore"):
-        if linear.normal is not None:
-            got = linear.normal(np.asarray(x, dtype=float))
-            return None if got is None else np.asarray(got[2])
-        got = linear.linearised(np.asarray(x, dtype=float)) if linear.linearised is not None else None
-        return None if got is None else got[2].T @ got[2]
+    """J'J (D, D) at x from the problem's exact sensitivities (`optimizers.base.exact_normal_equations`); None where
+    it has none there."""
+    got = exact_normal_equations(linear, x)
+    return None if got is None else got[0]

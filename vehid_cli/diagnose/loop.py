@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.progress import ProgressHook
-from ..optimizers.base import Problem
+from ..optimizers.base import Problem, forward_jacobian
 from .attribution import (
     BEATERS,
     PARAMETER_PREFIX,
@@ -36,7 +36,6 @@ from .attribution import (
     Ranked,
     fisher_ci,
     fit_free,
-    forward_jacobian,
     identifiable,
     lowers_validation,
     parsimonious,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..optimizers.base import Problem, forward_jacobian
+from ..optimizers.base import Problem, exact_normal_equations, forward_jacobian
 
 OFFSET_SD = 1.0  # a Gauss–Newton step of this many standard deviations or more: not at the optimum (a 95 % interval
 # that far off the optimum covers the true value 83 % of the time, not 95 %)
@@ -89,17 +89,9 @@ def optimum_offset(problem: Problem, x: NDArray, sd: NDArray, held: NDArray) -> 
 
 def _normal_equations(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray] | None:
     """J'J (D, D) and J'r (D,) of the problem's weighted residuals r at x (module docstring: which Jacobian)."""
+    exact = exact_normal_equations(problem, x)
+    if exact is not None or problem.residuals is None:
+        return exact
     with np.errstate(all="ignore"):
-        if problem.normal is not None:
-            got = problem.normal(x)
-            if got is not None:
-                return np.asarray(got[2]), np.asarray(got[3])
-        if problem.linearised is not None:
-            got = problem.linearised(x)
-            if got is not None:
-                _, r, J = got
-                return J.T @ J, J.T @ r
-        if problem.residuals is None:
-            return None
         J, r = forward_jacobian(problem, x)
         return J.T @ J, J.T @ r

@@ -313,3 +313,16 @@ def forward_points(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray]:
     h = 1e-6 * np.maximum(np.abs(x), 1e-3 * width)
     step = np.where(x + h <= problem.upper, h, -h)
     return np.vstack([x[None, :], x[None, :] + np.diag(step)]), step
+
+
+def exact_normal_equations(problem: Problem, x: NDArray) -> tuple[NDArray, NDArray] | None:
+    """J'J (D, D) and J'r (D,) of the problem's weighted residuals r at x from its exact sensitivities (one simulation
+    of the response and its derivatives, where forward differences take D + 1): its normal equations where it has them
+    (a long record's, summed without J), else its linearisation; None where it has neither there."""
+    x = np.asarray(x, dtype=float)
+    with np.errstate(all="ignore"):
+        if problem.normal is not None:
+            got = problem.normal(x)
+            return None if got is None else (np.asarray(got[2]), np.asarray(got[3]))
+        got = problem.linearised(x) if problem.linearised is not None else None
+        return None if got is None else (got[2].T @ got[2], got[2].T @ got[1])
